@@ -10,7 +10,9 @@ import sys
 
 # modules that define `register(subparsers)`; a missing one is skipped so a partial
 # checkout still runs what it has
-_COMMAND_MODULES = ("app.cli_data", "app.cli_devices", "app.cli_model", "app.cli_demo")
+_COMMAND_MODULES = (
+    "app.cli_data", "app.cli_devices", "app.cli_train", "app.cli_evaluate", "app.cli_bench", "app.cli_demo",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
