@@ -1,0 +1,215 @@
+"""The DiffusionPoser denoiser ``f(z_t, t, h) -> x0`` and its size configuration.
+
+Architecture (paper, Figure 2): a transformer *decoder*. The diffusion-step embedding
+and the body-height embedding are two tokens that serve as the cross-attention memory
+AND are prepended to the 61 frame tokens for self-attention. The output head reads
+only the frame tokens and predicts the clean window x0 (normalised features).
+
+The model does not take the observation mask: inpainting (diffusion.inpaint) is what
+makes one model serve every sensor subset, which is the point of the method.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from dataclasses import asdict, dataclass, fields
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from .features import N_FEATURES, WINDOW
+
+# Height is fed as a standardised scalar; these are typical adult statures (metres).
+HEIGHT_MEAN = 1.70
+HEIGHT_STD = 0.10
+
+
+@dataclass
+class ModelConfig:
+    """Size of a denoiser or regressor.
+
+    The paper's model is ``ModelConfig.paper()`` (8 layers / 512 / FF 2048 / 8 heads);
+    the default here is the CPU-real-time size chosen by benchmarks/bench_model.py
+    (see NOTES.md, "Model (issue 3)").
+    """
+
+    layers: int = 4
+    d_model: int = 256
+    heads: int = 4
+    ff: int = 1024
+    dropout: float = 0.1
+    window: int = WINDOW
+    features: int = N_FEATURES
+
+    @classmethod
+    def paper(cls) -> ModelConfig:
+        return cls(layers=8, d_model=512, heads=8, ff=2048)
+
+    @classmethod
+    def tiny(cls) -> ModelConfig:
+        """For tests and smoke runs only."""
+        return cls(layers=1, d_model=32, heads=2, ff=64, dropout=0.0)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> ModelConfig:
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in d.items() if k in names})
+
+
+def timestep_embedding(t: Tensor, dim: int, max_period: float = 10000.0) -> Tensor:
+    """Sinusoidal embedding of integer diffusion levels, (B,) -> (B, dim)."""
+    half = dim // 2
+    freqs = torch.exp(-math.log(max_period) * torch.arange(half, dtype=torch.float32, device=t.device) / half)
+    args = t.float()[:, None] * freqs[None]
+    emb = torch.cat([torch.cos(args), torch.sin(args)], dim=-1)
+    if dim % 2:
+        emb = torch.cat([emb, torch.zeros_like(emb[:, :1])], dim=-1)
+    return emb
+
+
+class Denoiser(nn.Module):
+    """Transformer-decoder denoiser; input and output (B, N, F) normalised features."""
+
+    def __init__(self, config: ModelConfig | None = None) -> None:
+        super().__init__()
+        self.config = cfg = config or ModelConfig()
+        d = cfg.d_model
+        self.in_proj = nn.Linear(cfg.features, d)
+        # learned positions for [step, height, frame_0 .. frame_{N-1}]
+        self.pos = nn.Parameter(torch.zeros(1, cfg.window + 2, d))
+        nn.init.normal_(self.pos, std=0.02)
+        self.step_mlp = nn.Sequential(nn.Linear(d, d), nn.SiLU(), nn.Linear(d, d))
+        self.height_mlp = nn.Sequential(nn.Linear(1, d), nn.SiLU(), nn.Linear(d, d))
+        layer = nn.TransformerDecoderLayer(
+            d_model=d, nhead=cfg.heads, dim_feedforward=cfg.ff, dropout=cfg.dropout,
+            activation="gelu", batch_first=True, norm_first=True,
+        )
+        self.decoder = nn.TransformerDecoder(layer, num_layers=cfg.layers)
+        self.norm = nn.LayerNorm(d)
+        self.out_proj = nn.Linear(d, cfg.features)
+
+    def cond_tokens(self, t: Tensor, height: Tensor) -> Tensor:
+        """(B, 2, d): the step token and the height token."""
+        d = self.config.d_model
+        step = self.step_mlp(timestep_embedding(t, d))
+        h = ((height.float() - HEIGHT_MEAN) / HEIGHT_STD)[:, None]
+        return torch.stack([step, self.height_mlp(h)], dim=1)
+
+    def forward(self, z: Tensor, t: Tensor, height: Tensor) -> Tensor:
+        """z (B, N, F) noised window, t (B,) int levels, height (B,) metres -> x0 (B, N, F)."""
+        n = z.shape[1]
+        cond = self.cond_tokens(t, height)
+        tokens = torch.cat([cond, self.in_proj(z)], dim=1) + self.pos[:, : n + 2]
+        h = self.decoder(tokens, cond)
+        return self.out_proj(self.norm(h[:, 2:]))
+
+
+def count_parameters(model: nn.Module) -> int:
+    return sum(p.numel() for p in model.parameters())
+
+
+# ----------------------------------------------------------------------- model files
+
+MODEL_KINDS = ("diffusion", "regressor")
+MODEL_FORMAT = "imucap-model-v1"
+
+
+def build_model(kind: str, config: ModelConfig | None = None) -> nn.Module:
+    """A fresh Denoiser ("diffusion") or Regressor ("regressor")."""
+    if kind == "diffusion":
+        return Denoiser(config)
+    if kind == "regressor":
+        from .regressor import Regressor
+
+        return Regressor(config)
+    raise ValueError(f"unknown model kind {kind!r}; choose one of {', '.join(MODEL_KINDS)}")
+
+
+@dataclass
+class LoadedModel:
+    """A model ready for inference plus what it needs around it: the feature normaliser
+    statistics (the network works on normalised features) and its provenance."""
+
+    model: nn.Module
+    kind: str
+    config: ModelConfig
+    norm_mean: np.ndarray  # (F,) float32
+    norm_std: np.ndarray  # (F,) float32
+    step: int = 0
+    meta: dict | None = None
+
+    def normalize(self, x: Tensor) -> Tensor:
+        mean = torch.as_tensor(self.norm_mean, dtype=x.dtype)
+        return (x - mean) / torch.as_tensor(self.norm_std, dtype=x.dtype)
+
+    def denormalize(self, x: Tensor) -> Tensor:
+        mean = torch.as_tensor(self.norm_mean, dtype=x.dtype)
+        return x * torch.as_tensor(self.norm_std, dtype=x.dtype) + mean
+
+
+def save_model(path: str | os.PathLike, model: nn.Module, kind: str, norm_mean: np.ndarray,
+               norm_std: np.ndarray, step: int = 0, meta: dict | None = None, fp16: bool = False) -> None:
+    """Write an inference model file (weights only, no optimizer), atomically.
+
+    ``fp16`` halves the file (shipping weights); they are cast back to float32 on load
+    because CPU inference in half precision is slower, not faster.
+    """
+    sd = {k: (v.half() if fp16 and v.is_floating_point() else v).detach().cpu().clone()
+          for k, v in model.state_dict().items()}
+    obj = {
+        "format": MODEL_FORMAT, "kind": kind, "model_config": model.config.to_dict(), "state_dict": sd,
+        "norm_mean": np.asarray(norm_mean, np.float32), "norm_std": np.asarray(norm_std, np.float32),
+        "step": int(step), "meta": meta or {},
+    }
+    atomic_torch_save(obj, path)
+
+
+def load_model(path: str | os.PathLike, use_ema: bool = True) -> LoadedModel:
+    """Load an inference model file or a training checkpoint (its EMA weights by default),
+    in eval mode, float32, on the CPU."""
+    obj = torch.load(path, map_location="cpu", weights_only=False)
+    if not isinstance(obj, dict) or "model_config" not in obj:
+        raise ValueError(f"{path} is not an imucap model file or training checkpoint")
+    kind = obj["kind"]
+    cfg = ModelConfig.from_dict(obj["model_config"])
+    model = build_model(kind, cfg)
+    if "state_dict" in obj:
+        sd = obj["state_dict"]
+    else:
+        sd = obj["ema"] if use_ema and obj.get("ema") is not None else obj["model"]
+    model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in sd.items()})
+    model.eval()
+    return LoadedModel(model=model, kind=kind, config=cfg, norm_mean=np.asarray(obj["norm_mean"], np.float32),
+                       norm_std=np.asarray(obj["norm_std"], np.float32), step=int(obj.get("step", 0)),
+                       meta=obj.get("meta"))
+
+
+def atomic_torch_save(obj: object, path: str | os.PathLike) -> None:
+    """torch.save to a temporary file in the same directory, fsync, then os.replace, so a
+    crash or kill mid-write never leaves a truncated file under the final name."""
+    path = os.fspath(path)
+    d = os.path.dirname(os.path.abspath(path))
+    os.makedirs(d, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".pt", dir=d)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            torch.save(obj, f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+__all__ = [
+    "ModelConfig", "Denoiser", "timestep_embedding", "count_parameters", "HEIGHT_MEAN", "HEIGHT_STD",
+    "MODEL_KINDS", "build_model", "LoadedModel", "save_model", "load_model", "atomic_torch_save",
+]
