@@ -1,0 +1,294 @@
+"""Acclaim ASF/AMC reader (HDM05, CMU), AMC plain or gzipped.
+
+In Acclaim files each bone's rotation acts at the bone's start, in a local frame given
+by the bone's `axis` (C); the AMC values M are rotations about that frame, so the bone's
+global rotation is G = G_parent C M C^-1 and its end is start + G (direction * length).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..motion import Motion, MotionFormatError
+from ..rotations import euler_to_matrix, matrix_about_axis
+from .joint_maps import ASF, match_joint_map
+from .retarget import SourceSkeleton, retarget, world_map
+from .text import read_text_lines
+
+INCH = 0.0254
+_AXES = {"x": np.array([1.0, 0.0, 0.0]), "y": np.array([0.0, 1.0, 0.0]), "z": np.array([0.0, 0.0, 1.0])}
+
+
+@dataclass
+class AsfBone:
+    name: str
+    direction: np.ndarray
+    length: float
+    axis: np.ndarray  # degrees/radians as in file, converted to radians
+    axis_order: str
+    dofs: list[str] = field(default_factory=list)
+    parent: str = ""
+
+
+@dataclass
+class AsfSkeleton:
+    path: str
+    length_unit: float
+    angle_deg: bool
+    root_order: list[str]
+    root_axis: str
+    root_position: np.ndarray
+    root_orientation: np.ndarray
+    bones: dict[str, AsfBone]
+    order: list[str]  # bones in parent-before-child order, 'root' first
+
+    @property
+    def scale(self) -> float:
+        """Metres per file length unit (Acclaim lengths are inches divided by `length`)."""
+        return INCH / self.length_unit
+
+
+def _floats(path: str, line_no: int, parts: list[str], n: int, what: str) -> np.ndarray:
+    if len(parts) < n:
+        raise MotionFormatError(path, f"{what}: expected {n} numbers, found {len(parts)}", line_no)
+    try:
+        v = np.array([float(p) for p in parts[:n]])
+    except ValueError:
+        raise MotionFormatError(path, f"{what}: not a number in {parts[:n]}", line_no) from None
+    if not np.all(np.isfinite(v)):
+        raise MotionFormatError(path, f"{what}: NaN or infinite value", line_no)
+    return v
+
+
+def parse_asf(path: str | Path) -> AsfSkeleton:
+    path = str(path)
+    lines = read_text_lines(path)
+    section = ""
+    length_unit, angle_deg = 1.0, True
+    root_order: list[str] = []
+    root_axis = "XYZ"
+    root_pos = np.zeros(3)
+    root_ori = np.zeros(3)
+    bones: dict[str, AsfBone] = {}
+    cur: dict | None = None
+    children: dict[str, list[str]] = {}
+    for n, raw in enumerate(lines, start=1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        if line.startswith(":"):
+            parts = line.split()
+            section = parts[0][1:]
+            continue
+        parts = line.split()
+        key = parts[0]
+        if section == "units":
+            if key == "length":
+                length_unit = float(_floats(path, n, parts[1:], 1, "units length")[0])
+            elif key == "angle":
+                angle_deg = parts[1].lower().startswith("deg")
+        elif section == "root":
+            if key == "order":
+                root_order = [p.upper() for p in parts[1:]]
+            elif key == "axis":
+                root_axis = parts[1].upper()
+            elif key == "position":
+                root_pos = _floats(path, n, parts[1:], 3, "root position")
+            elif key == "orientation":
+                root_ori = _floats(path, n, parts[1:], 3, "root orientation")
+        elif section == "bonedata":
+            if key == "begin":
+                cur = {"line": n}
+            elif key == "end":
+                if cur is None or "name" not in cur:
+                    raise MotionFormatError(path, "bone block without a name", n)
+                ax = cur.get("axis", (np.zeros(3), "XYZ"))
+                bones[cur["name"]] = AsfBone(
+                    name=cur["name"], direction=cur.get("direction", np.zeros(3)), length=cur.get("length", 0.0),
+                    axis=ax[0], axis_order=ax[1], dofs=cur.get("dof", []),
+                )
+                cur = None
+            elif cur is not None:
+                if key == "name":
+                    cur["name"] = parts[1]
+                elif key == "direction":
+                    cur["direction"] = _floats(path, n, parts[1:], 3, "bone direction")
+                elif key == "length":
+                    cur["length"] = float(_floats(path, n, parts[1:], 1, "bone length")[0])
+                elif key == "axis":
+                    v = _floats(path, n, parts[1:], 3, "bone axis")
+                    cur["axis"] = (v, parts[4].upper() if len(parts) > 4 else "XYZ")
+                elif key == "dof":
+                    dofs = [d.lower() for d in parts[1:]]
+                    bad = [d for d in dofs if d not in ("rx", "ry", "rz", "tx", "ty", "tz", "l")]
+                    if bad:
+                        raise MotionFormatError(path, f"unknown dof {bad}", n)
+                    cur["dof"] = dofs
+        elif section == "hierarchy":
+            if key in ("begin", "end"):
+                continue
+            children.setdefault(key, []).extend(parts[1:])
+            for c in parts[1:]:
+                if c not in bones:
+                    raise MotionFormatError(path, f"hierarchy names unknown bone {c!r}", n)
+                bones[c].parent = key
+    if not bones:
+        raise MotionFormatError(path, "no :bonedata (not an ASF file?)")
+    order = ["root"]
+    queue = ["root"]
+    while queue:
+        b = queue.pop(0)
+        for c in children.get(b, []):
+            order.append(c)
+            queue.append(c)
+    orphans = set(bones) - set(order)
+    if orphans:
+        raise MotionFormatError(path, f"bones not in :hierarchy: {sorted(orphans)}")
+    conv = np.deg2rad if angle_deg else (lambda x: x)
+    for b in bones.values():
+        b.axis = conv(b.axis)
+    return AsfSkeleton(path=path, length_unit=length_unit, angle_deg=angle_deg, root_order=root_order,
+                       root_axis=root_axis, root_position=root_pos, root_orientation=conv(root_ori),
+                       bones=bones, order=order)
+
+
+def parse_amc(path: str | Path, asf: AsfSkeleton) -> dict[str, np.ndarray]:
+    """Per bone (T, n_dof) values in file units, plus 'root' (T, len(root order))."""
+    path = str(path)
+    lines = read_text_lines(path)
+    ndof = {name: len([d for d in b.dofs if d != "l"]) for name, b in asf.bones.items()}
+    ndof["root"] = len(asf.root_order) or 6
+    frames: list[dict[str, list[float]]] = []
+    frame_lines: list[int] = []
+    for n, raw in enumerate(lines, start=1):
+        line = raw.strip()
+        if not line or line.startswith("#") or line.startswith(":"):
+            continue
+        parts = line.split()
+        if len(parts) == 1 and parts[0].isdigit():
+            frames.append({})
+            frame_lines.append(n)
+            continue
+        if not frames:
+            raise MotionFormatError(path, f"data before the first frame number: {line[:40]!r}", n)
+        name = parts[0]
+        if name not in ndof:
+            raise MotionFormatError(path, f"unknown bone {name!r} (not in {Path(asf.path).name})", n)
+        if len(parts) - 1 != ndof[name]:
+            raise MotionFormatError(path, f"bone {name!r} has {len(parts) - 1} values, ASF declares {ndof[name]}", n)
+        try:
+            vals = [float(p) for p in parts[1:]]
+        except ValueError:
+            raise MotionFormatError(path, f"bone {name!r}: value is not a number", n) from None
+        if not all(np.isfinite(vals)):
+            raise MotionFormatError(path, f"bone {name!r}: NaN or infinite value", n)
+        frames[-1][name] = vals
+    if len(frames) < 2:
+        raise MotionFormatError(path, f"only {len(frames)} frame(s) of motion", len(lines))
+    expected = {b for b in ndof if ndof[b] > 0}
+    # a truncated file ends in a partial frame: report it, keep nothing half-read
+    for f, fr in enumerate(frames):
+        missing = expected - set(fr)
+        if missing:
+            where = "last frame is incomplete (file truncated?)" if f == len(frames) - 1 else f"frame {f + 1}"
+            raise MotionFormatError(path, f"{where}: no values for {sorted(missing)[:5]}", frame_lines[f])
+    return {b: np.array([fr[b] for fr in frames]) for b in expected}
+
+
+def _dof_rotation(values: np.ndarray, dofs: list[str], angle_deg: bool) -> np.ndarray:
+    """Rotation from rx/ry/rz values, applied in the listed order about fixed axes."""
+    rot_dofs = [(k, d) for k, d in enumerate([d for d in dofs if d != "l"]) if d.startswith("r")]
+    T = values.shape[0]
+    if not rot_dofs:
+        return np.broadcast_to(np.eye(3), (T, 3, 3))
+    ang = values[:, [k for k, _ in rot_dofs]]
+    if angle_deg:
+        ang = np.deg2rad(ang)
+    order = "".join(d[1] for _, d in rot_dofs)  # lowercase = extrinsic
+    if len(order) == 3 and len(set(order)) == 3:
+        return euler_to_matrix(ang, order)
+    # one or two dofs (knee, toes): fixed-axis rotations applied in listed order
+    M = np.broadcast_to(np.eye(3), (T, 3, 3))
+    for k, ax in enumerate(order):
+        M = matrix_about_axis(_AXES[ax], ang[:, k]) @ M
+    return M
+
+
+def to_source_skeleton(asf: AsfSkeleton, amc: dict[str, np.ndarray], fps: float) -> SourceSkeleton:
+    T = amc["root"].shape[0]
+    names = asf.order
+    J = len(names)
+    idx = {n: i for i, n in enumerate(names)}
+    parents = [-1] + [idx[asf.bones[n].parent] for n in names[1:]]
+    glob = np.zeros((T, J, 3, 3))
+    pos = np.zeros((T, J, 3))
+    rest = np.zeros((J, 3))
+    rest_end = np.zeros((J, 3))
+    ends = np.zeros((T, J, 3))
+    # root
+    rv = amc["root"]
+    ro = asf.root_order or ["TX", "TY", "TZ", "RX", "RY", "RZ"]
+    tcols = [ro.index(a) for a in ("TX", "TY", "TZ")]
+    rdofs = [c.lower() for c in ro if c.startswith("R")]
+    rcols = [k for k, c in enumerate(ro) if c.startswith("R")]
+    C = euler_to_matrix(asf.root_orientation[None], asf.root_axis.lower())[0]
+    M = _dof_rotation(rv[:, rcols], rdofs, asf.angle_deg)
+    glob[:, 0] = C @ M @ C.T
+    pos[:, 0] = rv[:, tcols] + asf.root_position
+    ends[:, 0] = pos[:, 0]
+    rest[0] = asf.root_position
+    rest_end[0] = rest[0]
+    end_sites: dict[int, np.ndarray] = {}
+    has_child = set(parents[1:])
+    for j in range(1, J):
+        b = asf.bones[names[j]]
+        p = parents[j]
+        C = euler_to_matrix(b.axis[None], b.axis_order.lower())[0]
+        vals = amc.get(b.name, np.zeros((T, 0)))
+        M = _dof_rotation(vals, b.dofs, asf.angle_deg)
+        glob[:, j] = glob[:, p] @ (C @ M @ C.T)
+        bone = b.direction * b.length
+        pos[:, j] = ends[:, p]
+        ends[:, j] = pos[:, j] + (glob[:, j] @ bone)
+        rest[j] = rest_end[p]
+        rest_end[j] = rest[j] + bone
+        if j not in has_child:
+            end_sites[j] = rest_end[j]
+    return SourceSkeleton(names=names, parents=parents, rest=rest, glob=glob, pos=pos, fps=fps,
+                          end_sites=end_sites)
+
+
+def find_asf(amc_path: Path) -> Path:
+    """The skeleton file of an AMC take: HDM05 names takes `HDM_<actor>_...`, the skeleton
+    `HDM_<actor>.asf`; otherwise the only .asf beside it."""
+    folder = amc_path.parent
+    asfs = sorted(folder.glob("*.asf")) + sorted(folder.glob("*.ASF"))
+    stem = amc_path.name
+    for a in asfs:
+        if stem.startswith(a.stem + "_"):
+            return a
+    if len(asfs) == 1:
+        return asfs[0]
+    raise MotionFormatError(str(amc_path), f"cannot find its .asf skeleton in {folder} ({len(asfs)} candidates)")
+
+
+_FPS_IN_NAME = re.compile(r"_(\d{2,3})\.amc", re.IGNORECASE)
+
+
+def load_amc(path: str | Path, asf_path: str | Path | None = None, fps: float | None = None) -> Motion:
+    path = Path(path)
+    asf = parse_asf(asf_path or find_asf(path))
+    amc = parse_amc(path, asf)
+    if fps is None:
+        m = _FPS_IN_NAME.search(path.name)
+        fps = float(m.group(1)) if m else 120.0  # HDM05 and CMU capture at 120 Hz
+    src = to_source_skeleton(asf, amc, fps)
+    jmap = match_joint_map(src.names, str(path), maps=(ASF,))
+    W = world_map(np.array([0.0, 1.0, 0.0]))  # Acclaim is Y-up
+    name = path.name.removesuffix(".gz").removesuffix(".amc")
+    return retarget(src, jmap, asf.scale, W, name=name, source=str(path),
+                    meta={"format": "asf/amc", "skeleton": Path(asf.path).name, "units": "acclaim"})

@@ -1,0 +1,230 @@
+"""Retarget a source skeleton's animation onto our 24 segments.
+
+Sources disagree on everything: which way is up, the units, the pose at zero rotation
+(Bandai lies along X, HDM05 stands with legs apart, AMASS is a T-pose) and how many
+joints the spine and hands have. The method here needs only the source's zero-pose
+joint positions and global joint rotations:
+
+1. Build the source's T-pose: for each source joint a global rotation Q_j that turns its
+   zero-pose bone (towards the child mapped to our segment's end) onto our T-pose bone
+   direction, by the smallest rotation from its parent's Q (so bone twist is inherited,
+   not invented). The root is turned so its up (towards the spine) and left (right hip
+   to left hip) match ours.
+2. Our segment orientation is R_i(t) = W G_j(t) Q_j^T W^T, with W the fixed map from the
+   source world (its up axis) to ours: identity in the T-pose, and it carries every bone
+   of the source onto the corresponding bone of ours.
+3. Our bone offsets are the source's T-pose joint differences (scaled to metres), so the
+   retargeted body has the source's proportions and the feet stay where they were.
+Segments the source lacks copy their parent's orientation; a split source bone (Bandai's
+one chest bone for our spine2+spine3) keeps exact positions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..body import MAIN_CHILD, Body, anthropometric_offsets
+from ..motion import Motion
+from ..rotations import quat_between_vectors, quat_to_matrix, triad
+from ..skeleton import N_SEGMENTS, PARENTS, SEGMENT_INDEX, SEGMENTS
+
+# our T-pose bone directions, the target of step 1 (unit vectors, our world frame)
+_ANTHRO = anthropometric_offsets(1.0)
+TPOSE_DIRECTIONS: dict[int, np.ndarray] = {
+    i: _ANTHRO[c] / np.linalg.norm(_ANTHRO[c]) for i, c in MAIN_CHILD.items()
+}
+for _name in ("pelvis", "spine1", "spine2", "spine3", "neck", "head"):
+    TPOSE_DIRECTIONS[SEGMENT_INDEX[_name]] = np.array([0.0, 0.0, 1.0])
+for _side, _sign in (("l", 1.0), ("r", -1.0)):
+    TPOSE_DIRECTIONS[SEGMENT_INDEX[f"{_side}_toes"]] = np.array([1.0, 0.0, 0.0])
+    TPOSE_DIRECTIONS[SEGMENT_INDEX[f"{_side}_fingers"]] = np.array([0.0, _sign, 0.0])
+
+
+@dataclass
+class SourceSkeleton:
+    """A parsed source animation, in source units and source world axes.
+
+    names/parents: source joints (parents[i] < i). rest: (J, 3) joint positions at zero
+    rotation. glob: (T, J, 3, 3) global joint rotations. pos: (T, J, 3) global joint
+    positions. end_sites: joint index -> (3,) zero-pose position of an end point, for
+    leaf joints whose bone ends in an "End Site".
+    """
+
+    names: list[str]
+    parents: list[int]
+    rest: np.ndarray
+    glob: np.ndarray
+    pos: np.ndarray
+    fps: float
+    end_sites: dict[int, np.ndarray] = field(default_factory=dict)
+
+    def index(self, name: str) -> int:
+        return self.names.index(name)
+
+
+@dataclass(frozen=True)
+class JointMap:
+    """Which source joint drives each of our segments.
+
+    segments: our segment name -> source joint name. A segment missing here copies its
+    parent's orientation. `split` names our segments that sit partway along a source
+    bone: segment -> fraction of the parent's bone at which its joint lies.
+    """
+
+    name: str
+    segments: dict[str, str]
+    split: dict[str, float] = field(default_factory=dict)
+
+    def required(self) -> set[str]:
+        return set(self.segments.values())
+
+
+def _source_direction(src: SourceSkeleton, j: int, children: list[int]) -> np.ndarray | None:
+    """Zero-pose bone direction of source joint j towards the first of `children` (down
+    our main-child chain) that is not at the same place, else its end site. Acclaim
+    skeletons start the lower back at the root, so the pelvis must look one bone further."""
+    ends = [src.rest[c] for c in children]
+    if j in src.end_sites:
+        ends.append(src.end_sites[j])
+    for e in ends:
+        d = e - src.rest[j]
+        n = np.linalg.norm(d)
+        if n > 1e-6 * max(1.0, float(np.abs(src.rest).max())):
+            return d / n
+    return None
+
+
+def detect_up_axis(src: SourceSkeleton, jmap: JointMap) -> np.ndarray:
+    """The source world's up axis (a signed unit axis), read off the animation itself:
+    the mean direction from the feet to the head. Files rarely say which axis is up, and
+    the zero pose (lying, for Bandai) cannot tell."""
+    head = src.index(jmap.segments["head"])
+    feet = [src.index(jmap.segments[s]) for s in ("l_foot", "r_foot")]
+    v = (src.pos[:, head] - src.pos[:, feet].mean(axis=1)).mean(axis=0)
+    k = int(np.argmax(np.abs(v)))
+    axis = np.zeros(3)
+    axis[k] = np.sign(v[k]) or 1.0
+    return axis
+
+
+def world_map(up: np.ndarray) -> np.ndarray:
+    """A proper rotation W taking the source up axis to our +Z (heading is arbitrary:
+    clips start facing wherever the subject faced)."""
+    k = int(np.argmax(np.abs(up)))
+    s = float(np.sign(up[k]))
+    # cyclic permutation keeps handedness: source axis k -> our Z, k+1 -> X, k+2 -> Y
+    W = np.zeros((3, 3))
+    W[2, k] = s
+    W[0, (k + 1) % 3] = 1.0
+    W[1, (k + 2) % 3] = s
+    assert abs(np.linalg.det(W) - 1.0) < 1e-9
+    return W
+
+
+def retarget(
+    src: SourceSkeleton,
+    jmap: JointMap,
+    scale: float,
+    W: np.ndarray,
+    name: str = "",
+    source: str = "",
+    meta: dict | None = None,
+) -> Motion:
+    """Our Motion from a source animation (see the module docstring for the method)."""
+    J = len(src.names)
+    ours_to_src: dict[int, int] = {SEGMENT_INDEX[s]: src.index(n) for s, n in jmap.segments.items()}
+    src_to_ours = {j: i for i, j in ours_to_src.items()}
+    # our main-child mapping expressed on source joints: bone direction of source joint j
+    # is towards the source joint that drives our segment's main child
+    src_child: dict[int, list[int]] = {}
+    for i, j in ours_to_src.items():
+        chain = []
+        c = MAIN_CHILD.get(i)
+        while c is not None:
+            if c in ours_to_src:
+                chain.append(ours_to_src[c])
+            c = MAIN_CHILD.get(c)
+        src_child[j] = chain
+
+    Wt = W.T
+    # step 1: source T-pose global rotations
+    Q = np.zeros((J, 3, 3))
+    pelvis = ours_to_src[0]
+    up0 = _source_direction(src, pelvis, src_child[pelvis])
+    lhip, rhip = ours_to_src[SEGMENT_INDEX["l_thigh"]], ours_to_src[SEGMENT_INDEX["r_thigh"]]
+    left0 = src.rest[lhip] - src.rest[rhip]
+    Q_root = triad(up0, left0, Wt @ np.array([0.0, 0.0, 1.0]), Wt @ np.array([0.0, 1.0, 0.0]))
+    for j in range(J):
+        p = src.parents[j]
+        if j == pelvis or p < 0 and j not in src_to_ours:
+            Q[j] = Q_root
+            continue
+        Qp = Q[p] if p >= 0 else Q_root
+        i = src_to_ours.get(j)
+        d0 = _source_direction(src, j, src_child.get(j, [])) if i is not None else None
+        if i is None or d0 is None or i not in TPOSE_DIRECTIONS:
+            Q[j] = Qp
+            continue
+        target = Wt @ TPOSE_DIRECTIONS[i]
+        Q[j] = quat_to_matrix(quat_between_vectors(Qp @ d0, target)) @ Qp
+
+    # source T-pose joint positions (FK with Q), root at the origin
+    P = np.zeros((J, 3))
+    for j in range(J):
+        p = src.parents[j]
+        if p >= 0:
+            # zero-pose offset of j from its parent, rotated by the parent's T-pose rotation
+            P[j] = P[p] + Q[p] @ (src.rest[j] - src.rest[p])
+
+    # step 2: our orientations; segments without a source copy their parent
+    T = src.glob.shape[0]
+    rot = np.zeros((T, N_SEGMENTS, 3, 3))
+    for i in range(N_SEGMENTS):
+        if i in ours_to_src:
+            j = ours_to_src[i]
+            rot[:, i] = W @ src.glob[:, j] @ Q[j].T @ Wt
+        else:
+            rot[:, i] = rot[:, PARENTS[i]]
+
+    # step 3: offsets from the source T-pose
+    offsets = np.zeros((N_SEGMENTS, 3))
+    tpose_pos: dict[int, np.ndarray] = {i: W @ P[j] * scale for i, j in ours_to_src.items()}
+    anthro = None
+    for i in range(1, N_SEGMENTS):
+        par = PARENTS[i]
+        if i in tpose_pos and par in tpose_pos:
+            offsets[i] = tpose_pos[i] - tpose_pos[par]
+        elif SEGMENTS[i] in jmap.split:
+            # a joint partway along the parent's bone: the parent keeps the first part
+            frac = jmap.split[SEGMENTS[i]]
+            child = MAIN_CHILD[i]
+            bone = tpose_pos[child] - tpose_pos[par]
+            offsets[i] = frac * bone
+            tpose_pos[i] = tpose_pos[par] + offsets[i]
+        else:
+            if anthro is None:
+                anthro = anthropometric_offsets(1.75 * _height_scale(tpose_pos))
+            offsets[i] = anthro[i]
+            tpose_pos[i] = tpose_pos[par] + offsets[i]
+    root = (src.pos[:, pelvis] @ W.T) * scale
+    body = Body.from_offsets(offsets)
+    return Motion(rot=rot, root=root, fps=src.fps, body=body, name=name, source=source,
+                  meta=dict(meta or {})).floor_aligned()
+
+
+def _height_scale(tpose_pos: dict[int, np.ndarray]) -> float:
+    """Rough height / 1.75 from the leg length, to size segments the source lacks."""
+    hip = tpose_pos.get(SEGMENT_INDEX["l_thigh"])
+    ankle = tpose_pos.get(SEGMENT_INDEX["l_foot"])
+    if hip is None or ankle is None:
+        return 1.0
+    return float(np.linalg.norm(hip - ankle) / (0.530 - 0.039) / 1.75)
+
+
+def pick_scale(height_in_units: float, candidates: dict[str, float]) -> tuple[str, float]:
+    """The unit whose scale puts the skeleton's height nearest 1.7 m, for files that do
+    not state their units."""
+    best = min(candidates.items(), key=lambda kv: abs(np.log(height_in_units * kv[1] / 1.7)))
+    return best
