@@ -1,0 +1,135 @@
+"""Feature frames, normaliser, clip sampling and the cached dataset builder."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from inference.body import Body, tpose
+from inference.dataset import (
+    FeatureDataset,
+    Normalizer,
+    build_dataset,
+    decode_features,
+    motion_to_features,
+)
+from inference.features import N_FEATURES, SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
+from inference.motion import Motion
+from inference.rotations import axis_angle_to_matrix
+
+
+def moving_motion(T: int = 240, fps: float = 60.0, speed: float = 1.0, height: float = 1.75) -> Motion:
+    t = np.arange(T) / fps
+    R = tpose(T)
+    yaw = 0.2 * np.sin(2 * t)
+    R[:, 0] = axis_angle_to_matrix(np.stack([np.zeros(T), np.zeros(T), yaw], -1))
+    R[:, 4] = R[:, 0] @ axis_angle_to_matrix(np.stack([np.zeros(T), 0.6 * np.sin(5 * t), np.zeros(T)], -1))
+    root = np.stack([speed * t, 0.05 * np.sin(t), 0.9 + 0.03 * np.sin(6 * t)], -1)
+    return Motion(rot=R, root=root, fps=fps, body=Body.from_height(height), name=f"moving{speed}")
+
+
+def still_motion(T: int = 100, fps: float = 60.0) -> Motion:
+    return Motion(rot=tpose(T), root=np.tile([0.0, 0.0, 0.93], (T, 1)), fps=fps, body=Body.from_height(1.6),
+                  name="still")
+
+
+def test_features_layout_and_decode_round_trip():
+    m = moving_motion()
+    x = motion_to_features(m)
+    assert x.dtype == np.float32 and x.shape == (80, N_FEATURES)
+    d = decode_features(x)
+    np.testing.assert_allclose(d["rot"], m.rot[::3], atol=1e-5)
+    np.testing.assert_allclose(d["root"][:, 2], m.root[::3, 2], atol=1e-6)
+    np.testing.assert_allclose(d["root"][:, :2], m.root[::3, :2] - m.root[0, :2], atol=1e-5)
+    assert np.all(x[0, SL_DP] == 0)
+    assert set(np.unique(x[:, SL_CONTACT])) <= {0.0, 1.0}
+    assert d["acc"].shape == (80, 13, 3) and d["contacts"].dtype == bool
+
+
+def test_features_of_still_pose():
+    x = motion_to_features(still_motion())
+    np.testing.assert_allclose(x[:, SL_ACC], 0.0, atol=1e-6)
+    assert np.all(x[:, SL_CONTACT] == 1.0)
+    np.testing.assert_allclose(x[:, SL_ROT][:, :6], np.tile([1, 0, 0, 0, 1, 0], (x.shape[0], 1)))
+
+
+def test_normalizer_numpy_torch_save_load(tmp_path: Path):
+    clips = [motion_to_features(moving_motion(speed=s)) for s in (0.5, 1.5)] + [motion_to_features(still_motion())]
+    nz = Normalizer.fit(clips)
+    assert np.all(nz.mean[SL_ROT] == 0) and np.all(nz.std[SL_ROT] == 1)
+    assert np.all(nz.mean[SL_CONTACT] == 0) and np.all(nz.std[SL_CONTACT] == 1)
+    assert np.all(nz.std[SL_PZ] >= 0.02) and np.all(nz.std[SL_ACC] >= 0.1)
+    x = clips[0]
+    xn = nz.normalize(x)
+    assert xn.dtype == np.float32
+    np.testing.assert_allclose(nz.denormalize(xn), x, atol=1e-5)
+    xt = nz.normalize(torch.as_tensor(x))
+    np.testing.assert_allclose(xt.numpy(), xn, atol=1e-6)
+    p = tmp_path / "norm.json"
+    nz.save(p)
+    back = Normalizer.load(p)
+    np.testing.assert_array_equal(back.mean, nz.mean)
+    np.testing.assert_array_equal(back.std, nz.std)
+
+
+def test_sampling_windows_padding_and_energy_weights():
+    ds = FeatureDataset.from_motions([moving_motion(T=600, speed=1.5), still_motion(T=60)])
+    assert ds.weights.shape == (2,) and ds.weights.sum() == pytest.approx(1.0)
+    assert ds.weights[0] > 5 * ds.weights[1] > 0  # the moving clip is drawn far more often
+    rng = np.random.default_rng(0)
+    b = ds.sample(rng, 16)
+    assert b["x"].shape == (16, WINDOW, N_FEATURES) and b["x"].dtype == np.float32
+    assert b["height"].shape == (16,) and b["offsets"].shape == (16, 24, 3)
+    assert b["contact_offsets"].shape == (16, 4, 3)
+    # the short clip (20 frames at 20 Hz) is padded at the front with its first frame, dp = 0
+    w = ds.window(1, 0)
+    clip = ds.clips[1]
+    assert w.shape == (WINDOW, N_FEATURES)
+    np.testing.assert_array_equal(w[-clip.shape[0]:], clip)
+    first = clip[0].copy()
+    first[SL_DP] = 0
+    np.testing.assert_array_equal(w[: WINDOW - clip.shape[0]], np.tile(first, (WINDOW - clip.shape[0], 1)))
+
+
+def _write_clips(root: Path, n: int) -> list[Path]:
+    root.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i in range(n):
+        p = root / f"clip{i}.npz"
+        np.savez(p, speed=0.5 + i)
+        paths.append(p)
+    return paths
+
+
+def test_build_dataset_caches_by_content(tmp_path: Path):
+    data = tmp_path / "data"
+    paths = _write_clips(data, 3)
+    calls: list[Path] = []
+
+    def loader(p: Path) -> Motion:
+        calls.append(p)
+        if p.name == "clip2.npz":
+            raise ValueError(f"{p}: broken on purpose")
+        return moving_motion(T=200, speed=float(np.load(p)["speed"]))
+
+    def finder(ps):
+        return sorted(Path(ps[0]).glob("*.npz"))
+
+    cache = tmp_path / "cache"
+    ds = build_dataset([data], cache, loader=loader, finder=finder, progress=False)
+    assert len(ds) == 2 and len(ds.skipped) == 1 and len(calls) == 3
+    assert len(list(cache.glob("*.npz"))) == 1
+    ds2 = build_dataset([data], cache, loader=loader, finder=finder, progress=False)
+    assert len(calls) == 3  # cache hit: nothing reloaded
+    assert ds2.names == ds.names and ds2.key == ds.key
+    for a, b in zip(ds.clips, ds2.clips):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_allclose(ds2.weights, ds.weights)
+    np.testing.assert_allclose(ds2.offsets, ds.offsets)
+    # a changed file changes the key and triggers a rebuild
+    np.savez(paths[0], speed=3.0)
+    ds3 = build_dataset([data], cache, loader=loader, finder=finder, progress=False)
+    assert ds3.key != ds.key and len(calls) == 6
