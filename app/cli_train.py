@@ -1,0 +1,68 @@
+"""`imucap train`: train the DiffusionPoser denoiser or the regressive baseline.
+
+    imucap train --config cfg.json --out runs/x [--resume] [--steps N]
+                 [--model diffusion|regressor] [--seed S]
+
+Multi-process (one process per core or GPU):
+
+    torchrun --standalone --nproc_per_node 2 -m app.cli train --config cfg.json --out runs/x
+
+The config is a JSON object with the fields of ``inference.training.TrainConfig``; its
+``data`` entry names the training and validation sets (see ``training.load_dataset``).
+With ``--resume`` and no ``--config`` the run continues with the configuration stored in
+its checkpoint.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("train", help="train the model (diffusion) or the regressive baseline",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--config", type=Path, help="training config JSON (TrainConfig fields)")
+    p.add_argument("--out", type=Path, required=True, help="run directory: last.pt, model.pt, train.jsonl")
+    p.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
+    p.add_argument("--steps", type=int, help="total optimiser steps (overrides the config)")
+    p.add_argument("--model", choices=("diffusion", "regressor"), help="model kind (overrides the config)")
+    p.add_argument("--seed", type=int, help="random seed (overrides the config)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import torch
+
+    from inference.training import LAST, TrainConfig, train
+
+    if args.config is not None:
+        cfg = TrainConfig.load(args.config)
+    elif args.resume:
+        ckpt = torch.load(args.out / LAST, map_location="cpu", weights_only=False)
+        cfg = TrainConfig.from_dict(ckpt["train_config"])
+    else:
+        raise ValueError("--config is required (unless resuming)")
+    if args.steps is not None:
+        cfg.steps = args.steps
+    if args.model is not None:
+        cfg.kind = args.model
+    if args.seed is not None:
+        cfg.seed = args.seed
+    res = train(cfg, args.out, resume=args.resume, progress=not args.no_progress)
+    if res.checkpoint is not None and _is_main():
+        summary = {"step": res.step, "loss": res.last_loss, "checkpoint": str(res.checkpoint),
+                   "stopped_early": res.stopped_early}
+        if res.val:
+            summary.update(res.val)
+        print(json.dumps(summary), file=sys.stdout)
+    return 130 if res.stopped_early else 0
+
+
+def _is_main() -> bool:
+    import os
+
+    return int(os.environ.get("RANK", "0")) == 0

@@ -1,0 +1,118 @@
+"""Denoiser and regressor: shapes, conditioning, the paper size, model files."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from inference.denoiser import (
+    Denoiser,
+    ModelConfig,
+    build_model,
+    count_parameters,
+    load_model,
+    save_model,
+    timestep_embedding,
+)
+from inference.features import N_FEATURES, WINDOW, observation_mask
+from inference.regressor import MaskConfig, Regressor, random_observation_mask, regress
+
+
+def _inputs(b=2, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    return torch.randn(b, WINDOW, N_FEATURES, generator=g), torch.tensor([10, 900][:b]), torch.tensor([1.6, 1.9][:b])
+
+
+def test_shapes_and_conditioning():
+    torch.manual_seed(0)
+    m = Denoiser(ModelConfig.tiny()).eval()
+    z, t, h = _inputs()
+    with torch.no_grad():
+        y = m(z, t, h)
+        assert y.shape == z.shape
+        # the step and the height both change the prediction (they are really used)
+        assert not torch.allclose(y, m(z, t + 50, h))
+        assert not torch.allclose(y, m(z, t, h + 0.2))
+        # shorter windows work too (positions are sliced)
+        assert m(z[:, :20], t, h).shape == (2, 20, N_FEATURES)
+    assert timestep_embedding(t, 33).shape == (2, 33)
+
+
+def test_memory_tokens_feed_cross_and_self_attention():
+    m = Denoiser(ModelConfig.tiny()).eval()
+    seen = {}
+    layer = m.decoder.layers[0]
+    orig = layer.forward
+
+    def spy(tgt, memory, *a, **k):
+        seen["tgt"], seen["memory"] = tgt.shape, memory.shape
+        return orig(tgt, memory, *a, **k)
+
+    layer.forward = spy
+    z, t, h = _inputs()
+    with torch.no_grad():
+        m(z, t, h)
+    assert seen["memory"] == (2, 2, 32)  # step + height tokens as cross-attention memory
+    assert seen["tgt"] == (2, WINDOW + 2, 32)  # ... and prepended for self-attention
+
+
+def test_paper_size_constructs():
+    cfg = ModelConfig.paper()
+    assert (cfg.layers, cfg.d_model, cfg.ff) == (8, 512, 2048)
+    m = Denoiser(cfg)
+    assert len(m.decoder.layers) == 8
+    assert 30e6 < count_parameters(m) < 40e6
+
+
+def test_regressor_shapes_and_mask_use():
+    torch.manual_seed(0)
+    r = Regressor(ModelConfig.tiny()).eval()
+    x, _, h = _inputs()
+    mask = torch.zeros_like(x, dtype=torch.bool)
+    mask[:, :, :12] = True
+    with torch.no_grad():
+        y = r(x, mask, h)
+        assert y.shape == x.shape
+        # unobserved inputs are ignored ...
+        x2 = x.clone()
+        x2[~mask] = 99.0
+        assert torch.allclose(y, r(x2, mask, h))
+        # ... and the mask itself is an input
+        assert not torch.allclose(y, r(x, ~mask, h))
+    out = regress(r, x, mask, h)
+    assert torch.equal(out[mask], x[mask])
+
+
+def test_random_masks():
+    rng = np.random.default_rng(0)
+    cfg = MaskConfig(p_history_known=1.0)
+    m = random_observation_mask(rng, 16, WINDOW, cfg)
+    assert m.shape == (16, WINDOW, N_FEATURES) and m.dtype == bool
+    assert m[:, :-1].all()
+    m = random_observation_mask(rng, 64, WINDOW, MaskConfig(p_history_known=0.0, p_frame_drop=0.0, p_burst=0.0,
+                                                            p_site_drop=0.0))
+    site_union = np.zeros(N_FEATURES, bool)
+    for s in ("pelvis", "torso", "head", "l_upperarm", "r_upperarm", "l_wrist", "r_wrist", "l_thigh",
+              "r_thigh", "l_shank", "r_shank", "l_foot", "r_foot"):
+        site_union |= observation_mask([s], insoles=True)
+    assert not (m & ~site_union).any()  # only sensor-observable features are ever observed
+    assert (m == m[:, :1]).all()  # no dropouts asked for: constant over time
+    sizes = {int(x[0].sum()) for x in m}
+    assert len(sizes) > 3  # varied subsets
+
+
+def test_save_load_roundtrip(tmp_path):
+    for kind in ("diffusion", "regressor"):
+        torch.manual_seed(0)
+        m = build_model(kind, ModelConfig.tiny()).eval()
+        mean, std = np.zeros(N_FEATURES, np.float32), np.ones(N_FEATURES, np.float32) * 2
+        for fp16 in (False, True):
+            p = tmp_path / f"{kind}{fp16}.pt"
+            save_model(p, m, kind, mean, std, step=7, fp16=fp16)
+            lm = load_model(p)
+            assert lm.kind == kind and lm.step == 7 and lm.config == m.config
+            x = torch.ones(1, 3, N_FEATURES)
+            assert torch.allclose(lm.denormalize(lm.normalize(x)), x)
+            for (k, a), b in zip(m.state_dict().items(), lm.model.state_dict().values()):
+                assert b.dtype == a.dtype, k
+                assert torch.allclose(a, b, atol=1e-2 if fp16 else 0), k

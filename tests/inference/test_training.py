@@ -1,0 +1,171 @@
+"""Trainer: losses, augmentation, EMA, checkpoint/resume, and a 2-process torchrun run."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from inference.denoiser import ModelConfig, load_model
+from inference.features import SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT
+from inference.rotations import matrix_to_rot6d, rot6d_to_matrix
+from inference.training import (
+    EMA,
+    LossWeights,
+    TrainConfig,
+    contact_offsets_for,
+    feature_stats,
+    motion_losses,
+    rotate_yaw,
+    synthetic_dataset,
+    train,
+)
+
+ROOT = Path(__file__).resolve().parents[2]
+TINY = {"layers": 1, "d_model": 32, "heads": 2, "ff": 64, "dropout": 0.1}
+
+
+def _batch(contacts: float | None = None):
+    ds = synthetic_dataset(3, 70, seed=0)
+    b = ds.sample(np.random.default_rng(0), 4, 61)
+    x = torch.as_tensor(b["x"])
+    if contacts is not None:
+        x[..., SL_CONTACT] = contacts
+    mean, std = (torch.as_tensor(a) for a in feature_stats(ds.clips))
+    cl = torch.as_tensor(contact_offsets_for(b["offsets"], b["height"]), dtype=torch.float32)
+    return (x - mean) / std, mean, std, torch.as_tensor(b["offsets"]), cl
+
+
+def test_losses_zero_for_perfect_prediction_positive_otherwise():
+    xn, mean, std, off, cl = _batch(contacts=0.0)
+    terms = motion_losses(xn.clone(), xn, mean, std, off, cl)
+    assert set(terms) == {"simple", "vel", "fk", "drift", "slide"}
+    for k, v in terms.items():
+        assert float(v) == pytest.approx(0.0, abs=1e-9), k
+    # perturb orientations, root motion and contacts: every term turns positive
+    g = torch.Generator().manual_seed(0)
+    pert = xn + 0.3 * torch.randn(xn.shape, generator=g)
+    pert[..., SL_CONTACT] = (1.0 - mean[SL_CONTACT]) / std[SL_CONTACT]  # predicted in contact
+    terms = motion_losses(pert, xn, mean, std, off, cl)
+    for k, v in terms.items():
+        assert float(v) > 0, k
+    # slide vanishes where feet are predicted off the ground even if they move
+    pert[..., SL_CONTACT] = (0.0 - mean[SL_CONTACT]) / std[SL_CONTACT]
+    assert float(motion_losses(pert, xn, mean, std, off, cl)["slide"]) == 0.0
+
+
+def test_losses_differentiable():
+    xn, mean, std, off, cl = _batch(contacts=1.0)
+    pred = (xn + 0.1).requires_grad_(True)
+    terms = motion_losses(pred, xn, mean, std, off, cl)
+    sum(terms.values()).backward()
+    assert pred.grad is not None and torch.isfinite(pred.grad).all() and pred.grad.abs().sum() > 0
+
+
+def test_rotate_yaw_is_a_consistent_rigid_turn():
+    x = torch.as_tensor(synthetic_dataset(1, 61, seed=2).clips[0])[None]
+    a = 0.9
+    y = rotate_yaw(x, torch.tensor([a]))
+    Rz = torch.tensor([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    R = rot6d_to_matrix(x[..., SL_ROT].reshape(1, 61, 24, 6))
+    assert torch.allclose(y[..., SL_ROT], matrix_to_rot6d(Rz @ R).reshape(1, 61, -1), atol=1e-5)
+    acc = x[..., SL_ACC].reshape(1, 61, 13, 3)
+    assert torch.allclose(y[..., SL_ACC].reshape(1, 61, 13, 3), acc @ Rz.T, atol=1e-5)
+    assert torch.allclose(y[..., SL_DP], x[..., SL_DP] @ Rz[:2, :2].T, atol=1e-6)
+    assert torch.equal(y[..., SL_PZ], x[..., SL_PZ]) and torch.equal(y[..., SL_CONTACT], x[..., SL_CONTACT])
+
+
+def test_yaw_invariant_stats():
+    clips = synthetic_dataset(4, 80, seed=1).clips
+    mean, std = feature_stats(clips)
+    assert mean[SL_DP].tolist() == [0.0, 0.0] and std[SL_DP][0] == std[SL_DP][1]
+    assert mean[SL_ROT.start] == 0.0 and mean[SL_ROT.start + 2] != 0.0  # z keeps its mean
+    assert (std >= 1e-2).all()
+
+
+def test_ema_update():
+    lin = torch.nn.Linear(2, 1, bias=False)
+    with torch.no_grad():
+        lin.weight.fill_(0.0)
+    ema = EMA(lin, decay=0.9)
+    with torch.no_grad():
+        lin.weight.fill_(1.0)
+    ema.update(lin, step=10_000)  # past warm-up: decay 0.9
+    assert torch.allclose(ema.model.weight, torch.full((1, 2), 0.1))
+    ema.update(lin, step=0)  # warm-up decay min(0.9, 1/10) = 0.1
+    assert torch.allclose(ema.model.weight, torch.full((1, 2), 0.1 * 0.1 + 0.9))
+    assert not ema.model.weight.requires_grad
+
+
+def _cfg(kind="diffusion", steps=4, **kw) -> TrainConfig:
+    d = {"kind": kind, "model": TINY, "steps": steps, "batch": 4, "warmup": 2, "log_every": 1, "ckpt_every": 2,
+         "val_every": 2, "val_batches": 1, "val_batch": 2,
+         "data": {"train": {"synthetic": {"clips": 3, "frames": 70, "seed": 0}},
+                  "val": {"synthetic": {"clips": 2, "frames": 50, "seed": 1}}}}
+    d.update(kw)
+    return TrainConfig.from_dict(json.loads(json.dumps(d)))
+
+
+@pytest.mark.parametrize("kind", ["diffusion", "regressor"])
+def test_resume_reproduces_uninterrupted_run(tmp_path, kind):
+    full = train(_cfg(kind), tmp_path / "full", progress=False)
+    assert full.step == 4 and len(full.losses) == 4
+    part = train(_cfg(kind), tmp_path / "part", progress=False, stop_after=2)
+    assert part.step == 2 and (tmp_path / "part" / "last.pt").exists()
+    with pytest.raises(FileExistsError):
+        train(_cfg(kind), tmp_path / "part", progress=False)
+    rest = train(_cfg(kind), tmp_path / "part", resume=True, progress=False)
+    assert rest.step == 4
+    assert rest.losses == pytest.approx(full.losses[2:], rel=1e-5, abs=1e-6)
+    a = torch.load(tmp_path / "full" / "last.pt", weights_only=False)
+    b = torch.load(tmp_path / "part" / "last.pt", weights_only=False)
+    for k in a["ema"]:
+        assert torch.allclose(a["ema"][k], b["ema"][k], atol=1e-6), k
+    log = [json.loads(s) for s in (tmp_path / "part" / "train.jsonl").read_text().splitlines()]
+    events = [e["event"] for e in log]
+    assert events.count("start") == 2 and "val" in events and "checkpoint" in events
+    assert all(math.isfinite(e["loss"]) for e in log if e["event"] == "train")
+    lm = load_model(tmp_path / "part" / "model.pt")
+    assert lm.kind == kind and lm.step == 4 and lm.norm_std.shape == (190,)
+
+
+def test_torchrun_two_processes(tmp_path):
+    """Two CPU processes with gloo through torch.distributed.run: both ranks finish, rank 0
+    writes the checkpoint, and a second launch resumes from it."""
+    cfg = _cfg(steps=2, log_every=1, ckpt_every=2, val_every=0).to_dict()
+    cfg_path = tmp_path / "cfg.json"
+    cfg_path.write_text(json.dumps(cfg))
+    out = tmp_path / "run"
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
+
+    def launch(*extra: str) -> subprocess.CompletedProcess:
+        cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2",
+               "-m", "app.cli", "train", "--config", str(cfg_path), "--out", str(out), "--no-progress", *extra]
+        return subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=240)
+
+    r = launch()
+    assert r.returncode == 0, r.stderr[-3000:]
+    ck = torch.load(out / "last.pt", weights_only=False)
+    assert ck["step"] == 2 and ck["world_size"] == 2
+    r = launch("--resume", "--steps", "3")
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert torch.load(out / "last.pt", weights_only=False)["step"] == 3
+    log = [json.loads(s) for s in (out / "train.jsonl").read_text().splitlines()]
+    starts = [e for e in log if e["event"] == "start"]
+    assert [s["world"] for s in starts] == [2, 2] and starts[1]["resume"] and starts[1]["step"] == 2
+    assert json.loads(r.stdout.strip().splitlines()[-1])["step"] == 3  # one summary line, from rank 0 only
+    assert len(r.stdout.strip().splitlines()) == 1
+
+
+def test_loss_weights_from_config():
+    cfg = TrainConfig.from_dict({"loss": {"fk": 3.0}, "model": {"layers": 2}})
+    assert cfg.loss == LossWeights(fk=3.0) and cfg.model.layers == 2 and cfg.model.d_model == ModelConfig().d_model
+    with pytest.raises(ValueError):
+        TrainConfig.from_dict({"nonsense": 1})
