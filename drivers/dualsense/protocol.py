@@ -68,9 +68,7 @@ class DsCalibration:
     acc_minus: tuple[int, int, int] = (-8192, -8192, -8192)
 
     def valid(self) -> bool:
-        g = all(
-            abs(p - b) + abs(m - b) > 0 for p, m, b in zip(self.gyro_plus, self.gyro_minus, self.gyro_bias)
-        )
+        g = all(abs(p - b) + abs(m - b) > 0 for p, m, b in zip(self.gyro_plus, self.gyro_minus, self.gyro_bias))
         a = all(p - m != 0 for p, m in zip(self.acc_plus, self.acc_minus))
         return g and a and (self.gyro_speed_plus + self.gyro_speed_minus) > 0
 
@@ -95,9 +93,7 @@ def encode_input_report(d: DsInput) -> bytes:
     buf[1:5] = b"\x80\x80\x80\x80"  # sticks centred
     buf[7] = d.seq & 0xFF
     buf[8] = 0x08  # d-pad "none"
-    _IMU.pack_into(
-        buf, 16, *(_c16(v) for v in d.gyro_raw), *(_c16(v) for v in d.accel_raw), d.timestamp & 0xFFFFFFFF
-    )
+    _IMU.pack_into(buf, 16, *(_c16(v) for v in d.gyro_raw), *(_c16(v) for v in d.accel_raw), d.timestamp & 0xFFFFFFFF)
     if d.battery_pct is not None:
         level = max(0, min(10, round((d.battery_pct - 5) / 10)))
         buf[53] = level | ((1 if d.charging else 0) << 4)

@@ -115,9 +115,7 @@ class GroupAssembler:
     def push(self, name: str, value: object) -> CanGroup | None:
         done: CanGroup | None = None
         cur = self._cur
-        if cur.names and (
-            name in cur.names or (name in GROUP_START and not set(cur.names) <= set(GROUP_START))
-        ):
+        if cur.names and (name in cur.names or (name in GROUP_START and not set(cur.names) <= set(GROUP_START))):
             done = self._flush(complete=False)
             cur = self._cur
         setattr(cur, FIELDS[name][1], value)

@@ -91,9 +91,7 @@ def _xbus_frames(n: int, seed: int = 0) -> list[bytes]:
     return [
         xb.encode(
             0x36,
-            xb.encode_mtdata2(
-                xb.MTData2(packet_counter=k, quat=(1.0, 0, 0, 0), acc=(rng.random(), 0.0, 9.8))
-            ),
+            xb.encode_mtdata2(xb.MTData2(packet_counter=k, quat=(1.0, 0, 0, 0), acc=(rng.random(), 0.0, 9.8))),
         )
         for k in range(n)
     ]
@@ -199,9 +197,7 @@ def test_can_round_trip_and_offsets():
     d = groups[0]
     assert d.sample_time_us == 4_000_000_123 and d.counter == 65535 and d.status == 0x81
     assert d.quat == pytest.approx(g.quat, abs=1 / 32767) and d.acc == pytest.approx(g.acc, abs=1 / 256)
-    assert d.gyro == pytest.approx(g.gyro, abs=1 / 512) and d.free_acc == pytest.approx(
-        g.free_acc, abs=1 / 256
-    )
+    assert d.gyro == pytest.approx(g.gyro, abs=1 / 512) and d.free_acc == pytest.approx(g.free_acc, abs=1 / 256)
     # once the layout is learned, the next group completes on its last frame (no extra latency)
     assert out[-1] is not None
     assert xcan.decode(0x7FF, b"", 0) is None  # other traffic on the bus is ignored
