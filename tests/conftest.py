@@ -1,0 +1,22 @@
+"""Shared test fixtures: where the real data lies, and a skip when it is not there."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def data_root() -> Path:
+    return Path(os.environ.get("IMUCAP_DATA", REPO.parent / "shared" / "data"))
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    root = data_root()
+    if not (root / "hdm05").is_dir() or not (root / "bandai").is_dir():
+        pytest.skip(f"real motion data not found at {root} (set IMUCAP_DATA)")
+    return root

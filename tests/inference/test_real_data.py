@@ -1,0 +1,71 @@
+"""Every real motion file we are given loads into a sane Motion (issue 2, "Must show").
+
+These read ../shared/data (or $IMUCAP_DATA) where it lies and skip when it is absent."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from inference.loaders import find_motion_files, load_motion
+from inference.loaders.asf_amc import parse_asf
+
+pytestmark = pytest.mark.data
+
+
+def _check(m, fps):
+    assert np.isfinite(m.rot).all() and np.isfinite(m.root).all()
+    assert 1.4 <= m.body.height <= 2.1, m.name
+    assert abs(m.contacts()[..., 2].min()) < 0.03, m.name
+    assert m.fps == pytest.approx(fps, rel=1e-4), m.name
+    # orientations are rotations
+    RtR = np.einsum("...ji,...jk->...ik", m.rot[::10], m.rot[::10])
+    assert np.abs(RtR - np.eye(3)).max() < 1e-9
+
+
+def test_every_hdm05_file_loads(shared_data):
+    files = find_motion_files(shared_data / "hdm05")
+    assert len(files) >= 180
+    for f in files:
+        _check(load_motion(f), 120.0)
+
+
+def test_every_bandai_file_loads(shared_data):
+    files = find_motion_files(shared_data / "bandai")
+    assert len(files) >= 2300
+    for f in files:
+        _check(load_motion(f), 30.0)
+
+
+def test_hdm05_squat_drops_the_root(shared_data):
+    for f in find_motion_files(shared_data / "hdm05")[:]:
+        if "squat" in f.name:
+            m = load_motion(f)
+            assert m.root[:, 2].max() - m.root[:, 2].min() > 0.3, f.name
+
+
+def test_hdm05_retarget_reproduces_source_joint_positions(shared_data):
+    """Our FK on the retargeted motion puts the knees, ankles and elbows where the source
+    skeleton has them (to the millimetre): bone lengths come from the source."""
+    f = next(p for p in find_motion_files(shared_data / "hdm05" / "dg") if "jog" in p.name)
+    from inference.loaders.asf_amc import find_asf, parse_amc, to_source_skeleton
+
+    asf = parse_asf(find_asf(f))
+    src = to_source_skeleton(asf, parse_amc(f, asf), 120.0)
+    m = load_motion(f)
+    j = m.joints()
+    pairs = {"l_shank": "ltibia", "r_foot": "rfoot", "l_forearm": "lradius", "r_upperarm": "rhumerus"}
+    from inference.skeleton import SEGMENT_INDEX
+
+    for ours, theirs in pairs.items():
+        d_ours = np.linalg.norm(j[:, SEGMENT_INDEX[ours]] - j[:, 0], axis=-1)
+        d_src = np.linalg.norm(src.pos[:, src.index(theirs)] - src.pos[:, 0], axis=-1) * asf.scale
+        assert np.abs(d_ours - d_src).max() < 1e-3, ours
+
+
+def test_bandai_walk_faces_where_it_goes(shared_data):
+    m = load_motion(shared_data / "bandai" / "d1" / "dataset-1_walk_normal_001.bvh.gz")
+    travel = m.root[-1] - m.root[0]
+    travel[2] = 0
+    fwd = m.rot[:, 0, :, 0].mean(axis=0)
+    assert fwd @ travel / np.linalg.norm(travel) / np.linalg.norm(fwd) > 0.95
