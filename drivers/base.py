@@ -179,6 +179,7 @@ class Device(ABC):
     """
 
     scheme: ClassVar[str] = ""
+    kind: ClassVar[str] = "imu"  # "imu" or "insoles": what the hub does with the samples
     counter_modulus: ClassVar[int | None] = None
 
     def __init__(

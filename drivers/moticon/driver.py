@@ -22,6 +22,7 @@ class MoticonUdpDevice(Device):
     missing periods as lost packets."""
 
     scheme = "moticon-udp"
+    kind = "insoles"
 
     def __init__(self, host: str, port: int, *, weight_kg: float = 75.0, rate: float = 100.0, **kw: Any) -> None:
         super().__init__(kw.pop("device_id", None) or "insoles", **kw)
