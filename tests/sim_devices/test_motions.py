@@ -1,0 +1,88 @@
+"""Procedural motions: plausible, floor-aligned, and readable back through the AMASS path."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from inference.amass_frames import amass_poses_to_global
+from inference.body import estimate_height
+from inference.synthesis import synthesize
+from sim_devices.motions import KINDS, generate, write_amass_npz
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_every_kind_is_finite_floor_aligned_and_round_trips_through_amass(kind: str, tmp_path: Path):
+    m = generate(kind, height=1.68, seconds=3.0, seed=5)
+    assert m.n_frames == 181 and m.fps == 60.0
+    assert np.all(np.isfinite(m.rot)) and np.all(np.isfinite(m.root))
+    cp = m.contacts()
+    assert abs(cp[..., 2].min()) < 1e-9
+    assert abs(estimate_height(m.body.offsets) - 1.68) < 0.02
+    p = write_amass_npz(m, tmp_path / f"{kind}.npz")
+    with np.load(p) as z:
+        assert z["poses"].shape == (m.n_frames, 156) and z["trans"].shape == (m.n_frames, 3)
+        assert float(z["mocap_framerate"]) == 60.0 and float(z["imucap_height_m"]) == pytest.approx(1.68)
+        assert str(z["gender"]) == "neutral" and z["betas"].shape == (16,)
+        np.testing.assert_allclose(amass_poses_to_global(z["poses"]), m.rot, atol=1e-9)
+        np.testing.assert_allclose(z["trans"], m.root)
+
+
+def test_lead_loader_reads_generated_file(tmp_path: Path):
+    loaders = pytest.importorskip("inference.loaders")
+    m = generate("walk", seconds=2.0, seed=1)
+    p = write_amass_npz(m, tmp_path / "walk.npz")
+    back = loaders.load_motion(p)
+    np.testing.assert_allclose(back.rot, m.rot, atol=1e-6)
+    np.testing.assert_allclose(back.root[:, :2], m.root[:, :2], atol=1e-6)
+    assert back.body.height == pytest.approx(m.body.height)
+
+
+@pytest.mark.parametrize(("kind", "speed"), [("walk", 0.9), ("walk", 1.5), ("jog", 2.5), ("jog", 3.5)])
+def test_gait_speed_and_foot_contact(kind: str, speed: float):
+    m = generate(kind, speed=speed, seconds=6.0, seed=3)
+    v = np.linalg.norm(m.root[-1, :2] - m.root[0, :2]) / m.duration
+    assert v == pytest.approx(speed, rel=0.06)
+    sig = synthesize(m)
+    # each foot is in contact during part of every stride and off during the swing
+    on = sig.contacts.reshape(-1, 2, 2).any(-1).mean(0)
+    assert np.all(on > (0.25 if kind == "walk" else 0.05)) and np.all(on < 0.8)
+    # pelvis bob is a few centimetres, not a hop
+    assert 0.01 < np.ptp(m.root[:, 2]) < (0.06 if kind == "walk" else 0.2)
+
+
+def test_walk_is_reproducible_and_seed_dependent():
+    a, b, c = (generate("walk", seed=s, seconds=2) for s in (1, 1, 2))
+    np.testing.assert_array_equal(a.rot, b.rot)
+    assert not np.allclose(a.rot, c.rot)
+
+
+def test_squat_and_jump_have_the_right_shape():
+    sq = generate("squat", seconds=4.0)
+    assert np.ptp(sq.root[:, 2]) > 0.3
+    cp = sq.contacts()
+    assert np.ptp(cp[..., :2], axis=0).max() < 1e-6  # feet stay exactly planted
+    j = generate("jump", seconds=3.0, seed=0)
+    stand = j.root[0, 2]
+    assert j.root[:, 2].max() - stand > 0.15
+    # during flight the pelvis free acceleration is gravity (away from take-off/landing)
+    sig = synthesize(j)
+    air = j.contacts()[..., 2].min(-1) > 0.005
+    idx = np.flatnonzero(air[: int(1.9 * 60)])  # the first flight
+    inner = idx[(idx > idx.min() + 6) & (idx < idx.max() - 6)]
+    assert inner.size > 5
+    np.testing.assert_allclose(sig.free_acc[inner, 0, 2], -9.81, atol=0.3)
+
+
+@pytest.mark.parametrize("kind", ["tpose", "npose"])
+def test_holds_are_still(kind: str):
+    sig = synthesize(generate(kind, seconds=2.0))
+    np.testing.assert_allclose(sig.free_acc, 0.0, atol=1e-9)
+    assert sig.contacts.all()
+
+
+def test_rejects_unknown_kind():
+    with pytest.raises(ValueError, match="unknown motion kind"):
+        generate("moonwalk")
