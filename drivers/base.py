@@ -278,6 +278,10 @@ class Device(ABC):
                 self.stats.timeouts += 1
                 return None
 
+    def has_buffered(self) -> bool:
+        """Whether ``read`` can return a sample without touching the transport."""
+        return bool(getattr(self, "_pending", None))
+
     def __iter__(self) -> Iterator[Sample]:
         """Yield samples until closed; timeouts are skipped."""
         while self._is_open:

@@ -7,6 +7,7 @@ reconfigures the tty (a syscall storm at 100 Hz x 13 sensors).
 
 from __future__ import annotations
 
+import os
 import select
 import time
 from collections import deque
@@ -61,10 +62,13 @@ class SerialDevice(Device):
         if ser is None:
             raise DeviceGone("port closed")
         try:
-            r, _, _ = select.select([ser.fileno()], [], [], timeout)
+            fd = ser.fileno()
+            r, _, _ = select.select([fd], [], [], timeout)
             if not r:
                 return b""
-            data = ser.read(max(1, ser.in_waiting))
+            # the port is ours alone and in raw mode: read the fd directly (pyserial's read
+            # adds a second select and an ioctl per call, a third of the cost at 1300 packets/s)
+            data = os.read(fd, 4096)
         except (serial.SerialException, OSError, ValueError, TypeError) as exc:
             raise DeviceGone(f"read failed: {exc}") from exc
         if not data:
