@@ -1,0 +1,113 @@
+"""Metrics on hand-computed cases (definitions in inference/metrics.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from inference.body import Body, forward_kinematics
+from inference.metrics import (
+    EVAL_SEGMENTS,
+    evaluate_clip,
+    global_angle_error,
+    jitter,
+    joint_position_error,
+    local_angle_error,
+    root_error,
+    summarize,
+)
+from inference.rotations import matrix_about_axis
+from inference.skeleton import N_SEGMENTS, SEGMENT_INDEX
+
+Z = np.array([0.0, 0.0, 1.0])
+
+
+def _identity(T: int = 3) -> np.ndarray:
+    return np.broadcast_to(np.eye(3), (T, N_SEGMENTS, 3, 3)).copy()
+
+
+def test_eighteen_segments_are_evaluated():
+    assert len(EVAL_SEGMENTS) == 18
+    for name in ("l_toes", "r_toes", "l_hand", "r_hand", "l_fingers", "r_fingers"):
+        assert SEGMENT_INDEX[name] not in EVAL_SEGMENTS
+
+
+def test_global_angle_one_segment_and_excluded_segment():
+    Rt = _identity()
+    Rp = _identity()
+    Rp[:, SEGMENT_INDEX["head"]] = matrix_about_axis(Z, np.pi / 2)  # 90 deg on 1 of 18 segments
+    Rp[:, SEGMENT_INDEX["l_hand"]] = matrix_about_axis(Z, 1.0)  # excluded: no effect
+    np.testing.assert_allclose(global_angle_error(Rp, Rt), 90.0 / 18, atol=1e-9)
+
+
+def test_local_vs_global_angle():
+    Rt = _identity()
+    # turn the whole body 30 deg: every global orientation is off, only the root's local one
+    Rp = np.broadcast_to(matrix_about_axis(Z, np.deg2rad(30.0)), Rt.shape).copy()
+    np.testing.assert_allclose(global_angle_error(Rp, Rt), 30.0, atol=1e-9)
+    np.testing.assert_allclose(local_angle_error(Rp, Rt), 30.0 / 18, atol=1e-9)
+    # turn the left leg from the hip: thigh, shank, foot (toes excluded) globally, hip locally
+    Rp = _identity()
+    for n in ("l_thigh", "l_shank", "l_foot", "l_toes"):
+        Rp[:, SEGMENT_INDEX[n]] = matrix_about_axis(Z, np.deg2rad(30.0))
+    np.testing.assert_allclose(global_angle_error(Rp, Rt), 3 * 30.0 / 18, atol=1e-9)
+    np.testing.assert_allclose(local_angle_error(Rp, Rt), 30.0 / 18, atol=1e-9)
+
+
+def test_joint_position_error_is_root_relative():
+    body = Body.from_height(1.75)
+    R = _identity(2)
+    jt = forward_kinematics(R, np.zeros((2, 3)), body.offsets)
+    jp = jt + np.array([3.0, -1.0, 0.5])  # translated: no error
+    np.testing.assert_allclose(joint_position_error(jp, jt), 0.0, atol=1e-12)
+    jp = jt.copy()
+    jp[:, SEGMENT_INDEX["head"]] += [0.23, 0.0, 0.0]  # one of 23 joints off by 23 cm
+    np.testing.assert_allclose(joint_position_error(jp, jt), 0.01, atol=1e-12)
+
+
+def test_jitter_of_a_cubic():
+    fps = 20.0
+    t = np.arange(10) / fps
+    j = np.zeros((10, 4, 3))
+    j[:, 2, 0] = 2.0 * t**3  # third derivative 12 m/s^3, exact for finite differences
+    np.testing.assert_allclose(jitter(j, fps), 12.0 / 4, rtol=1e-9)
+    assert jitter(j[:3], fps).shape == (0,)
+
+
+def test_root_error_over_horizons():
+    fps = 20.0
+    T = 101  # 5 s
+    rt = np.zeros((T, 3))
+    rt[:, 0] = np.arange(T) / fps * 1.5  # walks 1.5 m/s
+    rp = np.zeros((T, 3))
+    rp[:, 2] = 7.0  # height never counts
+    e2 = root_error(rp, rt, 2, fps)
+    assert e2.shape == (T - 40,)
+    np.testing.assert_allclose(e2, 3.0)
+    np.testing.assert_allclose(root_error(rt + [5.0, -2.0, 0.0], rt, 5, fps), 0.0, atol=1e-12)
+    assert root_error(rp, rt, 10, fps) is None
+
+
+def test_summary_pools_frames_and_reports_none():
+    fps = 20.0
+    T1, T2 = 50, 150
+    Rt1, Rt2 = _identity(T1), _identity(T2)
+    Rp1 = Rt1.copy()
+    Rp1[:, SEGMENT_INDEX["head"]] = matrix_about_axis(Z, np.pi / 2)  # GA 5 deg on clip 1
+    rng = np.random.default_rng(0)
+    j1 = np.cumsum(rng.normal(size=(T1, 24, 3)), 0) * 0.01
+    j2 = np.cumsum(rng.normal(size=(T2, 24, 3)), 0) * 0.01
+    r1, r2 = np.zeros((T1, 3)), np.zeros((T2, 3))
+    c1 = evaluate_clip("a", Rp1, r1, j1, Rt1, r1, j1, fps)
+    c2 = evaluate_clip("b", Rt2, r2, 2 * j2, Rt2, r2, j2, fps)
+    s = summarize([c1, c2])
+    assert s["clips"] == 2 and s["frames"] == 200
+    assert s["ga_deg"] == pytest.approx(5.0 * T1 / (T1 + T2))
+    assert s["re2_m"] == pytest.approx(0.0)
+    assert s["re5_m"] == pytest.approx(0.0)  # only clip b (7.5 s) is long enough
+    assert s["re10_m"] is None
+    jr = (c1.jitter_pred_sum + c2.jitter_pred_sum) / (c1.jitter_true_sum + c2.jitter_true_sum)
+    assert s["jitter_ratio"] == pytest.approx(jr)
+    assert 1.0 < s["jitter_ratio"] < 2.0
+    empty = summarize([])
+    assert empty["ga_deg"] is None and empty["jitter_ratio"] is None and empty["frames"] == 0

@@ -1,0 +1,209 @@
+"""The live poser: pass-through of measurements, dropouts, root correction, baselines,
+default weights. Tiny random models and a generated motion; no trained weights needed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from torch import nn
+
+from inference import poser as poser_mod
+from inference.body import Body, contact_points, forward_kinematics, npose_rotations
+from inference.denoiser import LoadedModel, ModelConfig, build_model
+from inference.evaluation import SIX, clip_input, synthetic_motion
+from inference.features import N_FEATURES, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, observation_mask
+from inference.poser import Poser, correct_root_displacement, reconstruct_offline, standing_features
+from inference.skeleton import SEGMENT_INDEX
+from inference.training import feature_stats
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_thread():
+    # the suite shares 2 cores with other work; oversubscribed OpenMP threads crawl
+    old = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(old)
+
+
+@pytest.fixture(scope="module")
+def clip():
+    m = synthetic_motion(seconds=3.0, seed=1)
+    return m, clip_input(m, SIX)
+
+
+def _loaded(kind: str, module: nn.Module | None = None, clip_features=None) -> LoadedModel:
+    torch.manual_seed(0)
+    cfg = ModelConfig.tiny()
+    model = (module or build_model(kind, cfg)).eval()
+    if clip_features is not None:
+        mean, std = feature_stats([clip_features])
+    else:
+        mean, std = np.zeros(N_FEATURES, np.float32), np.ones(N_FEATURES, np.float32)
+    return LoadedModel(model=model, kind=kind, config=cfg, norm_mean=mean, norm_std=std)
+
+
+class Echo(nn.Module):
+    """A denoiser that returns its input: with the single clean step [0] the poser then
+    holds every unobserved feature at its previous value (a perfect 'hold' prior)."""
+
+    def __init__(self, dp: tuple[float, float] | None = None, mean=None, std=None):
+        super().__init__()
+        self.config = ModelConfig.tiny()
+        self.dp = dp
+        self.mean, self.std = mean, std
+
+    def forward(self, z, t, height):
+        out = z.clone()
+        if self.dp is not None:  # predict a constant root displacement (normalised units)
+            out[..., SL_DP] = (torch.tensor(self.dp) - self.mean[SL_DP]) / self.std[SL_DP]
+        return out
+
+
+def test_standing_start_puts_feet_on_the_floor():
+    body = Body.from_height(1.62)
+    x = standing_features(body)
+    R = npose_rotations(1)[0]
+    j = forward_kinematics(R, np.array([0.0, 0.0, x[SL_PZ][0]]), body.offsets)
+    assert contact_points(R, j, body)[:, 2].min() == pytest.approx(0.0, abs=1e-12)
+    assert np.all(x[SL_CONTACT] == 1) and np.all(x[SL_DP] == 0)
+    p = Poser(None, body)
+    np.testing.assert_allclose(p.history(), np.broadcast_to(x, (61, N_FEATURES)), atol=1e-6)
+
+
+@pytest.mark.parametrize("kind", ["diffusion", "regressor", "floor"])
+def test_observed_features_pass_through_exactly(kind, clip):
+    _, inp = clip
+    model = None if kind == "floor" else _loaded(kind, clip_features=inp.features)
+    p = Poser(model, inp.body, steps=3, seed=0)
+    for t in range(4):
+        fr = p.step(inp.features[t], inp.mask[t])
+        m = inp.mask[t]
+        assert np.array_equal(fr.features[m], inp.features[t][m])
+        assert np.all(np.isfinite(fr.features)) and np.all(np.isfinite(fr.joints))
+        assert fr.rot.shape == (24, 3, 3) and fr.joints.shape == (24, 3) and fr.root.shape == (3,)
+        assert fr.contacts.dtype == bool and fr.contacts.shape == (4,)
+        # valid rotations everywhere, observed segments equal to the sensor's
+        np.testing.assert_allclose(fr.rot @ np.swapaxes(fr.rot, -1, -2), np.broadcast_to(np.eye(3), (24, 3, 3)),
+                                   atol=1e-5)
+        np.testing.assert_allclose(fr.rot[SEGMENT_INDEX["head"]], inp.rot[t, SEGMENT_INDEX["head"]], atol=1e-5)
+        # joints are FK of the output
+        j = forward_kinematics(fr.rot.astype(np.float64), fr.root.astype(np.float64), inp.body.offsets)
+        np.testing.assert_allclose(fr.joints, j, atol=1e-4)
+    # what was measured is in the history exactly as the next window sees it
+    hist = p.history()
+    np.testing.assert_allclose(hist[-1][inp.mask[3]], inp.features[3][inp.mask[3]], atol=1e-5)
+
+
+def test_dropped_sensor_stays_finite_and_rejoins(clip):
+    _, inp = clip
+    feats = inp.features.copy()
+    mask = inp.mask.copy()
+    wrist = observation_mask(["l_wrist"])
+    mask[10:20] &= ~wrist  # one sensor lost for 0.5 s
+    mask[25:32] = False  # every sensor lost
+    feats[~mask] = np.nan  # what a lost packet looks like after resampling
+    p = Poser(_loaded("diffusion", clip_features=inp.features), inp.body, steps=3)
+    rec = reconstruct_offline(p, feats, mask)
+    assert np.all(np.isfinite(rec.features)) and np.all(np.isfinite(rec.joints)) and np.all(np.isfinite(rec.root))
+    # back to the measurement when the sensors return
+    for t in (20, 32, 40):
+        np.testing.assert_array_equal(rec.features[t][mask[t]], inp.features[t][mask[t]])
+
+
+def test_dropout_is_continuous_with_a_hold_prior(clip):
+    """With a prior that holds the past, a lost sensor's segment neither jumps at the
+    drop nor drifts during it: unobserved frames start from a copy of frame N-2."""
+    _, inp = clip
+    lm = LoadedModel(model=Echo(), kind="diffusion", config=ModelConfig.tiny(),
+                     norm_mean=np.zeros(N_FEATURES, np.float32), norm_std=np.ones(N_FEATURES, np.float32))
+    mask = inp.mask.copy()
+    mask[10:20] &= ~observation_mask(["l_wrist"])
+    rec = reconstruct_offline(Poser(lm, inp.body, steps=[0]), inp.features, mask)
+    seg = SEGMENT_INDEX["l_forearm"]
+    for t in range(10, 20):
+        np.testing.assert_allclose(rec.rot[t, seg], rec.rot[9, seg], atol=1e-5)
+    np.testing.assert_allclose(rec.rot[20, seg], inp.rot[20, seg], atol=1e-5)
+
+
+def test_root_correction_zeroes_dp_when_feet_planted():
+    # direct: both feet in contact and still relative to the body -> the root stays
+    pts = torch.tensor(np.random.default_rng(0).normal(size=(4, 3)), dtype=torch.float32)
+    dp = torch.tensor([0.07, -0.03])
+    out = correct_root_displacement(dp, pts, pts.clone(), torch.ones(4, dtype=torch.bool))
+    torch.testing.assert_close(out, torch.zeros(2), atol=1e-7, rtol=0)
+    # no contact: unchanged; a stance foot sliding back 5 cm under the body -> root +5 cm
+    torch.testing.assert_close(correct_root_displacement(dp, pts, pts, torch.zeros(4, dtype=torch.bool)), dp)
+    moved = pts.clone()
+    moved[:2, 0] -= 0.05
+    c = torch.tensor([True, True, False, False])
+    torch.testing.assert_close(correct_root_displacement(dp, pts, moved, c), torch.tensor([0.05, 0.0]),
+                               atol=1e-6, rtol=0)
+
+
+def test_root_correction_inside_the_poser():
+    """A model insisting on dp = 10 cm/frame while standing with both feet down: the
+    corrected root does not move; without the correction it walks off."""
+    body = Body.from_height(1.75)
+    mean, std = np.zeros(N_FEATURES, np.float32), np.ones(N_FEATURES, np.float32)
+    echo = Echo(dp=(0.1, 0.0), mean=torch.as_tensor(mean), std=torch.as_tensor(std))
+    lm = LoadedModel(model=echo, kind="diffusion", config=ModelConfig.tiny(), norm_mean=mean, norm_std=std)
+    feats = np.zeros(N_FEATURES)
+    none = np.zeros(N_FEATURES, bool)
+    p = Poser(lm, body, steps=[0])
+    for _ in range(5):
+        fr = p.step(feats, none)
+    np.testing.assert_allclose(fr.root[:2], 0.0, atol=1e-6)
+    assert fr.contacts.all()
+    p = Poser(lm, body, steps=[0], root_correction=False)
+    for _ in range(5):
+        fr = p.step(feats, none)
+    np.testing.assert_allclose(fr.root[:2], [0.5, 0.0], atol=1e-5)
+
+
+def test_floor_baseline_holds_unobserved_and_root(clip):
+    _, inp = clip
+    p = Poser(None, inp.body)
+    rec = reconstruct_offline(p, inp.features, inp.mask)
+    Rn = npose_rotations(1)[0]
+    np.testing.assert_allclose(rec.rot[:, SEGMENT_INDEX["l_thigh"]], np.broadcast_to(Rn[1], (len(rec), 3, 3)),
+                               atol=1e-6)
+    np.testing.assert_allclose(rec.rot[:, SEGMENT_INDEX["pelvis"]], inp.rot[:, 0], atol=1e-5)
+    np.testing.assert_allclose(rec.root, np.broadcast_to(rec.root[0], rec.root.shape), atol=1e-6)
+    np.testing.assert_allclose(rec.root[0, 2], standing_features(inp.body)[SL_PZ][0], atol=1e-6)
+
+
+def test_reproducible_and_reset(clip):
+    _, inp = clip
+    lm = _loaded("diffusion", clip_features=inp.features)
+    p = Poser(lm, inp.body, steps=4, seed=3)
+    a = reconstruct_offline(p, inp.features[:6], inp.mask[:6])
+    p.reset()
+    b = reconstruct_offline(p, inp.features[:6], inp.mask[:6])
+    np.testing.assert_array_equal(a.features, b.features)
+
+
+def test_window_wraps_around():
+    body = Body.from_height(1.7)
+    p = Poser(None, body)
+    x = standing_features(body)
+    m = observation_mask(["head"])
+    for k in range(130):  # more than 2 windows
+        x = x.copy()
+        x[SL_ROT.start + 6 * SEGMENT_INDEX["head"]] = np.cos(0.01 * k)
+        fr = p.step(x, m)
+        assert fr.index == k
+    assert np.array_equal(fr.features[m], x[m])
+    h = p.history()
+    assert h.shape == (61, N_FEATURES)
+    np.testing.assert_allclose(h[-1][m], x[m], atol=1e-6)
+
+
+def test_missing_default_weights_say_how_to_train(monkeypatch, tmp_path):
+    monkeypatch.setitem(poser_mod.DEFAULT_WEIGHTS, "diffusion", tmp_path / "nope.pt")
+    with pytest.raises(FileNotFoundError, match="imucap train"):
+        poser_mod.resolve_model("diffusion")
+    assert poser_mod.resolve_model("floor") is None
+    with pytest.raises(FileNotFoundError):
+        poser_mod.resolve_model(str(tmp_path / "missing.pt"))
