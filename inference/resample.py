@@ -54,8 +54,9 @@ def moving_average(acc: np.ndarray, step: int = 1) -> np.ndarray:
     if T == 0:
         return acc.copy()
     pad = np.concatenate([np.repeat(acc[:1], HALF, 0), acc, np.repeat(acc[-1:], HALF, 0)], axis=0)
-    idx = np.arange(0, T, step)
-    return _window_mean([pad[idx + k] for k in range(WINDOW_MA)])
+    n = len(range(0, T, step))
+    # strided views, no copies: window element k of output i is pad[i*step + k]
+    return _window_mean([pad[k: k + (n - 1) * step + 1: step] for k in range(WINDOW_MA)])
 
 
 def downsample(acc: np.ndarray, rest: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:

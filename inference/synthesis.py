@@ -50,6 +50,8 @@ GRAVITY = np.array([0.0, 0.0, -9.81])
 G = 9.81
 CONTACT_SPEED = 0.3  # m/s, paper's contact label threshold
 DEFAULT_BMI = 22.0
+_CHUNK = 4096  # frames per synthesis chunk
+_MARGIN = 4  # overlap on each side (>= the 1-frame stencil of the finite differences)
 
 # de Leva (1996) mass fractions distributed over our 24 segments (module docstring)
 _MASS_PERCENT: dict[str, float] = {
@@ -161,20 +163,27 @@ def kinematics(motion: Motion, fps: float = FPS_SIGNAL) -> Kinematics:
     )
 
 
-def insole_force(kin: Kinematics, body: Body, mass: float | None = None) -> np.ndarray:
-    """(T, 2) vertical force under the (left, right) foot, N: m (g + a_com_z) (COM
-    acceleration smoothed like the site accelerations, never below 0), shared in
-    proportion to each foot's number of contact points; 0 when no point is in contact."""
-    m = body_mass(body.height) if mass is None else mass
-    com = np.einsum("s,tsk->tk", SEGMENT_MASS_FRACTION, segment_com(kin.rot, kin.joints, body))
-    az = moving_average(second_difference(com[:, 2], kin.fps)[:, None])[:, 0]
-    total = np.clip(m * (G + az), 0.0, None)
-    c = kin.contacts.astype(np.float64)
+def _com_z(rot: np.ndarray, joints: np.ndarray, body: Body) -> np.ndarray:
+    return np.einsum("s,ts->t", SEGMENT_MASS_FRACTION, segment_com(rot, joints, body)[..., 2])
+
+
+def _insole_from(com_z: np.ndarray, contacts: np.ndarray, fps: float, mass: float) -> np.ndarray:
+    az = moving_average(second_difference(com_z, fps)[:, None])[:, 0]
+    total = np.clip(mass * (G + az), 0.0, None)
+    c = contacts.astype(np.float64)
     per_foot = np.stack([c[:, 0] + c[:, 1], c[:, 2] + c[:, 3]], axis=-1)
     n = per_foot.sum(-1, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):
         share = np.where(n > 0, per_foot / n, 0.0)
     return total[:, None] * share
+
+
+def insole_force(kin: Kinematics, body: Body, mass: float | None = None) -> np.ndarray:
+    """(T, 2) vertical force under the (left, right) foot, N: m (g + a_com_z) (COM
+    acceleration smoothed like the site accelerations, never below 0), shared in
+    proportion to each foot's number of contact points; 0 when no point is in contact."""
+    m = body_mass(body.height) if mass is None else mass
+    return _insole_from(_com_z(kin.rot, kin.joints, body), kin.contacts, kin.fps, m)
 
 
 @dataclass
@@ -237,65 +246,84 @@ def synthesize(
     ``acc_bias``/``gyro_bias`` (S,3), and ``free_acc_raw`` (T,S,3), the unsmoothed free
     acceleration a device would stream (the live resampler applies the moving average)."""
     rng = np.random.default_rng(rng)
-    kin = kinematics(motion)
-    fps = kin.fps
-    T = kin.rot.shape[0]
+    m60 = motion.resample(FPS_SIGNAL)
+    fps = float(FPS_SIGNAL)
+    T = m60.n_frames
     k_idx = [SITES.index(s) for s in sites]
     seg = [SITE_SEGMENT_INDEX[k] for k in k_idx]
     S = len(seg)
-    R_WB = kin.rot[:, seg]  # (T,S,3,3)
-    a_W = kin.site_acc_raw[:, k_idx]  # (T,S,3)
     nz = noise or NoiseModel()
+    mass_kg = body_mass(motion.body.height) if mass is None else float(mass)
 
+    # everything random is drawn up front, in a fixed order, so chunking cannot change it
     if nz.mounting_deg > 0:
         R_BS = _random_rotations(rng, S, nz.mounting_deg)
     else:
         R_BS = np.tile(np.eye(3), (S, 1, 1))
     heading = rng.uniform(-1, 1, size=S) * np.deg2rad(nz.heading_deg) if nz.heading_deg > 0 else np.zeros(S)
-    R_WG = _rz(heading)
-    R_GW = np.swapaxes(R_WG, -1, -2)
-    R_WS = R_WB @ R_BS  # (T,S,3,3) true sensor orientation
-    R_SW = np.swapaxes(R_WS, -1, -2)
-
-    f_S = (R_SW @ (a_W - GRAVITY)[..., None])[..., 0]
-    w_B = angular_velocity(R_WB, fps)
-    w_S = (np.swapaxes(R_BS, -1, -2)[None] @ w_B[..., None])[..., 0]
-
     acc_bias = rng.normal(size=(S, 3)) * nz.acc_bias if nz.acc_bias > 0 else np.zeros((S, 3))
     gyro_bias = rng.normal(size=(S, 3)) * nz.gyro_bias if nz.gyro_bias > 0 else np.zeros((S, 3))
-    f_meas = f_S + acc_bias
-    if nz.acc_white > 0:
-        f_meas = f_meas + rng.normal(size=f_S.shape) * nz.acc_white
-    g_meas = w_S + gyro_bias
-    if nz.gyro_white > 0:
-        g_meas = g_meas + rng.normal(size=w_S.shape) * nz.gyro_white
-
-    # reported orientation: sensor frame -> the sensor's own reference frame G, with error E
-    R_GS = R_GW[None] @ R_WS
+    acc_w = rng.normal(size=(T, S, 3)) * nz.acc_white if nz.acc_white > 0 else None
+    gyro_w = rng.normal(size=(T, S, 3)) * nz.gyro_white if nz.gyro_white > 0 else None
+    walk = None
     if nz.ori_walk_deg_per_sqrt_s > 0:
         step = np.deg2rad(nz.ori_walk_deg_per_sqrt_s) / np.sqrt(fps)
         walk = np.cumsum(rng.normal(size=(T, S)), axis=0) * step
-        R_GS = _rz(walk) @ R_GS
-    if nz.ori_white_deg > 0:
-        R_GS = so3_exp(rng.normal(size=(T, S, 3)) * np.deg2rad(nz.ori_white_deg)) @ R_GS
+    ori_w = rng.normal(size=(T, S, 3)) * np.deg2rad(nz.ori_white_deg) if nz.ori_white_deg > 0 else None
+    R_WG = _rz(heading)
+    R_GW = np.swapaxes(R_WG, -1, -2)
+    R_SB = np.swapaxes(R_BS, -1, -2)
 
-    if noise is None:
-        free_raw = a_W.copy()
-    else:
+    quat = np.empty((T, S, 4))
+    f_meas = np.empty((T, S, 3))
+    g_meas = np.empty((T, S, 3))
+    free_raw = np.empty((T, S, 3))
+    contacts = np.empty((T, 4), dtype=bool)
+    com_z = np.empty(T)
+    # Time chunks with a small overlap: every quantity here needs at most +-1 neighbour,
+    # so the interior of each chunk equals the whole-clip result while the working set
+    # stays in cache (an hour of motion at once would need gigabytes of temporaries).
+    for start in range(0, T, _CHUNK):
+        stop = min(T, start + _CHUNK)
+        a, b = max(0, start - _MARGIN), min(T, stop + _MARGIN)
+        kin = kinematics(m60.slice(a, b), fps)
+        sl = slice(start - a, stop - a)
+        out = slice(start, stop)
+        R_WB = kin.rot[sl][:, seg]
+        a_W = kin.site_acc_raw[sl][:, k_idx]
+        R_WS = R_WB @ R_BS
+        f = (np.swapaxes(R_WS, -1, -2) @ (a_W - GRAVITY)[..., None])[..., 0] + acc_bias
+        if acc_w is not None:
+            f = f + acc_w[out]
+        w_B = angular_velocity(kin.rot[:, seg], fps)[sl]
+        g = (R_SB @ w_B[..., None])[..., 0] + gyro_bias
+        if gyro_w is not None:
+            g = g + gyro_w[out]
+        R_GS = R_GW @ R_WS
+        if walk is not None:
+            R_GS = _rz(walk[out]) @ R_GS
+        if ori_w is not None:
+            R_GS = so3_exp(ori_w[out]) @ R_GS
         # as a device computes it: reported orientation x measured specific force + g
-        free_raw = (R_GS @ f_meas[..., None])[..., 0] + GRAVITY
+        # (exactly the world acceleration when there is no noise)
+        free_raw[out] = a_W if noise is None else (R_GS @ f[..., None])[..., 0] + GRAVITY
+        quat[out] = matrix_to_quat(R_GS)
+        f_meas[out] = f
+        g_meas[out] = g
+        contacts[out] = kin.contacts[sl]
+        com_z[out] = _com_z(kin.rot[sl], kin.joints[sl], motion.body)
     free = moving_average(free_raw)
 
     meta = {
         "R_SB": np.swapaxes(R_BS, -1, -2).copy(), "R_WG": R_WG, "heading_rad": heading,
         "acc_bias": acc_bias, "gyro_bias": gyro_bias, "free_acc_raw": free_raw,
-        "mass_kg": body_mass(motion.body.height) if mass is None else mass,
+        "mass_kg": mass_kg,
         "noise": nz, "name": motion.name,
     }
     return SiteSignals(
-        fps=fps, sites=tuple(sites), t=np.arange(T) / fps, quat=matrix_to_quat(R_GS), free_acc=free,
-        specific_force=f_meas, gyro=g_meas, contacts=kin.contacts.copy(),
-        insole_force=insole_force(kin, motion.body, mass), meta=meta,
+        fps=fps, sites=tuple(sites), t=np.arange(T) / fps, quat=quat, free_acc=free,
+        specific_force=f_meas, gyro=g_meas, contacts=contacts,
+        insole_force=_insole_from(com_z, contacts, fps, mass_kg), meta=meta,
     )
 
 

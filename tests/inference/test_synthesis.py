@@ -185,3 +185,15 @@ def test_amass_frames_round_trip():
     np.testing.assert_allclose(root @ [0, 1, 0], [0, 0, 1], atol=1e-12)  # SMPL up -> world up
     np.testing.assert_allclose(root @ [0, 0, 1], [1, 0, 0], atol=1e-12)  # SMPL forward -> +X
     np.testing.assert_allclose(tp[0, 3:], 0.0, atol=1e-12)
+
+
+def test_chunked_synthesis_equals_whole_clip(monkeypatch):
+    """synthesize() works in time chunks for memory; the result must not depend on them."""
+    import inference.synthesis as syn
+
+    m = _walking_like(T=250)
+    whole = synthesize(m, NoiseModel.typical(), rng=5)
+    monkeypatch.setattr(syn, "_CHUNK", 37)
+    chunked = synthesize(m, NoiseModel.typical(), rng=5)
+    for name in ("quat", "free_acc", "specific_force", "gyro", "contacts", "insole_force"):
+        np.testing.assert_allclose(getattr(chunked, name), getattr(whole, name), atol=1e-10, err_msg=name)
