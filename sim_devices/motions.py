@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.ndimage import gaussian_filter1d
 
 from inference.amass_frames import global_to_amass_poses
 from inference.body import Body, contact_points, forward_kinematics, global_from_local
@@ -240,10 +241,16 @@ def _gait(T: int, fps: float, body: Body, speed: float, rng: np.random.Generator
     phase = rng.uniform() + cadence * t
     R, cp = build(phase)
     vel = anchor_velocity(phase, cp, 1.0 / fps)
+    # the anchor (lowest point, stance foot) switches at heel-to-toe roll and at foot strike,
+    # which puts kinks into the derived root path and spikes of tens of m/s^2 into the pelvis
+    # acceleration; short Gaussians (35 ms horizontal, 60 ms vertical) remove most of them
+    # at the cost of some stance-foot slide (a trade-off: see NOTES, jog contacts)
+    sigma = 0.06 * fps
+    vel = gaussian_filter1d(vel, 0.035 * fps, axis=0, mode="nearest")
     root = np.zeros((T, 3))
     root[:, :2] = np.cumsum(vel, axis=0) / fps
     root[:, :2] -= root[:1, :2]
-    root[:, 2] = -cp[..., 2].min(-1)
+    root[:, 2] = gaussian_filter1d(-cp[..., 2].min(-1), sigma, mode="nearest")
     if run:
         # flight: while no foot is below its stance height the body is ballistic; add a
         # vertical bounce that peaks mid-flight (two flights per stride)
