@@ -1,0 +1,102 @@
+"""`imucap evaluate`: the DESIGN.md contract (one JSON object on stdout, null for metrics
+the clips are too short for), exports, report, and the missing-weights error."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from app.cli import main
+from app.export_bvh import write_motion_bvh
+from inference import poser as poser_mod
+from inference.denoiser import ModelConfig, build_model, save_model
+from inference.evaluation import synthetic_motion
+from inference.loaders import load_motion
+from inference.training import feature_stats
+
+KEYS = {"clips", "frames", "ga_deg", "la_deg", "jpe_cm", "jitter_ratio", "re2_m", "re5_m", "re10_m",
+        "model", "sensors", "steps", "insoles"}
+
+
+@pytest.fixture(scope="module")
+def data_dir(tmp_path_factory):
+    d = tmp_path_factory.mktemp("motions")
+    write_motion_bvh(d / "walk_a.bvh", synthetic_motion(seconds=2.6, seed=1))
+    write_motion_bvh(d / "walk_b.bvh", synthetic_motion(seconds=2.2, seed=2, turn_deg_per_s=30.0))
+    return d
+
+
+@pytest.fixture(scope="module")
+def tiny_models(tmp_path_factory, data_dir):
+    d = tmp_path_factory.mktemp("models")
+    from inference.feature_codec import features_from_motion
+
+    mean, std = feature_stats([features_from_motion(load_motion(data_dir / "walk_a.bvh"))])
+    paths = {}
+    for kind in ("diffusion", "regressor"):
+        torch.manual_seed(0)
+        paths[kind] = d / f"{kind}.pt"
+        save_model(paths[kind], build_model(kind, ModelConfig.tiny()), kind, mean, std)
+    return paths
+
+
+def _run(capsys, *argv):
+    code = main(["evaluate", *argv, "--threads", "1", "--no-progress"])
+    cap = capsys.readouterr()
+    return code, cap.out, cap.err
+
+
+def test_json_contract_and_nulls(capsys, data_dir, tiny_models):
+    code, out, _ = _run(capsys, "--data", str(data_dir), "--sensors", "pelvis,l_wrist,r_wrist", "--steps", "2",
+                        "--model", str(tiny_models["diffusion"]), "--json")
+    assert code == 0
+    res = json.loads(out)  # stdout is exactly one JSON object
+    assert out.strip().count("\n") == 0
+    assert KEYS <= set(res)
+    assert res["clips"] == 2 and res["frames"] == 53 + 45
+    assert res["sensors"] == ["pelvis", "l_wrist", "r_wrist"] and res["steps"] == 2 and res["insoles"] is False
+    assert res["re2_m"] is not None and res["re5_m"] is None and res["re10_m"] is None
+    assert all(np.isfinite(res[k]) for k in ("ga_deg", "la_deg", "jpe_cm", "jitter_ratio"))
+    assert [c["name"] for c in res["per_clip"]] == ["walk_a", "walk_b"]
+
+
+def test_floor_with_insoles_and_bvh_export(capsys, data_dir, tmp_path):
+    code, out, _ = _run(capsys, "--data", str(data_dir), "--insoles", "--model", "floor", "--limit", "1",
+                        "--no-noise", "--json", "--export-dir", str(tmp_path / "bvh"))
+    assert code == 0
+    res = json.loads(out)
+    assert res["model"] == "floor" and res["steps"] == 0 and res["insoles"] is True and res["clips"] == 1
+    recon = load_motion(tmp_path / "bvh" / "walk_a.recon.bvh")
+    truth = load_motion(tmp_path / "bvh" / "walk_a.truth.bvh")
+    assert recon.n_frames == truth.n_frames == res["frames"]
+    assert abs(recon.fps - 20.0) < 1e-6
+
+
+def test_report_over_sensor_sets_and_models(capsys, data_dir, tiny_models, tmp_path, monkeypatch):
+    for kind, path in tiny_models.items():
+        monkeypatch.setitem(poser_mod.DEFAULT_WEIGHTS, kind, path)
+    report = tmp_path / "report.md"
+    code, out, _ = _run(capsys, "--data", str(data_dir / "walk_b.bvh"), "--steps", "2", "--json",
+                        "--report", str(report))
+    assert code == 0
+    res = json.loads(out)
+    text = report.read_text()
+    assert len(res["report"]["rows"]) == 12
+    for label in ("6 sites", "6 sites + insoles", "3 sites (pelvis, wrists)", "2 sites (shanks)"):
+        for model in ("diffusion", "regressor", "floor"):
+            assert f"| {label} | {model} |" in text
+
+
+def test_missing_weights_is_a_clear_error(capsys, data_dir, tmp_path, monkeypatch):
+    monkeypatch.setitem(poser_mod.DEFAULT_WEIGHTS, "diffusion", tmp_path / "none.pt")
+    code, out, err = _run(capsys, "--data", str(data_dir), "--json")
+    assert code == 2 and out == ""
+    assert "imucap train" in err
+
+
+def test_unknown_site_is_rejected(capsys, data_dir):
+    code, out, err = _run(capsys, "--data", str(data_dir), "--sensors", "pelvis,tail", "--model", "floor", "--json")
+    assert code == 2 and out == "" and "tail" in err
