@@ -1,0 +1,43 @@
+"""`imucap bench --json`: the DESIGN.md keys, for the live loop and under `paper`.
+No wall-clock assertions (the machine is shared)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+import app.cli_bench as cli_bench
+from app.cli import main
+from inference.denoiser import LoadedModel, ModelConfig, build_model
+
+
+@pytest.fixture(autouse=True)
+def _restore_threads():
+    # the CLI's --threads sets torch's global thread count; give it back
+    old = torch.get_num_threads()
+    yield
+    torch.set_num_threads(old)
+
+
+def _tiny_paper():
+    torch.manual_seed(0)
+    cfg = ModelConfig.tiny()
+    return LoadedModel(model=build_model("diffusion", cfg).eval(), kind="diffusion", config=cfg,
+                       norm_mean=np.zeros(190, np.float32), norm_std=np.ones(190, np.float32))
+
+
+def test_bench_json_contract(capsys, monkeypatch):
+    monkeypatch.setattr(cli_bench, "paper_model", _tiny_paper)  # the real one takes seconds per frame
+    code = main(["bench", "--json", "--random-weights", "--frames", "3", "--paper-frames", "2", "--warmup", "1",
+                 "--threads", "1", "--steps", "2"])
+    out = capsys.readouterr().out
+    assert code == 0
+    res = json.loads(out)
+    for r in (res, res["paper"]):
+        assert {"p50_ms", "p99_ms", "steps", "model"} <= set(r)
+        assert 0 < r["p50_ms"] <= r["p99_ms"]
+    assert res["steps"] == 2 and res["paper"]["steps"] == 30 and res["threads"] == 1
+    assert "4/256/1024" in res["model"] and "paper" in res["paper"]["model"]
