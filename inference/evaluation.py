@@ -68,11 +68,30 @@ class ClipInput:
     joints: np.ndarray  # (T, 24, 3) truth
 
 
+def face_forward(motion: Motion) -> Motion:
+    """The motion turned about the vertical and shifted so that its first frame's pelvis
+    faces +X from above the origin.
+
+    That is the frame a calibrated live session works in (DESIGN.md: after
+    sensor-to-world calibration X is the subject's forward at calibration time) and the
+    heading the poser's standing history has; clips in the data face wherever the
+    capture did, and feeding them raw would start every evaluation with a sudden turn.
+    A rigid motion of the world: every metric is unchanged by it for a perfect poser."""
+    fwd = motion.rot[0, 0] @ np.array([1.0, 0.0, 0.0])
+    yaw = float(np.arctan2(fwd[1], fwd[0]))
+    Rz = matrix_about_axis(np.array([0.0, 0.0, 1.0]), -yaw)
+    root = (motion.root - [motion.root[0, 0], motion.root[0, 1], 0.0]) @ Rz.T
+    return replace(motion, rot=Rz @ motion.rot, root=root)
+
+
 def clip_input(motion: Motion, sites: Sequence[str], insoles: bool = False, noise: NoiseModel | None = None,
-               seed: int = 0) -> ClipInput:
+               seed: int = 0, align: bool = True) -> ClipInput:
     """Synthesize a motion's signals at `sites` and turn them into 20 Hz features and
-    masks the way the live pipeline does (module docstring), plus the 20 Hz truth."""
+    masks the way the live pipeline does (module docstring), plus the 20 Hz truth.
+    ``align`` first turns the clip to face +X at its start (``face_forward``)."""
     sites = parse_sites(list(sites))
+    if align:
+        motion = face_forward(motion)
     kin = kinematics(motion)
     rot = kin.rot[::STEP]
     T = rot.shape[0]
@@ -245,7 +264,7 @@ def resolve_models(specs: Sequence[str]) -> dict[str, LoadedModel | None]:
 
 
 __all__ = [
-    "SIX", "REPORT_SETS", "REPORT_MODELS", "evaluation_noise", "ClipInput", "clip_input", "clip_seed",
+    "SIX", "REPORT_SETS", "REPORT_MODELS", "evaluation_noise", "face_forward", "ClipInput", "clip_input", "clip_seed",
     "ClipResult", "reconstruct_clip", "evaluate_motions", "load_motions", "model_label", "report_markdown",
     "synthetic_motion", "resolve_models"
 ]

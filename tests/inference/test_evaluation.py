@@ -31,7 +31,7 @@ def _one_thread():
 
 def test_noise_free_inputs_equal_training_features():
     m = synthetic_motion(seconds=2.0, seed=4)
-    inp = clip_input(m, SIX, insoles=True, noise=None)
+    inp = clip_input(m, SIX, insoles=True, noise=None, align=False)
     x = features_from_motion(m)
     mask = observation_mask(SIX, insoles=True)
     assert inp.features.shape == x.shape and np.array_equal(inp.mask[0], mask)
@@ -62,3 +62,20 @@ def test_floor_evaluation_and_short_clip_nulls():
     assert clips[0].recon is not None and clips[0].recon.rot.shape == (61, 24, 3, 3)
     text = report_markdown([{"label": "6 sites", "model": "floor", "steps": 0, **s}])
     assert "| 6 sites | floor | 0 | 2 | 192 |" in text and "n/a" in text
+
+
+def test_face_forward_turns_the_start_to_plus_x():
+    from inference.evaluation import face_forward
+
+    m = synthetic_motion(seconds=1.0, seed=3, turn_deg_per_s=50.0)
+    from dataclasses import replace
+
+    from inference.rotations import matrix_about_axis
+
+    Rz = matrix_about_axis(np.array([0.0, 0.0, 1.0]), 2.5)
+    turned = replace(m, rot=Rz @ m.rot, root=m.root @ Rz.T + [4.0, -3.0, 0.0])
+    back = face_forward(turned)
+    fwd = back.rot[0, 0] @ [1.0, 0.0, 0.0]
+    assert abs(np.arctan2(fwd[1], fwd[0])) < 1e-9
+    np.testing.assert_allclose(back.root[0, :2], 0.0, atol=1e-12)
+    np.testing.assert_allclose(back.joints(), face_forward(m).joints(), atol=1e-9)
