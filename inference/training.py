@@ -325,6 +325,16 @@ def feature_stats(clips: list[np.ndarray], yaw_invariant: bool = True) -> tuple[
     return mean.astype(np.float32), np.maximum(std, STD_FLOOR).astype(np.float32)
 
 
+def window_stats(ds: Dataset, window: int = WINDOW, yaw_invariant: bool = True, seed: int = 0,
+                 n_windows: int = 4096) -> tuple[np.ndarray, np.ndarray]:
+    """``feature_stats`` over windows drawn by the dataset's own sampler, i.e. over the
+    distribution the model is trained on (kinetic-energy weighting favours lively clips,
+    whose accelerations are ~1.8x larger in std than the frame average on HDM05)."""
+    rng = np.random.default_rng([seed, 7919])
+    xs = [ds.sample(rng, 256, window)["x"].reshape(-1, N_FEATURES) for _ in range(max(1, n_windows // 256))]
+    return feature_stats(xs, yaw_invariant=yaw_invariant)
+
+
 # --------------------------------------------------------------------------- augmentation
 
 def rotate_yaw(x: Tensor, angle: Tensor) -> Tensor:
@@ -691,7 +701,7 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
     else:
         # our own statistics (not a dataset-provided normaliser): they must match the
         # augmentation, and they travel with every checkpoint and model file
-        mean_np, std_np = feature_stats(train_set.clips, yaw_invariant=cfg.augment_yaw)
+        mean_np, std_np = window_stats(train_set, cfg.window, yaw_invariant=cfg.augment_yaw, seed=cfg.seed)
     ctx = StepContext(cfg, torch.as_tensor(mean_np, dtype=torch.float32),
                       torch.as_tensor(std_np, dtype=torch.float32), Schedule.cosine(cfg.T))
 
@@ -825,6 +835,7 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
 
 __all__ = [
     "LossWeights", "TrainConfig", "ArrayDataset", "synthetic_dataset", "load_dataset", "feature_stats",
+    "window_stats", "data_root", "cache_root", "default_data",
     "rotate_yaw", "motion_losses", "total_loss", "EMA", "step_seeds", "batch_loss", "validate",
     "init_distributed", "lr_at", "train", "TrainResult", "CHECKPOINT_FORMAT",
 ]

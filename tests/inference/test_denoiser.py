@@ -116,3 +116,13 @@ def test_save_load_roundtrip(tmp_path):
             for (k, a), b in zip(m.state_dict().items(), lm.model.state_dict().values()):
                 assert b.dtype == a.dtype, k
                 assert torch.allclose(a, b, atol=1e-2 if fp16 else 0), k
+
+
+def test_lean_inference_path_matches_modules():
+    torch.manual_seed(1)
+    m = Denoiser(ModelConfig(layers=2, d_model=64, heads=4, ff=128, dropout=0.3)).eval()
+    z, t, h = _inputs()
+    ref = m(z, t, h)  # grad enabled: the nn.TransformerDecoder path
+    with torch.inference_mode():
+        lean = m(z, t, h)
+    assert torch.allclose(ref, lean, atol=1e-5)
