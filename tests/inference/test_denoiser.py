@@ -50,8 +50,7 @@ def test_memory_tokens_feed_cross_and_self_attention():
 
     layer.forward = spy
     z, t, h = _inputs()
-    with torch.no_grad():
-        m(z, t, h)
+    m(z, t, h)  # with grad: the nn.TransformerDecoder path (the lean path is pinned to it below)
     assert seen["memory"] == (2, 2, 32)  # step + height tokens as cross-attention memory
     assert seen["tgt"] == (2, WINDOW + 2, 32)  # ... and prepended for self-attention
 
