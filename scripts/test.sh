@@ -1,0 +1,17 @@
+#!/usr/bin/env bash
+# Set up and run the whole test suite, GUI tests under a virtual X server.
+# Real-data tests read $IMUCAP_DATA (default ../shared/data) and skip when it is absent.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh
+if ! command -v xvfb-run >/dev/null; then
+  # Xvfb and the libraries Qt's xcb platform plugin needs
+  export DEBIAN_FRONTEND=noninteractive
+  SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq xvfb xauth libgl1-mesa-dri libegl1 libxkbcommon-x11-0 libxcb-cursor0 \
+    libxcb-icccm4 libxcb-keysyms1 libxcb-image0 libxcb-render-util0 libxcb-xinerama0 libxcb-randr0 \
+    libxcb-shape0 libxcb-xkb1 libdbus-1-3 libfontconfig1 >/dev/null
+fi
+.venv/bin/ruff check .
+exec xvfb-run -a -s "-screen 0 1280x1024x24" .venv/bin/python -m pytest -n 2 -q "$@"
