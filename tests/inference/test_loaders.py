@@ -254,3 +254,52 @@ def test_unknown_extension_and_missing_file(tmp_path):
         load_motion(tmp_path / "x.fbx")
     with pytest.raises(FileNotFoundError, match="nope.bvh"):
         load_motion(tmp_path / "nope.bvh")
+
+
+# CMU 31-joint layout (as in the cgspeed BVH conversions): Y-up, T-pose at zero rotation
+_CMU = [
+    ("Hips", None, (0, 17, 0)), ("LHipJoint", "Hips", (0, 0, 0)), ("LeftUpLeg", "LHipJoint", (1.6, -1.7, 0.8)),
+    ("LeftLeg", "LeftUpLeg", (2.5, -6.9, 0)), ("LeftFoot", "LeftLeg", (2.5, -6.9, 0)),
+    ("LeftToeBase", "LeftFoot", (0.1, -0.4, 2.2)),
+    ("RHipJoint", "Hips", (0, 0, 0)), ("RightUpLeg", "RHipJoint", (-1.6, -1.7, 0.8)),
+    ("RightLeg", "RightUpLeg", (-2.5, -6.9, 0)), ("RightFoot", "RightLeg", (-2.5, -6.9, 0)),
+    ("RightToeBase", "RightFoot", (-0.1, -0.4, 2.2)),
+    ("LowerBack", "Hips", (0, 0, 0)), ("Spine", "LowerBack", (0, 2.0, 0)), ("Spine1", "Spine", (0, 2.0, 0)),
+    ("Neck", "Spine1", (0, 2.0, 0)), ("Neck1", "Neck", (0, 1.6, 0)), ("Head", "Neck1", (0, 1.6, 0)),
+    ("LeftShoulder", "Spine1", (0, 2.0, 0)), ("LeftArm", "LeftShoulder", (3.0, 0.4, 0)),
+    ("LeftForeArm", "LeftArm", (5.0, 0, 0)), ("LeftHand", "LeftForeArm", (3.5, 0, 0)),
+    ("LeftFingerBase", "LeftHand", (0.6, 0, 0)), ("LeftHandIndex1", "LeftFingerBase", (0.6, 0, 0)),
+    ("LThumb", "LeftHand", (0.4, 0, 0.4)),
+    ("RightShoulder", "Spine1", (0, 2.0, 0)), ("RightArm", "RightShoulder", (-3.0, 0.4, 0)),
+    ("RightForeArm", "RightArm", (-5.0, 0, 0)), ("RightHand", "RightForeArm", (-3.5, 0, 0)),
+    ("RightFingerBase", "RightHand", (-0.6, 0, 0)), ("RightHandIndex1", "RightFingerBase", (-0.6, 0, 0)),
+    ("RThumb", "RightHand", (-0.4, 0, 0.4)),
+]
+
+
+def test_cmu_31_joint_bvh(tmp_path):
+    global _JOINTS, _END
+    saved = (_JOINTS, _END)
+    _JOINTS, _END = _CMU, {"Head": (0, 1.6, 0), "LeftHandIndex1": (0.5, 0, 0), "RightHandIndex1": (-0.5, 0, 0),
+                           "LThumb": (0.3, 0, 0.3), "RThumb": (-0.3, 0, 0.3), "LeftToeBase": (0, 0, 1.0),
+                           "RightToeBase": (0, 0, 1.0)}
+    try:
+        assert len(_CMU) == 31
+        T = 40
+        f = np.zeros((T, 6 + 3 * 30))
+        f[:, 1] = 17.0
+        f[:, 2] = np.linspace(0, 30, T)  # walking along +Z (CMU files face +Z)
+        p = tmp_path / "cmu.bvh"
+        _write_bvh(p, f)
+        m = load_motion(p)
+    finally:
+        _JOINTS, _END = saved
+    assert m.meta["skeleton"] == "cmu31"
+    assert m.meta["units"] == "cmu"  # 0.056444 m per unit puts this body near 1.7 m
+    assert 1.4 < m.body.height < 2.1
+    # zero rotation is a T-pose with the legs 20 deg apart: ours shows exactly that
+    ang = np.degrees(matrix_angle_between(m.rot[0], np.eye(3)))
+    assert ang[[SEGMENT_INDEX[s] for s in ("pelvis", "l_upperarm", "r_forearm", "spine3")]].max() < 1.0
+    assert ang[SEGMENT_INDEX["l_thigh"]] == pytest.approx(np.degrees(np.arctan2(2.5, 6.9)), abs=0.01)
+    travel = m.root[-1] - m.root[0]
+    assert m.rot[0, 0, :, 0] @ travel / np.linalg.norm(travel) > 0.99
