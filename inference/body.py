@@ -100,11 +100,11 @@ def anthropometric_offsets(height: float) -> np.ndarray:
         "l_fingers": (0.0, 0.45 * HAND, 0.0),
     }
     centre = {
-        "spine1": (-0.01, 0.0, 0.06),
+        "spine1": (0.0, 0.0, 0.06),
         "spine2": (0.0, 0.0, 0.07),
         "spine3": (0.0, 0.0, 0.07),
         "neck": (0.0, 0.0, 0.06),
-        "head": (0.01, 0.0, CHIN_Z - 0.82),
+        "head": (0.0, 0.0, CHIN_Z - 0.82),
     }
     off = np.zeros((N_SEGMENTS, 3))
     for name, v in centre.items():
