@@ -1,0 +1,177 @@
+"""The calibration protocol a subject follows, and a simulator of it for tests and the demo.
+
+Protocol (timings in ``Protocol``):
+1. ``table``: the sensors lie on a table in the reference orientation (x forward, y
+   left, z up, forward = where the subject will face), untouched;
+2. ``strap``: they are picked up and strapped on (the sensors move; nothing is measured);
+3. ``tpose``: the subject holds the T-pose, still;
+4. ``blend``: the subject moves from the T-pose into the activity, which follows.
+
+``synthesize_session`` builds the signals a suit would send during all of this: the body
+motion (T-pose hold, blend, activity) goes through ``inference.synthesis.synthesize``
+with the noise model (mounting rotation and reference-frame heading included), and the
+table and strap phases are then written over the first seconds with the *same* sensors'
+heading, biases and noise, but the sensor orientations of the protocol. The strap phase
+is a smooth, gyro-consistent path (an AHRS on the receiving side integrates the gyro, so
+a jump in orientation without a matching rate would be a lie the DualSense path notices).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from inference.body import contact_points, forward_kinematics, tpose
+from inference.motion import Motion
+from inference.resample import moving_average
+from inference.rotations import matrix_about_axis, matrix_to_quat, quat_slerp, quat_to_matrix, so3_exp
+from inference.signals import SiteSignals
+from inference.skeleton import SITES
+from inference.synthesis import GRAVITY, NoiseModel, angular_velocity, synthesize
+
+from .live import CalibrationSchedule
+
+
+@dataclass
+class Protocol:
+    """Durations (s) of the protocol phases; ``margin`` is cut from both ends of each still
+    phase when calibrating, so clock offsets between devices and the hub's latency never
+    put a moving frame inside a window."""
+
+    table: float = 3.0
+    strap: float = 1.5
+    tpose: float = 3.0
+    blend: float = 1.0
+    margin: float = 0.4
+
+    @property
+    def prefix(self) -> float:
+        """Seconds before the activity starts."""
+        return self.table + self.strap + self.tpose + self.blend
+
+    @property
+    def calibrated_at(self) -> float:
+        """Seconds after the start when the T-pose window closes."""
+        return self.table + self.strap + self.tpose - self.margin
+
+    def schedule(self) -> CalibrationSchedule:
+        m = self.margin
+        return CalibrationSchedule(
+            world_start=m, world_seconds=self.table - 2 * m,
+            tpose_start=self.table + self.strap + m, tpose_seconds=self.tpose - 2 * m,
+        )
+
+    @classmethod
+    def fitted(cls, total: float, fraction: float = 0.6) -> Protocol:
+        """The default protocol, or a proportionally shorter one that leaves at least
+        ``1 - fraction`` of a ``total``-second session for the activity (short demo
+        runs); still windows never shorter than 0.5 s."""
+        p = cls()
+        if p.prefix <= fraction * total:
+            return p
+        k = max(fraction * total / p.prefix, 2.1 / p.prefix)
+        return cls(table=p.table * k, strap=p.strap * k, tpose=p.tpose * k, blend=p.blend * k,
+                   margin=min(p.margin * k, 0.2))
+
+
+def _smoothstep(x: np.ndarray) -> np.ndarray:
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def _slerp_R(R0: np.ndarray, R1: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """(T, ..., 3, 3) rotations from R0 to R1 (..., 3, 3) at weights w (T,)."""
+    q0, q1 = matrix_to_quat(R0), matrix_to_quat(R1)
+    wq = w.reshape((-1,) + (1,) * (q0.ndim - 1))
+    return quat_to_matrix(quat_slerp(np.broadcast_to(q0, (len(w),) + q0.shape),
+                                     np.broadcast_to(q1, (len(w),) + q1.shape), wq))
+
+
+def tpose_standing(motion_body, n: int, fps: float, xy: tuple[float, float] = (0.0, 0.0)) -> Motion:
+    """``n`` frames of an exactly still T-pose, feet on the floor, facing +X."""
+    R = tpose(n)
+    j = forward_kinematics(R[:1], np.zeros(3), motion_body.offsets)
+    z = -float(contact_points(R[:1], j, motion_body)[..., 2].min())
+    root = np.tile([xy[0], xy[1], z], (n, 1))
+    return Motion(rot=R, root=root, fps=fps, body=motion_body, name="tpose")
+
+
+def session_motion(activity: Motion, protocol: Protocol | None = None) -> Motion:
+    """The subject's body motion over a whole session at the activity's rate: T-pose held
+    through the table, strap and T-pose phases, a smooth blend, then ``activity`` (which
+    should face +X at its start: X is the subject's forward at calibration)."""
+    p = protocol or Protocol()
+    fps = activity.fps
+    n_hold = int(round((p.table + p.strap + p.tpose) * fps))
+    n_blend = max(int(round(p.blend * fps)), 1)
+    xy = (float(activity.root[0, 0]), float(activity.root[0, 1]))
+    hold = tpose_standing(activity.body, n_hold + n_blend, fps, xy)
+    w = _smoothstep((np.arange(n_blend) + 1) / (n_blend + 1))
+    Rb = _slerp_R(hold.rot[0], activity.rot[0], w)
+    rb = hold.root[0] + w[:, None] * (activity.root[0] - hold.root[0])
+    rot = np.concatenate([hold.rot[:n_hold], Rb, activity.rot])
+    root = np.concatenate([hold.root[:n_hold], rb, activity.root])
+    meta = dict(activity.meta or {})
+    meta["protocol"] = p
+    meta["activity_start_frame"] = n_hold + n_blend
+    return replace(activity, rot=rot, root=root, name=f"session_{activity.name}", meta=meta)
+
+
+def synthesize_session(
+    activity: Motion,
+    protocol: Protocol | None = None,
+    noise: NoiseModel | None = None,
+    rng: np.random.Generator | int | None = None,
+    sites: tuple[str, ...] | list[str] = SITES,
+    R_known: np.ndarray | None = None,
+) -> tuple[SiteSignals, Motion]:
+    """Signals of a whole session (see module docstring) and the body-motion truth (60 Hz).
+
+    ``meta`` of the signals carries synthesis's R_SB / R_WG (what calibration must
+    recover), ``protocol`` and ``activity_start`` (s)."""
+    p = protocol or Protocol()
+    rng = np.random.default_rng(rng)
+    truth = session_motion(activity.resample(60.0), p)
+    sig = synthesize(truth, noise=noise, rng=rng, sites=tuple(sites))
+    nz = noise or NoiseModel()
+    fps = sig.fps
+    n_table = int(round(p.table * fps))
+    n_strap = int(round(p.strap * fps))
+    n_pre = n_table + n_strap
+    S = len(sig.sites)
+    Rk = np.eye(3) if R_known is None else np.asarray(R_known, float)
+    R_WG = sig.meta["R_WG"]
+    R_BS = np.swapaxes(sig.meta["R_SB"], -1, -2)
+    # world orientation of each sensor: table, strap path (slerp plus a lift-and-turn
+    # wobble), then on the bone (T-pose: R_WB = I, so R_WS = R_BS) for a few frames of overlap
+    s = _smoothstep((np.arange(n_strap) + 0.5) / n_strap)
+    R_path = _slerp_R(np.broadcast_to(Rk, (S, 3, 3)), R_BS, s)
+    axis = rng.normal(size=(S, 3))
+    axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
+    wob = np.sin(np.pi * s)[:, None] * np.deg2rad(40.0)
+    R_path = matrix_about_axis(np.broadcast_to(axis, (n_strap, S, 3)), wob) @ R_path
+    R_WS = np.concatenate([np.broadcast_to(Rk, (n_table, S, 3, 3)), R_path, np.broadcast_to(R_BS, (2, S, 3, 3))])
+    gyro = angular_velocity(R_WS, fps)[:n_pre]
+    R_WS = R_WS[:n_pre]
+    a_W = np.zeros((n_pre, S, 3))  # sensors carried gently: translation neglected
+    f = (np.swapaxes(R_WS, -1, -2) @ (a_W - GRAVITY)[..., None])[..., 0] + sig.meta["acc_bias"]
+    g = gyro + sig.meta["gyro_bias"]
+    if nz.acc_white > 0:
+        f = f + rng.normal(size=f.shape) * nz.acc_white
+    if nz.gyro_white > 0:
+        g = g + rng.normal(size=g.shape) * nz.gyro_white
+    R_GS = np.swapaxes(R_WG, -1, -2)[None] @ R_WS
+    if nz.ori_white_deg > 0:
+        R_GS = so3_exp(rng.normal(size=(n_pre, S, 3)) * np.deg2rad(nz.ori_white_deg)) @ R_GS
+    free_raw = sig.meta["free_acc_raw"].copy()
+    free_raw[:n_pre] = (R_GS @ f[..., None])[..., 0] + GRAVITY if noise is not None else a_W
+    quat = sig.quat.copy()
+    quat[:n_pre] = matrix_to_quat(R_GS)
+    sf, gy = sig.specific_force.copy(), sig.gyro.copy()
+    sf[:n_pre], gy[:n_pre] = f, g
+    meta = dict(sig.meta)
+    meta.update(free_acc_raw=free_raw, protocol=p, activity_start=truth.meta["activity_start_frame"] / fps,
+                R_known=Rk)
+    out = replace(sig, quat=quat, free_acc=moving_average(free_raw), specific_force=sf, gyro=gy, meta=meta)
+    return out, truth
