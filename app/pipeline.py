@@ -1,0 +1,522 @@
+"""The live chain: hub frames (60 Hz) -> calibration -> 60->20 Hz resampler -> 190-feature
+observation + mask -> ``Poser.step`` -> sinks.
+
+``Pipeline`` is the chain without threads: ``push(frame)`` returns the poses that frame
+completed (0 or 1), so tests, offline replay and the threaded runner share one code
+path. ``LivePipeline`` runs it on its own threads (DESIGN.md: inference never runs on
+the GUI thread): an ingest thread polls the frame source (the hub) into a bounded queue
+(oldest dropped and counted when inference falls behind, so the output describes *now*),
+an inference thread drains it through the Pipeline; the GUI only reads ``latest()``.
+
+Acceleration: devices stream *raw* free acceleration and the resampler applies the
+model's 11-frame moving average once. The simulated suit replays synthesis's
+``meta["free_acc_raw"]`` (sim_devices.devices.base.SignalSource), so nothing here
+smooths twice; ``frames_from_signals`` follows the same rule for device-less replay.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+import traceback
+from collections import deque
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
+
+from calibration import Calibration, Calibrator
+from drivers.base import Sample
+from drivers.hub import Hub, HubFrame
+from inference.features import N_FEATURES, SL_ACC, SL_CONTACT, SL_ROT, observation_mask
+from inference.resample import STEP, StreamingResampler
+from inference.rotations import matrix_to_rot6d
+from inference.signals import SiteSignals
+from inference.skeleton import N_CONTACTS, N_SITES, SITE_INDEX, SITE_SEGMENT_INDEX, SITES
+
+if TYPE_CHECKING:  # the poser pulls in torch; recorders and replay readers need not
+    from inference.poser import PoseFrame, Poser
+
+MAX_FILLED_GAP = 6  # 60 Hz frames; a longer hole restarts the resampler instead of inpainting it
+_NR = N_SITES * 9  # packed rest payload: R_WB (13*9) | observed (13) | contacts (4) | insole present (1)
+
+
+@dataclass
+class LivePose:
+    """One reconstructed 20 Hz frame with where it came from.
+
+    t: session time of the 60 Hz sample this frame stands for; t_newest: time of the
+    newest sample that went into it (the resampler looks 5 samples ahead);
+    observed_sites: (13,) which sites were measured in it; insoles: contacts observed;
+    latency_ms: emission time minus t_newest (hub wait + queueing + compute), only for
+    live sources; compute_ms: time spent in this push.
+    """
+
+    pose: PoseFrame
+    t: float
+    t_newest: float
+    index: int
+    observed_sites: np.ndarray
+    insoles: bool
+    latency_ms: float | None
+    compute_ms: float
+
+
+class Sink:
+    """Receives what the pipeline produces; override what you need. Called on the
+    pipeline's (inference) thread: be quick, or hand over to your own thread."""
+
+    def on_frame(self, frame: HubFrame) -> None:
+        """Every 60 Hz hub frame, raw (before calibration)."""
+
+    def on_calibration(self, calibration: Calibration, t: float) -> None:
+        """A new calibration took effect at session time ``t``."""
+
+    def on_pose(self, pose: LivePose) -> None:
+        """Every reconstructed frame."""
+
+    def close(self) -> None:
+        """End of session."""
+
+
+class CallbackSink(Sink):
+    """A sink from plain callables."""
+
+    def __init__(self, on_pose: Callable[[LivePose], Any] | None = None,
+                 on_frame: Callable[[HubFrame], Any] | None = None,
+                 on_calibration: Callable[[Calibration, float], Any] | None = None) -> None:
+        self._pose, self._frame, self._cal = on_pose, on_frame, on_calibration
+
+    def on_frame(self, frame: HubFrame) -> None:
+        if self._frame:
+            self._frame(frame)
+
+    def on_calibration(self, calibration: Calibration, t: float) -> None:
+        if self._cal:
+            self._cal(calibration, t)
+
+    def on_pose(self, pose: LivePose) -> None:
+        if self._pose:
+            self._pose(pose)
+
+
+@dataclass
+class PipelineStats:
+    """Counters (monotonic) and recent timings."""
+
+    frames_in: int = 0
+    frames_calibrating: int = 0
+    frames_filled: int = 0  # 60 Hz frames missing in the stream, filled as unobserved
+    resampler_restarts: int = 0
+    poses: int = 0
+    dropped: int = 0  # set by LivePipeline: frames dropped from its queue
+    sink_errors: int = 0
+    latency_ms: deque = field(default_factory=lambda: deque(maxlen=2000))
+    compute_ms: deque = field(default_factory=lambda: deque(maxlen=2000))
+    step_ms: deque = field(default_factory=lambda: deque(maxlen=2000))
+
+    def summary(self) -> dict[str, Any]:
+        def pct(d: deque, q: float) -> float | None:
+            return round(float(np.percentile(np.fromiter(d, float), q)), 2) if d else None
+
+        return {
+            "frames_in": self.frames_in, "frames_calibrating": self.frames_calibrating, "poses": self.poses,
+            "dropped": self.dropped, "frames_filled": self.frames_filled,
+            "resampler_restarts": self.resampler_restarts, "sink_errors": self.sink_errors,
+            "latency_p50_ms": pct(self.latency_ms, 50), "latency_p99_ms": pct(self.latency_ms, 99),
+            "compute_p50_ms": pct(self.compute_ms, 50), "compute_p99_ms": pct(self.compute_ms, 99),
+            "step_p50_ms": pct(self.step_ms, 50), "step_p99_ms": pct(self.step_ms, 99),
+        }
+
+
+class Pipeline:
+    """The synchronous chain for frames over ``sites`` (the hub's site order).
+
+    poser: the live Poser. calibration: a ready Calibration, or None to calibrate from
+    the stream with ``calibrator`` (default: a Calibrator that waits for ``start_world`` /
+    ``start_tpose`` calls). active_sites: the sites whose measurements the poser gets
+    (default all of ``sites``): the clinician's sensor configuration, changeable live.
+    insoles: use the insoles' contacts. clock: the session clock, for latency (None for
+    replay of recorded or synthetic times, where latency means nothing).
+    """
+
+    def __init__(
+        self,
+        poser: Poser,
+        sites: Sequence[str],
+        calibration: Calibration | None = None,
+        calibrator: Calibrator | None = None,
+        active_sites: Sequence[str] | None = None,
+        insoles: bool = False,
+        sinks: Iterable[Sink] = (),
+        clock: Callable[[], float] | None = None,
+    ) -> None:
+        self.poser = poser
+        self.sites = tuple(sites)
+        unknown = [s for s in self.sites if s not in SITE_INDEX]
+        if unknown:
+            raise ValueError(f"unknown sensor site(s) {unknown}")
+        self._site_idx = np.array([SITE_INDEX[s] for s in self.sites], dtype=int)
+        self.calibrator = calibrator or Calibrator(self.sites)
+        self.calibration: Calibration | None = None
+        self.sinks: list[Sink] = list(sinks)
+        self.clock = clock
+        self.stats = PipelineStats()
+        self.resampler = StreamingResampler()
+        self._last_index: int | None = None
+        self.insoles = insoles
+        self.set_active_sites(active_sites if active_sites is not None else self.sites, insoles)
+        if calibration is not None:
+            self.set_calibration(calibration, t=0.0)
+
+    # ------------------------------------------------------------------ configuration
+    def set_active_sites(self, sites: Sequence[str], insoles: bool | None = None) -> None:
+        """Which sites (and whether the insoles) feed the poser from now on; the others
+        become unobserved and are inpainted (no retraining: that is the method's point)."""
+        bad = [s for s in sites if s not in self.sites]
+        if bad:
+            raise ValueError(f"site(s) {bad} are not in this suit ({', '.join(self.sites)})")
+        self.active_sites = tuple(s for s in self.sites if s in set(sites))
+        self._active = np.isin(self.sites, self.active_sites)
+        if insoles is not None:
+            self.insoles = bool(insoles)
+
+    def add_sink(self, sink: Sink) -> None:
+        self.sinks.append(sink)
+
+    def set_calibration(self, calibration: Calibration, t: float) -> None:
+        """Use ``calibration`` from now on: the poser restarts from a standing history (the
+        old one was in another frame of reference) and the resampler from empty."""
+        missing = [s for s in self.sites if s not in calibration.sites]
+        if missing:
+            raise ValueError(f"the calibration has no site(s) {missing}")
+        self.calibration = calibration
+        self.poser.reset()
+        self.resampler.reset()
+        self._emit("on_calibration", calibration, t)
+
+    def recalibrate(self, origin: float | None = None) -> None:
+        """Drop the calibration and collect new windows (schedule re-anchored at ``origin``)."""
+        self.calibration = None
+        self.calibrator.reset(origin)
+
+    @property
+    def status(self) -> str:
+        return "calibrated" if self.calibration is not None else self.calibrator.status()
+
+    # ------------------------------------------------------------------ the chain
+    def _emit(self, method: str, *args: Any) -> None:
+        for s in self.sinks:
+            try:
+                getattr(s, method)(*args)
+            except Exception:  # a broken sink must not stop the reconstruction
+                self.stats.sink_errors += 1
+                if self.stats.sink_errors <= 3:
+                    traceback.print_exc()
+
+    def push(self, frame: HubFrame) -> list[LivePose]:
+        """One 60 Hz hub frame in; the 20 Hz poses it completed out."""
+        t_start = time.perf_counter()
+        self.stats.frames_in += 1
+        if frame.sites != self.sites:
+            raise ValueError(f"frame sites {frame.sites} differ from the pipeline's {self.sites}")
+        self._emit("on_frame", frame)
+        out: list[LivePose] = []
+        if self.calibration is None:
+            self.stats.frames_calibrating += 1
+            cal = self.calibrator.push(frame.t, frame.quat, frame.free_acc, frame.acc, frame.gyro, frame.present)
+            if cal is not None:
+                self.set_calibration(cal, frame.t)
+            self._last_index = frame.index
+            return out
+        if self._last_index is not None:
+            gap = frame.index - self._last_index - 1
+            if 0 < gap <= MAX_FILLED_GAP:
+                for k in range(gap):
+                    t_fill = frame.t - (gap - k) * (1.0 / 60.0)
+                    out += self._resample(t_fill, np.full((N_SITES, 3), np.nan), self._empty_rest(), t_start)
+                self.stats.frames_filled += gap
+            elif gap > MAX_FILLED_GAP or gap < 0:
+                self.resampler.reset()
+                self.stats.resampler_restarts += 1
+        self._last_index = frame.index
+        acc, rest = self._observe(frame)
+        out += self._resample(frame.t, acc, rest, t_start)
+        return out
+
+    @staticmethod
+    def _empty_rest() -> np.ndarray:
+        r = np.zeros(_NR + N_SITES + N_CONTACTS + 1)
+        r[:_NR] = np.nan
+        return r
+
+    def _observe(self, frame: HubFrame) -> tuple[np.ndarray, np.ndarray]:
+        """Calibrated world orientation and acceleration on the 13-site layout (NaN where not
+        observed), packed for the resampler."""
+        R, a = self.calibration.apply(frame.quat, frame.free_acc, frame.acc, sites=self.sites)  # type: ignore[union-attr]
+        ok = frame.present & self._active & np.all(np.isfinite(R), axis=(-1, -2)) & np.all(np.isfinite(a), axis=-1)
+        acc13 = np.full((N_SITES, 3), np.nan)
+        acc13[self._site_idx[ok]] = a[ok]
+        rest = self._empty_rest()
+        R13 = rest[:_NR].reshape(N_SITES, 9)
+        R13[self._site_idx[ok]] = R[ok].reshape(-1, 9)
+        rest[_NR:_NR + N_SITES][self._site_idx[ok]] = 1.0
+        if self.insoles and frame.insole_present:
+            rest[_NR + N_SITES:_NR + N_SITES + N_CONTACTS] = frame.contacts
+            rest[-1] = 1.0
+        return acc13, rest
+
+    def _resample(self, t: float, acc: np.ndarray, rest: np.ndarray, t_start: float) -> list[LivePose]:
+        out = []
+        for f20 in self.resampler.push(acc, rest, t):
+            out.append(self._pose(f20.index, f20.t if f20.t is not None else t, t, f20.acc, f20.rest, t_start))
+        return out
+
+    def _pose(self, index: int, t: float, t_newest: float, acc: np.ndarray, rest: np.ndarray,
+              t_start: float) -> LivePose:
+        R = rest[:_NR].reshape(N_SITES, 3, 3)
+        observed = rest[_NR:_NR + N_SITES] > 0.5
+        observed &= np.all(np.isfinite(acc), axis=-1)
+        insoles = bool(rest[-1] > 0.5)
+        x = np.zeros(N_FEATURES)
+        for k in np.nonzero(observed)[0]:
+            seg = SITE_SEGMENT_INDEX[k]
+            x[SL_ROT.start + 6 * seg: SL_ROT.start + 6 * seg + 6] = matrix_to_rot6d(R[k]).reshape(6)
+            x[SL_ACC.start + 3 * k: SL_ACC.start + 3 * k + 3] = acc[k]
+        if insoles:
+            x[SL_CONTACT] = rest[_NR + N_SITES:_NR + N_SITES + N_CONTACTS]
+        mask = observation_mask([SITES[k] for k in np.nonzero(observed)[0]], insoles=insoles)
+        t0 = time.perf_counter()
+        pose = self.poser.step(x, mask)
+        t1 = time.perf_counter()
+        latency = (self.clock() - t_newest) * 1e3 if self.clock is not None else None
+        lp = LivePose(pose=pose, t=t, t_newest=t_newest, index=index, observed_sites=observed, insoles=insoles,
+                      latency_ms=latency, compute_ms=(t1 - t_start) * 1e3)
+        self.stats.poses += 1
+        self.stats.step_ms.append((t1 - t0) * 1e3)
+        self.stats.compute_ms.append(lp.compute_ms)
+        if latency is not None:
+            self.stats.latency_ms.append(latency)
+        self._emit("on_pose", lp)
+        return lp
+
+    def close(self) -> None:
+        self._emit("close")
+
+
+# ---------------------------------------------------------------------------- sources
+
+
+class FrameSource(Protocol):
+    def poll(self) -> list[HubFrame]: ...
+
+
+class SuitHub(Hub):
+    """The hub plus what a status panel wants that the hub does not keep: each device's
+    last battery level and sample count per second."""
+
+    def __init__(self, *a: Any, **kw: Any) -> None:
+        super().__init__(*a, **kw)
+        self.battery: dict[str, float] = {}
+
+    def push(self, name: str, s: Sample) -> None:
+        if s.battery is not None:
+            self.battery[name] = float(s.battery)
+        super().push(name, s)
+
+    def status(self) -> dict[str, dict[str, Any]]:
+        """Per device: packets decoded, errors, gaps, queue drops, battery (None if unknown)."""
+        out = {}
+        for name, tr in self.tracks.items():
+            st = tr.device.stats
+            out[name] = {
+                "packets": int(st.decoded), "errors": int(st.errors), "gaps": int(self.stats.gaps.get(name, 0)),
+                "lost": int(st.lost_packets), "dropped": int(tr.dropped), "reconnects": int(st.reconnects),
+                "battery": self.battery.get(name),
+            }
+        return out
+
+
+def frames_from_signals(sig: SiteSignals, t0: float = 0.0, insoles: bool = False,
+                        drop: dict[str, list[tuple[float, float]]] | None = None) -> list[HubFrame]:
+    """Hub frames straight from synthesized signals (no devices): raw free acceleration
+    (``meta['free_acc_raw']``, as a device streams it), specific force, gyro, quaternion;
+    ``drop`` marks sites absent over (start, stop) second spans. For tests and replay."""
+    raw = sig.meta.get("free_acc_raw", sig.free_acc) if sig.meta else sig.free_acc
+    S = len(sig.sites)
+    out = []
+    for i in range(len(sig)):
+        t = t0 + i / sig.fps
+        present = np.ones(S, bool)
+        for site, spans in (drop or {}).items():
+            k = sig.sites.index(site)
+            if any(a <= t - t0 < b for a, b in spans):
+                present[k] = False
+        q, fa = sig.quat[i].copy(), raw[i].copy()
+        acc, gyro = sig.specific_force[i].copy(), sig.gyro[i].copy()
+        for arr in (q, fa, acc, gyro):
+            arr[~present] = np.nan
+        force = sig.insole_force[i] if insoles else np.full(2, np.nan)
+        out.append(HubFrame(t=t, index=i, sites=tuple(sig.sites), quat=q, free_acc=fa, acc=acc, gyro=gyro,
+                            present=present, insole_force=force, contacts=sig.contacts[i].copy(),
+                            insole_present=insoles))
+    return out
+
+
+class ListSource:
+    """Frames from a list, released at the pace of ``clock`` (real time) or all at once
+    (``realtime=False``): a FrameSource for tests and offline replay."""
+
+    def __init__(self, frames: Sequence[HubFrame], realtime: bool = False,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.frames = list(frames)
+        self.realtime = realtime
+        self.clock = clock
+        self._i = 0
+        self._start: float | None = None
+
+    @property
+    def exhausted(self) -> bool:
+        return self._i >= len(self.frames)
+
+    def poll(self) -> list[HubFrame]:
+        if self.exhausted:
+            return []
+        if not self.realtime:
+            out, self._i = self.frames[self._i:], len(self.frames)
+            return out
+        if self._start is None:
+            self._start = self.clock() - self.frames[0].t
+        now = self.clock() - self._start
+        j = self._i
+        while j < len(self.frames) and self.frames[j].t <= now:
+            j += 1
+        out, self._i = self.frames[self._i:j], j
+        return out
+
+
+# ---------------------------------------------------------------------------- threads
+
+
+class LivePipeline:
+    """Runs a Pipeline off the caller's thread.
+
+    ingest thread: ``source.poll()`` every ``poll_interval`` into a bounded queue of
+    ``queue_size`` frames (oldest dropped, ``stats.dropped``); inference thread: the
+    Pipeline. ``latest()`` is what a GUI timer reads; ``stats()`` a snapshot of the
+    counters. Exceptions on either thread stop the run and are kept in ``error``.
+    """
+
+    def __init__(self, pipeline: Pipeline, source: FrameSource, queue_size: int = 120,
+                 poll_interval: float = 1.0 / 120.0) -> None:
+        self.pipeline = pipeline
+        self.source = source
+        self.queue_size = queue_size
+        self.poll_interval = poll_interval
+        self._q: deque[HubFrame] = deque()
+        self._cv = threading.Condition()
+        self._stop = threading.Event()
+        self._latest: LivePose | None = None
+        self._threads: list[threading.Thread] = []
+        self.error: BaseException | None = None
+        self._commands: deque[Callable[[Pipeline], Any]] = deque()
+
+    def start(self) -> LivePipeline:
+        self._stop.clear()
+        self._threads = [
+            threading.Thread(target=self._guard, args=(self._ingest,), name="pipeline-ingest", daemon=True),
+            threading.Thread(target=self._guard, args=(self._infer,), name="pipeline-infer", daemon=True),
+        ]
+        for th in self._threads:
+            th.start()
+        return self
+
+    def stop(self, timeout: float = 5.0) -> None:
+        self._stop.set()
+        with self._cv:
+            self._cv.notify_all()
+        for th in self._threads:
+            th.join(timeout)
+        self._threads = []
+
+    def __enter__(self) -> LivePipeline:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    @property
+    def running(self) -> bool:
+        return any(th.is_alive() for th in self._threads)
+
+    def latest(self) -> LivePose | None:
+        """The newest reconstructed frame (thread-safe: a reference swap)."""
+        return self._latest
+
+    def call(self, fn: Callable[[Pipeline], Any]) -> None:
+        """Run ``fn(pipeline)`` on the inference thread before the next frame (changing the
+        active sites, recalibrating, adding a sink) without locking the chain."""
+        self._commands.append(fn)
+        with self._cv:
+            self._cv.notify_all()
+
+    def stats(self) -> dict[str, Any]:
+        s = self.pipeline.stats.summary()
+        s["queued"] = len(self._q)
+        return s
+
+    def _guard(self, fn: Callable[[], None]) -> None:
+        try:
+            fn()
+        except BaseException as exc:  # noqa: BLE001 - kept for the caller, the run stops
+            self.error = exc
+            traceback.print_exc()
+            self._stop.set()
+            with self._cv:
+                self._cv.notify_all()
+
+    def _ingest(self) -> None:
+        while not self._stop.is_set():
+            frames = self.source.poll()
+            if frames:
+                with self._cv:
+                    for f in frames:
+                        if len(self._q) >= self.queue_size:
+                            self._q.popleft()
+                            self.pipeline.stats.dropped += 1
+                        self._q.append(f)
+                    self._cv.notify_all()
+            self._stop.wait(self.poll_interval)
+
+    def _infer(self) -> None:
+        while not self._stop.is_set():
+            with self._cv:
+                while not self._q and not self._commands and not self._stop.is_set():
+                    self._cv.wait(0.1)
+                batch = list(self._q)
+                self._q.clear()
+            while self._commands:
+                self._commands.popleft()(self.pipeline)
+            for f in batch:
+                if self._stop.is_set():
+                    break
+                for lp in self.pipeline.push(f):
+                    self._latest = lp
+
+    def wait_for(self, predicate: Callable[[], bool], timeout: float) -> bool:
+        """Block until ``predicate()`` or ``timeout`` s (polling; for tests and the CLI)."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if predicate():
+                return True
+            if self.error is not None:
+                return False
+            time.sleep(0.02)
+        return predicate()
+
+
+__all__ = [
+    "LivePose", "Sink", "CallbackSink", "PipelineStats", "Pipeline", "SuitHub", "FrameSource",
+    "frames_from_signals", "ListSource", "LivePipeline", "STEP",
+]
