@@ -56,7 +56,7 @@ class DemoConfig:
     noise: bool = True
     headless: bool = True
     threads: int = 0
-    loop_seconds: float = 60.0  # GUI: length of the activity before the clip loops
+    calibration_protocol: Any = None  # a calibration.Protocol overriding the default timings
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -168,12 +168,11 @@ class DemoSession:
             import torch
 
             torch.set_num_threads(cfg.threads)
-        if cfg.headless:
-            self.protocol = Protocol.fitted(cfg.seconds)
-            activity_s = cfg.seconds - self.protocol.prefix + 2.0
+        if cfg.calibration_protocol is not None:
+            self.protocol = cfg.calibration_protocol
         else:
-            self.protocol = Protocol()
-            activity_s = cfg.seconds
+            self.protocol = Protocol.fitted(cfg.seconds) if cfg.headless else Protocol()
+        activity_s = cfg.seconds - self.protocol.prefix + 2.0 if cfg.headless else cfg.seconds
         self.model, self.model_label, self.warning = resolve_demo_model(cfg.model)
         self.activity = load_activity(cfg, activity_s)
         sites = tuple(cfg.sensors)

@@ -1,0 +1,79 @@
+"""The demo window under a (virtual) display: it opens, receives frames from the pipeline
+thread, the skeleton item's data changes, the sensor chooser reaches the pipeline, the
+record button writes a file. Saves docs/demo.png.
+
+Run under Xvfb: ``xvfb-run -a .venv/bin/pytest -m gui tests/app/test_gui.py``."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.gui
+
+if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+    pytest.skip("no display (run under xvfb-run)", allow_module_level=True)
+
+pytest.importorskip("pytestqt")
+pytest.importorskip("OpenGL")
+
+from app.cli_demo import DemoConfig, DemoSession  # noqa: E402
+from app.recording import read_recording  # noqa: E402
+from calibration import Protocol  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[2]
+SUIT = ("pelvis", "torso", "head", "l_upperarm", "r_upperarm", "l_wrist", "r_wrist", "l_thigh", "r_thigh",
+        "l_shank", "r_shank", "l_foot", "r_foot")
+
+
+def test_demo_window(qtbot, tmp_path):
+    from app.gui.main_window import DemoWindow
+
+    cfg = DemoConfig(motion="walk", sensors=SUIT, protocol="xbus", seconds=30.0, model="floor", headless=False,
+                     threads=1, calibration_protocol=Protocol(table=1.0, strap=0.5, tpose=1.0, blend=0.4,
+                                                              margin=0.15))
+    session = DemoSession(cfg).start()
+    try:
+        win = DemoWindow(session)
+        qtbot.addWidget(win)
+        win.show()
+        qtbot.waitExposed(win)
+        # frames arrive from the pipeline thread and reach the GL items
+        qtbot.waitUntil(lambda: win.frames_shown >= 3, timeout=30_000)
+        before = np.array(win.bones.pos, copy=True)
+        shown = win.frames_shown
+        qtbot.waitUntil(lambda: win.frames_shown >= shown + 5, timeout=10_000)
+        assert not np.allclose(before, win.bones.pos)
+        assert np.isfinite(win.bones.pos).all()
+        qtbot.waitUntil(lambda: win.table.rowCount() == len(SUIT), timeout=5_000)
+        assert win.table.item(0, 0).text() == "pelvis"
+
+        # the clinician's sensor configuration goes to the pipeline thread
+        win.preset.setCurrentIndex(win.preset.findText("paper 6 (pelvis, head, wrists, shanks)"))
+        qtbot.waitUntil(lambda: len(session.pipeline.active_sites) == 6, timeout=5_000)
+        qtbot.waitUntil(lambda: session.live.latest().observed_sites.sum() == 6, timeout=5_000)
+        win.preset.setCurrentIndex(0)
+        qtbot.waitUntil(lambda: len(session.pipeline.active_sites) == len(SUIT), timeout=5_000)
+
+        # recording from the button
+        win.record_path = tmp_path / "gui.h5"
+        win.record_button.click()
+        assert win.record_button.isChecked() and session.recorder is not None
+        n0 = session.pipeline.stats.poses
+        qtbot.waitUntil(lambda: session.pipeline.stats.poses >= n0 + 20, timeout=10_000)
+        # a walking pose for the screenshot
+        qtbot.wait(300)
+        docs = REPO / "docs"
+        docs.mkdir(exist_ok=True)
+        assert win.grab().save(str(docs / "demo.png"))
+        win.record_button.click()
+        assert session.recorder is None and not win.record_button.isChecked()
+        rec = read_recording(tmp_path / "gui.h5")
+        assert len(rec.recon["t"]) >= 15 and rec.n_frames >= 45
+        assert rec.metadata["model"] == "floor"
+        win.close()
+    finally:
+        session.stop()
