@@ -406,12 +406,18 @@ class LivePipeline:
     ``queue_size`` frames (oldest dropped, ``stats.dropped``); inference thread: the
     Pipeline. ``latest()`` is what a GUI timer reads; ``stats()`` a snapshot of the
     counters. Exceptions on either thread stop the run and are kept in ``error``.
+
+    ``max_lag`` (s): when the inference thread comes back to the queue, frames older than
+    the newest by more than this are dropped (counted) instead of worked through. A poser
+    slower than real time then shows the newest motion at a lower frame rate rather than
+    an ever older one (the resampler restarts across the hole; the poser continues).
     """
 
     def __init__(self, pipeline: Pipeline, source: FrameSource, queue_size: int = 120,
-                 poll_interval: float = 1.0 / 120.0) -> None:
+                 poll_interval: float = 1.0 / 120.0, max_lag: float | None = 0.15) -> None:
         self.pipeline = pipeline
         self.source = source
+        self.max_lag = max_lag
         self.queue_size = queue_size
         self.poll_interval = poll_interval
         self._q: deque[HubFrame] = deque()
@@ -496,6 +502,11 @@ class LivePipeline:
                     self._cv.wait(0.1)
                 batch = list(self._q)
                 self._q.clear()
+            if self.max_lag is not None and batch:
+                newest = batch[-1].t
+                keep = [f for f in batch if newest - f.t <= self.max_lag]
+                self.pipeline.stats.dropped += len(batch) - len(keep)
+                batch = keep
             while self._commands:
                 self._commands.popleft()(self.pipeline)
             for f in batch:

@@ -143,7 +143,7 @@ def test_threaded_runner_matches_the_synchronous_chain(session):
     ref = _run(_pipeline(truth), frames)
     got = []
     pipe = _pipeline(truth, sinks=[CallbackSink(on_pose=got.append)], clock=time.monotonic)
-    with LivePipeline(pipe, ListSource(frames), queue_size=10_000) as live:
+    with LivePipeline(pipe, ListSource(frames), queue_size=10_000, max_lag=None) as live:
         assert live.wait_for(lambda: len(got) >= len(ref), 60)
         assert live.latest() is got[-1]
     assert len(got) == len(ref)
