@@ -204,6 +204,7 @@ class Device(ABC):
         self._next_attempt = 0.0
         self._backoff = self.backoff_min
         self._lock = threading.RLock()
+        self._deferred_loss: OSError | None = None
 
     # --- lifecycle -------------------------------------------------------------------------------------
     def open(self) -> Device:
@@ -250,6 +251,27 @@ class Device(ABC):
         Never raises for transport loss while ``reconnect`` is on: the loss becomes a
         ``disconnected`` event and later a ``reconnected`` one.
         """
+        sample = self._guarded(self._read, timeout)
+        return None if sample is None else self._finish(sample, self.clock())
+
+    def read_many(self, timeout: float | None = 0.1, max_samples: int = 256) -> list[Sample]:
+        """Every sample that is available now, waiting up to ``timeout`` for the first;
+        ``[]`` on timeout. Same loss/reconnect behaviour as ``read``.
+
+        Why: at 13 sensors x 100 Hz the cost is in waking up once per packet, not in
+        decoding. A reader that wakes every few milliseconds and takes the whole
+        buffer pays the wake-up, the syscalls and the locking once per batch.
+        """
+        batch = self._guarded(lambda t: self._read_many(t, max_samples) or None, timeout)
+        if not batch:
+            return []
+        now = self.clock()  # one stamp per batch: these bytes were all decoded now
+        return [self._finish(s, now) for s in batch]
+
+    def _guarded(self, fn: Callable[[float | None], Any], timeout: float | None) -> Any:
+        """Run ``fn(remaining)`` until it returns something or ``timeout`` passes, turning
+        transport loss into reconnect with backoff (the part ``read`` and ``read_many``
+        share)."""
         if not self._is_open:
             raise RuntimeError(f"{self.describe()} is not open")
         deadline = None if timeout is None else self.clock() + timeout
@@ -260,23 +282,38 @@ class Device(ABC):
                     wait = self._next_attempt - self.clock()
                     if remaining is not None and wait >= remaining:
                         time.sleep(remaining)
-                        self.stats.timeouts += 1
+                        self._count_timeout(timeout)
                         return None
                     time.sleep(max(0.0, min(wait, 0.05)))
                     continue
                 remaining = None if deadline is None else max(0.0, deadline - self.clock())
             try:
-                sample = self._read(remaining)
+                exc, self._deferred_loss = self._deferred_loss, None
+                if exc is not None:
+                    raise exc
+                result = fn(remaining)
             except OSError as exc:  # includes DeviceGone and serial.SerialException
                 self._lost(exc)
                 if not self.reconnect:
                     raise
                 continue
-            if sample is not None:
-                return self._finish(sample)
+            if result is not None:
+                return result
             if remaining is not None and self.clock() >= deadline:  # type: ignore[operator]
-                self.stats.timeouts += 1
+                self._count_timeout(timeout)
                 return None
+
+    def _count_timeout(self, timeout: float | None) -> None:
+        # a zero-timeout poll (the hub's selector asking "anything more?") is not a timeout
+        if timeout != 0.0:
+            self.stats.timeouts += 1
+
+    def fileno(self) -> int | None:
+        """A file descriptor that becomes readable when ``read_many`` has data, or
+        ``None`` if this transport cannot be waited on with ``select`` (queue-backed
+        ones: python-can's virtual bus, hidapi). The hub serves every device with a
+        descriptor from one selector thread instead of one thread each."""
+        return None
 
     def has_buffered(self) -> bool:
         """Whether ``read`` can return a sample without touching the transport."""
@@ -289,9 +326,9 @@ class Device(ABC):
             if s is not None:
                 yield s
 
-    def _finish(self, sample: Sample) -> Sample:
+    def _finish(self, sample: Sample, now: float) -> Sample:
         if not sample.t:
-            sample.t = self.clock()
+            sample.t = now
         self.stats.decoded += 1
         if self._counter is not None and sample.counter is not None:
             lost = self._counter.update(sample.counter)
@@ -360,3 +397,24 @@ class Device(ABC):
     @abstractmethod
     def _read(self, timeout: float | None) -> Sample | None:
         """Return one decoded sample, ``None`` on timeout; raise ``OSError`` on loss."""
+
+    def _read_many(self, timeout: float | None, max_samples: int) -> list[Sample]:
+        """Samples available now (waiting up to ``timeout`` for the first), ``[]`` on
+        timeout; raise ``OSError`` on loss. The default loops ``_read``, so a backend
+        that only overrides ``_read`` works unchanged; stream backends override this
+        to decode a whole buffer at once. A loss after the first sample is deferred to
+        the next call, so the samples already decoded are not thrown away."""
+        s = self._read(timeout)
+        if s is None:
+            return []
+        out = [s]
+        while len(out) < max_samples:
+            try:
+                s = self._read(0.0)
+            except OSError as exc:
+                self._deferred_loss = exc
+                break
+            if s is None:
+                break
+            out.append(s)
+        return out

@@ -68,6 +68,33 @@ class MoticonUdpDevice(Device):
             return None
         return self._to_sample(f)
 
+    def _read_many(self, timeout: float | None, max_samples: int) -> list[Sample]:
+        """Every datagram queued on the socket: one select, then non-blocking
+        receives until the socket is empty."""
+        sock = self._sock
+        if sock is None:
+            raise DeviceGone("socket closed")
+        r, _, _ = select.select([sock], [], [], timeout)
+        if not r:
+            return []
+        out: list[Sample] = []
+        while len(out) < max_samples:
+            try:
+                data = sock.recv(65536, socket.MSG_DONTWAIT)
+            except BlockingIOError:
+                break
+            try:
+                f = mot.decode(data)
+            except mot.MoticonError:
+                self.stats.bad_frame += 1
+                continue
+            out.append(self._to_sample(f))
+        return out
+
+    def fileno(self) -> int | None:
+        s = self._sock
+        return None if s is None or not self._connected else s.fileno()
+
     def _to_sample(self, f: mot.InsoleFrame) -> Sample:
         extra: dict[str, Any] = {}
         if self._last_time is not None:

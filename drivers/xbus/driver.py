@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
 import numpy as np
 
-from .._math import quat_normalize
 from ..base import DeviceGone, Sample, Unwrapper
 from ..serial_base import SerialDevice
 from . import protocol as xb
@@ -111,35 +111,79 @@ class XbusDevice(SerialDevice):
         return mtdata2_to_sample(d, self.device_id, self._clock_unwrap)
 
 
+_IDENTITY = (1.0, 0.0, 0.0, 0.0)
+_NED, _ENU = xb.CoordFrame.NED, xb.CoordFrame.ENU
+
+
 def mtdata2_to_sample(d: xb.MTData2, device_id: str, unwrap: Unwrapper | None = None) -> Sample:
-    """The conversion the driver applies, exposed for the benchmark and tests."""
-    ned = d.frame == xb.CoordFrame.NED
-    flip = np.array([1.0, -1.0, -1.0])
+    """The conversion the driver applies, exposed for the benchmark and tests.
 
-    def vec(v: tuple[float, ...] | None) -> np.ndarray | None:
-        if v is None:
-            return None
-        a = np.array(v, dtype=float)
-        return a * flip if ned else a
-
-    quat = None
-    if d.quat is not None:
-        q = np.array(d.quat, dtype=float)
-        if ned:
-            q[2:] = -q[2:]
-        quat = quat_normalize(q)
+    The quantities are gathered as Python floats and turned into one float64
+    array whose slices the ``Sample`` carries: one numpy allocation per packet
+    instead of one per quantity plus a normalisation (this runs 1300 times a
+    second for a full suit)."""
+    frame = d.frame
+    ned = frame is _NED
     dev_t = None
     if d.sample_time_fine is not None:
         dev_t = unwrap.update(d.sample_time_fine) if unwrap else d.sample_time_fine / xb.SAMPLE_TIME_FINE_HZ
+    q4, fa3, acc3, gy3 = d.quat, d.free_acc, d.acc, d.gyro
+    if q4 is not None and fa3 is not None and acc3 is not None and gy3 is not None and not ned:
+        # what our driver configures: everything present, Z-up frame (the 1300/s path)
+        w, x, y, z = q4
+        n = math.sqrt(w * w + x * x + y * y + z * z)
+        if math.isfinite(n) and n >= 1e-9:
+            n = 1.0 / n if w >= 0 else -1.0 / n
+            arr = np.array((w * n, x * n, y * n, z * n, *fa3, *acc3, *gy3))
+            extra = {} if frame is _ENU else {"frame": frame.name}
+            return Sample(
+                0.0,
+                dev_t,
+                device_id,
+                d.packet_counter,
+                arr[0:4],
+                arr[4:7],
+                arr[7:10],
+                arr[10:13],
+                status=d.status,
+                extra=extra,
+            )
+    vals: list[float] = []
+    spans: list[tuple[int, int] | None] = []
+    if d.quat is not None:
+        w, x, y, z = d.quat
+        if ned:
+            y, z = -y, -z
+        n = math.sqrt(w * w + x * x + y * y + z * z)
+        if not math.isfinite(n) or n < 1e-9:
+            w, x, y, z = _IDENTITY
+        else:
+            n = 1.0 / n if w >= 0 else -1.0 / n
+            w, x, y, z = w * n, x * n, y * n, z * n
+        spans.append((0, 4))
+        vals += (w, x, y, z)
+    else:
+        spans.append(None)
+    for v in (d.free_acc, d.acc, d.gyro):
+        if v is None:
+            spans.append(None)
+            continue
+        spans.append((len(vals), len(vals) + 3))
+        if ned:
+            vals += (v[0], -v[1], -v[2])
+        else:
+            vals += v
+    arr = np.array(vals, dtype=float)
+    q, fa, acc, gyro = (None if sp is None else arr[sp[0] : sp[1]] for sp in spans)
     return Sample(
         0.0,
         dev_t,
         device_id,
         d.packet_counter,
-        quat,
-        vec(d.free_acc),
-        vec(d.acc),
-        vec(d.gyro),
+        q,
+        fa,
+        acc,
+        gyro,
         status=d.status,
         extra={"frame": d.frame.name} if d.frame != xb.CoordFrame.ENU else {},
     )

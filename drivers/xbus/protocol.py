@@ -17,6 +17,7 @@ against bytes captured from a real device.
 
 from __future__ import annotations
 
+import operator
 import struct
 from dataclasses import dataclass, field
 from enum import IntEnum
@@ -266,7 +267,123 @@ def encode_mtdata2(d: MTData2) -> bytes:
 
 def decode_mtdata2(payload: bytes) -> MTData2:
     """Parse an MTData2 payload. Unknown data ids are kept raw in ``unknown``;
-    a known id with the wrong size, or a truncated field, raises ``XbusError``."""
+    a known id with the wrong size, or a truncated field, raises ``XbusError``.
+
+    An MTi sends the same fields in the same order in every packet, so the field
+    layout is looked up in a cache of compiled ``struct`` plans and the whole
+    payload is unpacked in one call; an unseen or unusual layout (unknown ids,
+    Fp16.32, errors) takes the general field-by-field path. Both give identical
+    results (tested)."""
+    plan = _plan_for(payload)
+    if plan is None:
+        return _decode_mtdata2_fields(payload)
+    return plan(payload)
+
+
+# layout key (the field headers) -> fast decoder; None = use the general path
+_PLANS: dict[bytes, object] = {}
+_MAX_PLANS = 64
+
+
+def _plan_for(payload: bytes):  # type: ignore[no-untyped-def]
+    """The cached fast decoder for this payload's field layout, or ``None``."""
+    n = len(payload)
+    heads = bytearray()
+    i = 0
+    while i + 3 <= n:
+        heads += payload[i : i + 3]
+        i += 3 + payload[i + 2]
+    if i != n:
+        return None  # truncated or overrunning field: the general path raises
+    key = bytes(heads)
+    plan = _PLANS.get(key)
+    if plan is None and key not in _PLANS:
+        plan = _compile_plan(key)
+        if len(_PLANS) < _MAX_PLANS:
+            _PLANS[key] = plan
+    return plan
+
+
+def _compile_plan(key: bytes):  # type: ignore[no-untyped-def]
+    """Build the one-``struct`` decoder for a field layout, or ``None`` when the
+    layout needs the general path (unknown ids, Fp16.32, inconsistent sizes).
+    Field semantics follow ``_decode_mtdata2_fields`` exactly: later fields win,
+    except that a StatusByte never overrides an earlier status."""
+    fmt = [">"]
+    slots: list[tuple[str, int, int, float]] = []  # (attribute, first value index, count (0 = int), scale)
+    pos = 0
+    have_status = False
+    prec, frame = Precision.FLOAT32, CoordFrame.ENU
+    for k in range(0, len(key), 3):
+        did = (key[k] << 8) | key[k + 1]
+        size = key[k + 2]
+        base = did & 0xFFF0
+        fmt.append("3x")
+        if base in _INT_FORMATS and did == base:
+            f = _INT_FORMATS[XDI(base)][1:]
+            if size != struct.calcsize(">" + f):
+                return None
+            if base == XDI.PacketCounter:
+                attr = "packet_counter"
+            elif base == XDI.SampleTimeFine:
+                attr = "sample_time_fine"
+            elif base == XDI.StatusByte and have_status:
+                fmt.append(f"{size}x")
+                continue
+            else:
+                attr, have_status = "status", True
+            slots.append((attr, pos, 0, 1.0))
+            fmt.append(f)
+            pos += 1
+        elif base in _N_VALUES:
+            p = Precision(did & 0x3)
+            if p == Precision.FP1632 or (did & 0xC) == 0xC:
+                return None
+            count = _N_VALUES[XDI(base)]
+            if size != count * _PREC_SIZE[p]:
+                return None
+            code = {Precision.FLOAT32: "f", Precision.FLOAT64: "d", Precision.FP1220: "i"}[p]
+            slots.append((_ATTR[XDI(base)], pos, count, 1.0 / (1 << 20) if p == Precision.FP1220 else 1.0))
+            fmt.append(f"{count}{code}")
+            pos += count
+            prec, frame = p, CoordFrame(did & 0xC)
+        else:
+            return None
+    unpack = struct.Struct("".join(fmt)).unpack
+    if all(scale == 1.0 for *_, scale in slots):
+        # the common case: one unpack, one itemgetter picks every field (ints by index,
+        # vectors by slice, absent fields the trailing None), one constructor call
+        final: dict[str, int | slice] = {}
+        for attr, i, count, _ in slots:
+            final[attr] = i if count == 0 else slice(i, i + count)
+        order = ("packet_counter", "sample_time_fine", "quat", "acc", "free_acc", "gyro", "status")
+        pick = operator.itemgetter(*(final.get(a, pos) for a in order))
+
+        def fast(payload: bytes) -> MTData2:
+            return MTData2(*pick(unpack(payload) + _NONE), prec, frame)
+
+        return fast
+
+    def plan(payload: bytes) -> MTData2:
+        v = unpack(payload)
+        d = MTData2(precision=prec, frame=frame)
+        for attr, i, count, scale in slots:
+            if count == 0:
+                setattr(d, attr, v[i])
+            elif scale != 1.0:
+                setattr(d, attr, tuple(x * scale for x in v[i : i + count]))
+            else:
+                setattr(d, attr, v[i : i + count])
+        return d
+
+    return plan
+
+
+_NONE = (None,)
+
+
+def _decode_mtdata2_fields(payload: bytes) -> MTData2:
+    """The general field-by-field MTData2 parser (the reference the plans are tested against)."""
     d = MTData2()
     i, n = 0, len(payload)
     while i < n:
