@@ -320,10 +320,13 @@ class SuitHub(Hub):
         super().__init__(*a, **kw)
         self.battery: dict[str, float] = {}
 
-    def push(self, name: str, s: Sample) -> None:
-        if s.battery is not None:
-            self.battery[name] = float(s.battery)
-        super().push(name, s)
+    def push_many(self, name: str, samples: Sequence[Sample]) -> None:
+        """Every reader path (per-sample ``push`` too) ends here."""
+        for s in reversed(samples):
+            if s.battery is not None:
+                self.battery[name] = float(s.battery)
+                break
+        super().push_many(name, samples)
 
     def status(self) -> dict[str, dict[str, Any]]:
         """Per device: packets decoded, errors, gaps, queue drops, battery (None if unknown)."""
