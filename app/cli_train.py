@@ -10,7 +10,8 @@ Multi-process (one process per core or GPU):
 The config is a JSON object with the fields of ``inference.training.TrainConfig``; its
 ``data`` entry names the training and validation sets (see ``training.load_dataset``).
 With ``--resume`` and no ``--config`` the run continues with the configuration stored in
-its checkpoint.
+its checkpoint. ``--export FILE`` trains nothing: it writes OUT/last.pt's EMA weights as an
+inference model file (``--fp16`` to halve it, ``--default-steps`` for the live poser).
 """
 
 from __future__ import annotations
@@ -31,14 +32,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--model", choices=("diffusion", "regressor"), help="model kind (overrides the config)")
     p.add_argument("--seed", type=int, help="random seed (overrides the config)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--export", type=Path, metavar="FILE", help="write OUT/last.pt's EMA weights to FILE and exit")
+    p.add_argument("--fp16", action="store_true", help="with --export: store half-precision weights")
+    p.add_argument("--default-steps", help="with --export: step list the poser uses (e.g. 10, paper, 1000,500,0)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     import torch
 
-    from inference.training import LAST, TrainConfig, train
+    from inference.training import LAST, TrainConfig, export_model, train
 
+    if args.export is not None:
+        if args.default_steps is not None:
+            from inference.diffusion import parse_steps
+
+            parse_steps(args.default_steps)  # reject a bad list now, not in the poser
+        export_model(args.out / LAST, args.export, fp16=args.fp16, default_steps=args.default_steps)
+        print(json.dumps({"exported": str(args.export), "fp16": args.fp16}))
+        return 0
     if args.config is not None:
         cfg = TrainConfig.load(args.config)
     elif args.resume:

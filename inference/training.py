@@ -122,6 +122,9 @@ class TrainConfig:
     val_batch: int = 32
     keep_every: int = 0  # also keep step_XXXXXXX.pt every this many steps (0 = only last.pt)
     threads: int = 0  # torch intra-op threads per process (0 = leave torch's default)
+    # step list the live poser should use with this model (written to model.pt as
+    # meta["default_steps"]; anything diffusion.parse_steps takes); None = the paper's 10D
+    infer_steps: str | None = None
     # {"train": spec, "val": spec}, see load_dataset; empty = default_data() (the issue's split)
     data: dict = field(default_factory=dict)
 
@@ -676,7 +679,7 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
         saved = TrainConfig.from_dict(ckpt["train_config"])
         # the run's identity comes from the checkpoint; only run-length/logging knobs may change
         keep = {"steps", "log_every", "ckpt_every", "val_every", "val_batches", "keep_every", "threads",
-                "data"}
+                "data", "infer_steps"}
         names = [f.name for f in fields(cfg)]
         merged = {k: (getattr(cfg, k) if k in keep else getattr(saved, k)) for k in names}
         cfg = TrainConfig(**merged)
@@ -737,7 +740,7 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
         if cfg.keep_every and step % cfg.keep_every == 0:
             atomic_torch_save(obj, out / f"step_{step:07d}.pt")
         save_model(out / MODEL_FILE, ema.model, cfg.kind, mean_np, std_np, step=step,
-                   meta={"val": val, "train_config": cfg.to_dict()})
+                   meta={"val": val, "train_config": cfg.to_dict(), "default_steps": cfg.infer_steps})
         return last
 
     logf = open(out / LOG_FILE, "a") if d.main else None  # noqa: SIM115
@@ -833,7 +836,23 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
                        checkpoint=ckpt_path or (last if last.exists() else None), stopped_early=stopped)
 
 
+def export_model(checkpoint: str | os.PathLike, dest: str | os.PathLike, fp16: bool = False,
+                 default_steps: str | None = None) -> None:
+    """Write the EMA weights of a training checkpoint as an inference model file (what is
+    shipped: fp16 halves it; denoiser.load_model casts back to float32)."""
+    ck = torch.load(checkpoint, map_location="cpu", weights_only=False)
+    if ck.get("format") != CHECKPOINT_FORMAT:
+        raise ValueError(f"{checkpoint} is not an imucap training checkpoint")
+    model = build_model(ck["kind"], ModelConfig.from_dict(ck["model_config"]))
+    model.load_state_dict(ck["ema"])
+    cfg = dict(ck["train_config"])
+    steps = default_steps if default_steps is not None else cfg.get("infer_steps")
+    save_model(dest, model, ck["kind"], ck["norm_mean"], ck["norm_std"], step=int(ck["step"]),
+               meta={"val": ck.get("val"), "train_config": cfg, "default_steps": steps}, fp16=fp16)
+
+
 __all__ = [
+    "export_model",
     "LossWeights", "TrainConfig", "ArrayDataset", "synthetic_dataset", "load_dataset", "feature_stats",
     "window_stats", "data_root", "cache_root", "default_data",
     "rotate_yaw", "motion_losses", "total_loss", "EMA", "step_seeds", "batch_loss", "validate",

@@ -134,6 +134,14 @@ def test_resume_reproduces_uninterrupted_run(tmp_path, kind):
     assert all(math.isfinite(e["loss"]) for e in log if e["event"] == "train")
     lm = load_model(tmp_path / "part" / "model.pt")
     assert lm.kind == kind and lm.step == 4 and lm.norm_std.shape == (190,)
+    from app.cli import main
+
+    assert main(["train", "--out", str(tmp_path / "part"), "--export", str(tmp_path / "ship.pt"), "--fp16",
+                 "--default-steps", "10"]) == 0
+    shipped = load_model(tmp_path / "ship.pt")
+    assert shipped.meta["default_steps"] == "10" and shipped.step == 4
+    for k, v in lm.model.state_dict().items():
+        assert torch.allclose(v, shipped.model.state_dict()[k], atol=1e-2, rtol=1e-2), k
 
 
 def test_torchrun_two_processes(tmp_path):
