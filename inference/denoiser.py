@@ -98,8 +98,9 @@ class Denoiser(nn.Module):
     def cond_tokens(self, t: Tensor, height: Tensor) -> Tensor:
         """(B, 2, d): the step token and the height token."""
         d = self.config.d_model
-        step = self.step_mlp(timestep_embedding(t, d))
-        h = ((height.float() - HEIGHT_MEAN) / HEIGHT_STD)[:, None]
+        dtype = self.pos.dtype
+        step = self.step_mlp(timestep_embedding(t, d).to(dtype))
+        h = ((height.to(dtype) - HEIGHT_MEAN) / HEIGHT_STD)[:, None]
         return torch.stack([step, self.height_mlp(h)], dim=1)
 
     def forward(self, z: Tensor, t: Tensor, height: Tensor) -> Tensor:

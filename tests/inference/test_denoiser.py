@@ -125,3 +125,11 @@ def test_lean_inference_path_matches_modules():
     with torch.inference_mode():
         lean = m(z, t, h)
     assert torch.allclose(ref, lean, atol=1e-5)
+
+
+def test_bfloat16_model_runs():
+    m = Denoiser(ModelConfig.tiny()).eval().to(torch.bfloat16)
+    z, t, h = _inputs()
+    with torch.inference_mode():
+        y = m(z.bfloat16(), t, h.bfloat16())
+    assert y.dtype == torch.bfloat16 and y.shape == z.shape
