@@ -133,3 +133,20 @@ def test_bfloat16_model_runs():
     with torch.inference_mode():
         y = m(z.bfloat16(), t, h.bfloat16())
     assert y.dtype == torch.bfloat16 and y.shape == z.shape
+
+
+def test_freeze_for_cpu_same_outputs():
+    from inference.denoiser import freeze_for_cpu
+    from inference.diffusion import inpaint, paper_steps
+
+    torch.manual_seed(0)
+    m = Denoiser(ModelConfig.tiny()).eval()
+    f = freeze_for_cpu(m)
+    z, t, h = _inputs(1)
+    with torch.inference_mode():
+        assert torch.allclose(f(z, t, h), m(z, t, h), atol=1e-5)
+    mask = torch.ones_like(z, dtype=torch.bool)
+    mask[:, -1] = False
+    a = inpaint(m, z, mask, h, paper_steps(), generator=torch.Generator().manual_seed(0))
+    b = inpaint(f, z, mask, h, paper_steps(), generator=torch.Generator().manual_seed(0))
+    assert torch.allclose(a, b, atol=1e-4)
