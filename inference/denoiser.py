@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import os
 import tempfile
+import warnings
 from dataclasses import asdict, dataclass, fields
 
 import numpy as np
@@ -155,7 +156,10 @@ def freeze_for_cpu(model: nn.Module, batch: int = 1, window: int | None = None) 
     cfg = model.config
     n = window or cfg.window
     example = (torch.zeros(batch, n, cfg.features), torch.zeros(batch, dtype=torch.long), torch.full((batch,), 1.7))
-    with torch.inference_mode(False), torch.no_grad():
+    with torch.inference_mode(False), torch.no_grad(), warnings.catch_warnings():
+        # TorchScript is deprecated in favour of torch.compile, which here compiles for
+        # ~40 s and then runs no faster than eager (NOTES.md); keep the lever that works
+        warnings.simplefilter("ignore", DeprecationWarning)
         traced = torch.jit.trace(model, example, check_trace=False)
         return torch.jit.freeze(traced)
 
