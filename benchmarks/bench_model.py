@@ -31,7 +31,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from inference.denoiser import Denoiser, ModelConfig, count_parameters, freeze_for_cpu  # noqa: E402
-from inference.diffusion import even_steps, inpaint, paper_steps  # noqa: E402
+from inference.diffusion import even_steps, inpaint, paper_like_steps  # noqa: E402
 from inference.features import N_FEATURES, WINDOW, observation_mask  # noqa: E402
 
 SIX = ["pelvis", "head", "l_wrist", "r_wrist", "l_shank", "r_shank"]
@@ -87,7 +87,7 @@ def window(seed: int = 0) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
 
 
 def steps_for(k: int) -> list[int]:
-    return paper_steps() if k == 10 else even_steps(k)
+    return paper_like_steps(k) if 2 <= k <= 10 else even_steps(k)
 
 
 def time_frames(model, k: int, n: int, gen: torch.Generator, budget_s: float = float("inf")) -> list[float]:

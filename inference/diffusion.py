@@ -100,6 +100,18 @@ def paper_steps() -> list[int]:
     return list(PAPER_STEPS_10D)
 
 
+def paper_like_steps(k: int) -> list[int]:
+    """``k`` (2..10) levels taken from the paper's 10D list, evenly by position, always
+    keeping its first (1000: lets the model move dp away from the copied frame, the
+    root-error gain of Table 6) and last (0) entries; for cutting steps to meet a CPU
+    budget without losing the shape of 10D."""
+    full = list(PAPER_STEPS_10D)
+    if not 2 <= k <= len(full):
+        raise ValueError(f"paper-like step lists have 2..{len(full)} steps, not {k}")
+    idx = sorted({round(i * (len(full) - 1) / (k - 1)) for i in range(k)})
+    return [full[i] for i in idx]
+
+
 def even_steps(k: int, T: int = T_DEFAULT) -> list[int]:
     """``k`` evenly spaced levels from ``T`` down to 0 inclusive (distinct, descending).
 
@@ -121,8 +133,9 @@ def even_steps(k: int, T: int = T_DEFAULT) -> list[int]:
 def parse_steps(spec: str | int | Sequence[int], T: int = T_DEFAULT) -> list[int]:
     """Parse a step specification as used on command lines.
 
-    ``"paper"``/``"10D"`` -> the paper's list; an int or digit string K -> ``even_steps(K)``;
-    a comma/slash separated list -> that list (validated).
+    ``"paper"``/``"10D"`` -> the paper's list; ``"10D:K"`` -> ``paper_like_steps(K)``; an
+    int or digit string K -> ``even_steps(K)``; a comma/slash separated list -> that list
+    (validated).
     """
     if isinstance(spec, int):
         return even_steps(spec, T)
@@ -130,6 +143,8 @@ def parse_steps(spec: str | int | Sequence[int], T: int = T_DEFAULT) -> list[int
         s = spec.strip()
         if s.lower() in ("paper", "10d"):
             return paper_steps()
+        if s.lower().startswith(("10d:", "paper:")):
+            return paper_like_steps(int(s.split(":", 1)[1]))
         if s.isdigit():
             return even_steps(int(s), T)
         spec = [int(v) for v in s.replace("/", ",").split(",") if v.strip()]
@@ -250,6 +265,7 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
 
 
 __all__ = [
-    "T_DEFAULT", "PAPER_STEPS_10D", "Schedule", "cosine_alpha_bar", "paper_steps", "even_steps",
+    "T_DEFAULT", "PAPER_STEPS_10D", "Schedule", "cosine_alpha_bar", "paper_steps", "paper_like_steps",
+    "even_steps",
     "parse_steps", "validate_steps", "sample", "ddim_step", "inpaint",
 ]

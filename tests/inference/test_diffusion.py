@@ -76,6 +76,12 @@ def test_step_lists():
     assert parse_steps("10") == even_steps(10)
     assert parse_steps(5) == even_steps(5)
     assert parse_steps("100,10,0") == [100, 10, 0]
+    assert parse_steps("10D:10") == paper_steps()
+    assert parse_steps("10d:5") == [1000, 700, 400, 10, 0]
+    assert parse_steps("paper:2") == [1000, 0]
+    for k in range(2, 11):
+        st = parse_steps(f"10D:{k}")
+        assert len(st) == k and st[0] == 1000 and st[-1] == 0 and set(st) <= set(PAPER_STEPS_10D)
     with pytest.raises(ValueError):
         parse_steps("10,100")
     with pytest.raises(ValueError):
