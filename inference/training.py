@@ -78,18 +78,19 @@ class LossWeights:
     """Weights of the loss terms. The terms are in these units:
 
     simple: normalised features (1 = one standard deviation); vel: 6D change per second;
-    fk: metres; drift: metres; slide: metres per second. The defaults make each term
-    about 1 for an uninformed prediction (the data mean: simple = 1, 6D velocity^2 ~ 20
-    /s^2, FK ~ 0.2 m^2, drift ~ 0.3 m^2 over a 3 s window, measured on HDM05), so no
-    auxiliary term drowns the simple term early in training; with the paper's unit
-    weights in these units vel would dominate 20:1.
+    fk: metres; drift: metres; slide: metres per second. Defaults are the weights the
+    shipped model was trained with (NOTES.md, "Training the shipped model"): each
+    auxiliary term starts at ~0.1-0.3 of the simple term. Heavier weights (terms 10-50x
+    the simple term at initialisation) stalled learning: the model never learned to
+    reproduce even an un-noised input, because the random initial predictions give
+    foot speeds of metres per second and 6D velocities of ~20 /s.
     """
 
     simple: float = 1.0
-    vel: float = 0.05
-    fk: float = 5.0
-    drift: float = 3.0
-    slide: float = 1.0
+    vel: float = 0.002
+    fk: float = 2.0
+    drift: float = 0.05
+    slide: float = 0.02
 
     def to_dict(self) -> dict:
         return asdict(self)
