@@ -34,14 +34,15 @@ class ModelConfig:
     """Size of a denoiser or regressor.
 
     The paper's model is ``ModelConfig.paper()`` (8 layers / 512 / FF 2048 / 8 heads);
-    the default here is the CPU-real-time size chosen by benchmarks/bench_model.py
-    (see NOTES.md, "Model (issue 3)").
+    the default here is the CPU-real-time size chosen with benchmarks/bench_model.py
+    (NOTES.md, "Model (issue 3)"): 4/256/1024 costs ~11 ms per model call on one core
+    of this machine, 4/128/512 ~3.7 ms, which is what ten steps in a 50 ms frame allow.
     """
 
     layers: int = 4
-    d_model: int = 256
+    d_model: int = 128
     heads: int = 4
-    ff: int = 1024
+    ff: int = 512
     dropout: float = 0.1
     window: int = WINDOW
     features: int = N_FEATURES
