@@ -41,9 +41,9 @@ class ModelConfig:
     """
 
     layers: int = 4
-    d_model: int = 256
+    d_model: int = 128
     heads: int = 4
-    ff: int = 1024
+    ff: int = 512
     dropout: float = 0.1
     window: int = WINDOW
     features: int = N_FEATURES

@@ -40,4 +40,4 @@ def test_bench_json_contract(capsys, monkeypatch):
         assert {"p50_ms", "p99_ms", "steps", "model"} <= set(r)
         assert 0 < r["p50_ms"] <= r["p99_ms"]
     assert res["steps"] == 2 and res["paper"]["steps"] == 30 and res["threads"] == 1
-    assert "4/256/1024" in res["model"] and "paper" in res["paper"]["model"]
+    assert "4/128/512" in res["model"] and "paper" in res["paper"]["model"]
