@@ -116,6 +116,10 @@ def cmd_list(args: argparse.Namespace) -> int:
         else:
             url = f.get("url") or f.get("note") or "no backend"
             print(f"[{f['kind']}] {f['path']}  {f.get('usb') or ''}  {f['what']}  -> {url}")
+    # say what was looked at and came back empty, so "nothing listed" is not ambiguous
+    for kind in ("serial", "hid", "usb", "can"):
+        if not any(f["kind"] == kind for f in found):
+            print(f"[{kind}] none found")
     return 0
 
 
