@@ -47,6 +47,12 @@ class ModelConfig:
     dropout: float = 0.1
     window: int = WINDOW
     features: int = N_FEATURES
+    # x0 = sqrt(ab_t) z + sqrt(1 - ab_t) F(z, t, h) instead of x0 = F(z, t, h): the network
+    # learns the residual (v-prediction in disguise), so at low noise the input passes
+    # through unchanged instead of having to be re-learned. Without it, a CPU-sized
+    # training budget left the model blurring even a clean input (18 deg at t = 0; NOTES).
+    skip: bool = False
+    T: int = 1000
 
     @classmethod
     def paper(cls) -> ModelConfig:
@@ -97,6 +103,12 @@ class Denoiser(nn.Module):
         self.decoder = nn.TransformerDecoder(layer, num_layers=cfg.layers)
         self.norm = nn.LayerNorm(d)
         self.out_proj = nn.Linear(d, cfg.features)
+        if cfg.skip:
+            from .diffusion import cosine_alpha_bar
+
+            ab = cosine_alpha_bar(cfg.T).float()
+            self.register_buffer("skip_a", ab.sqrt(), persistent=False)
+            self.register_buffer("skip_b", (1.0 - ab).clamp(min=0.0).sqrt(), persistent=False)
 
     def cond_tokens(self, t: Tensor, height: Tensor) -> Tensor:
         """(B, 2, d): the step token and the height token."""
@@ -115,7 +127,12 @@ class Denoiser(nn.Module):
             h = self.decoder(tokens, cond)
         else:
             h = self._lean_decoder(tokens, cond)
-        return self.out_proj(self.norm(h[:, 2:]))
+        out = self.out_proj(self.norm(h[:, 2:]))
+        if self.config.skip:
+            a = self.skip_a[t].to(out.dtype)[:, None, None]
+            b = self.skip_b[t].to(out.dtype)[:, None, None]
+            out = a * z.to(out.dtype) + b * out
+        return out
 
     def _lean_decoder(self, x: Tensor, mem: Tensor) -> Tensor:
         """The decoder stack in eval mode, written out with the layers' own weights.

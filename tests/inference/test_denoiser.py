@@ -150,3 +150,27 @@ def test_freeze_for_cpu_same_outputs():
     a = inpaint(m, z, mask, h, paper_steps(), generator=torch.Generator().manual_seed(0))
     b = inpaint(f, z, mask, h, paper_steps(), generator=torch.Generator().manual_seed(0))
     assert torch.allclose(a, b, atol=1e-4)
+
+
+def test_skip_parameterisation_passes_clean_input_through_and_round_trips(tmp_path):
+    """With skip=True a clean window (t = 0) comes back exactly; at the top level the
+    output is the network's alone. The flag survives save/load."""
+    from inference.denoiser import Denoiser, ModelConfig, load_model, save_model
+
+    torch.manual_seed(0)
+    cfg = ModelConfig(layers=1, d_model=32, heads=2, ff=64, dropout=0.0, skip=True)
+    m = Denoiser(cfg).eval()
+    z = torch.randn(2, cfg.window, 190)
+    h = torch.tensor([1.7, 1.8])
+    with torch.no_grad():
+        assert torch.equal(m(z, torch.tensor([0, 0]), h), z)
+        top = m(z, torch.tensor([cfg.T, cfg.T]), h)
+        plain = Denoiser(ModelConfig(layers=1, d_model=32, heads=2, ff=64, dropout=0.0))
+        plain.load_state_dict(m.state_dict())
+        assert torch.allclose(top, plain.eval()(z, torch.tensor([cfg.T, cfg.T]), h), atol=1e-3)
+    path = tmp_path / "m.pt"
+    save_model(path, m, "diffusion", np.zeros(190, np.float32), np.ones(190, np.float32))
+    back = load_model(path)
+    assert back.config.skip
+    with torch.no_grad():
+        assert torch.allclose(back.model(z, torch.tensor([500, 3]), h), m(z, torch.tensor([500, 3]), h), atol=1e-5)
