@@ -29,6 +29,11 @@ BANDAI = JointMap(
         "thigh": "UpperLeg_{L}", "shank": "LowerLeg_{L}", "foot": "Foot_{L}", "toes": "Toes_{L}",
     }),
     split={"spine3": 0.5},
+    # Bandai's rig lies along X at zero rotation with joint axes rolled per chain. Measured
+    # on 24 walk clips (d1 and d2): the roll of each segment relative to the pelvis, against
+    # our standing N-pose, sat at these quarter turns in every clip (spine +90, collars -90,
+    # right thigh 180; children follow their parent). test_real_data pins it.
+    roll_quarters={"spine1": 1, "l_collar": 3, "r_collar": 3, "r_thigh": 2},
 )
 
 CMU_BVH = JointMap(
@@ -79,7 +84,7 @@ def match_joint_map(names: list[str], path: str, maps: tuple[JointMap, ...] = BV
         if not missing:
             if len(plain) != len(names) or any(plain[k] != k for k in jm.required()):
                 segs = {s: plain[n] for s, n in jm.segments.items()}
-                return JointMap(name=jm.name, segments=segs, split=jm.split)
+                return JointMap(name=jm.name, segments=segs, split=jm.split, roll_quarters=jm.roll_quarters)
             return jm
         if best is None or len(missing) < best[0]:
             best = (len(missing), jm, missing)

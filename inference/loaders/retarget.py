@@ -27,7 +27,7 @@ import numpy as np
 
 from ..body import MAIN_CHILD, Body, anthropometric_offsets
 from ..motion import Motion
-from ..rotations import quat_between_vectors, quat_to_matrix, triad
+from ..rotations import quat_about_axis, quat_between_vectors, quat_to_matrix, triad
 from ..skeleton import N_SEGMENTS, PARENTS, SEGMENT_INDEX, SEGMENTS
 
 # our T-pose bone directions, the target of step 1 (unit vectors, our world frame)
@@ -76,6 +76,10 @@ class JointMap:
     name: str
     segments: dict[str, str]
     split: dict[str, float] = field(default_factory=dict)
+    # quarter turns about the bone that the rig's joint axes add to a segment (relative to
+    # its parent), which a zero pose cannot show: the smallest-rotation T-pose would leave
+    # the segment rolled by that much in every frame (see joint_maps.BANDAI)
+    roll_quarters: dict[str, int] = field(default_factory=dict)
 
     def required(self) -> set[str]:
         return set(self.segments.values())
@@ -169,6 +173,10 @@ def retarget(
             continue
         target = Wt @ TPOSE_DIRECTIONS[i]
         Q[j] = quat_to_matrix(quat_between_vectors(Qp @ d0, target)) @ Qp
+        k = jmap.roll_quarters.get(SEGMENTS[i], 0)
+        if k % 4:
+            # the rig rolls this joint's axes by k quarter turns about the bone (JointMap)
+            Q[j] = quat_to_matrix(quat_about_axis(target, k * np.pi / 2)) @ Q[j]
 
     # source T-pose joint positions (FK with Q), root at the origin
     P = np.zeros((J, 3))
