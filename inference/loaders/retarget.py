@@ -160,6 +160,9 @@ def retarget(
     lhip, rhip = ours_to_src[SEGMENT_INDEX["l_thigh"]], ours_to_src[SEGMENT_INDEX["r_thigh"]]
     left0 = src.rest[lhip] - src.rest[rhip]
     Q_root = triad(up0, left0, Wt @ np.array([0.0, 0.0, 1.0]), Wt @ np.array([0.0, 1.0, 0.0]))
+    # a rig whose zero pose is not upright (Bandai's lies along X) has rolled joint axes
+    # (JointMap.roll_quarters); one exported in a T-pose under the same names does not
+    lying_rig = abs(float(up0 @ (Wt @ np.array([0.0, 0.0, 1.0])))) < 0.7
     for j in range(J):
         p = src.parents[j]
         if j == pelvis or p < 0 and j not in src_to_ours:
@@ -173,7 +176,7 @@ def retarget(
             continue
         target = Wt @ TPOSE_DIRECTIONS[i]
         Q[j] = quat_to_matrix(quat_between_vectors(Qp @ d0, target)) @ Qp
-        k = jmap.roll_quarters.get(SEGMENTS[i], 0)
+        k = jmap.roll_quarters.get(SEGMENTS[i], 0) if lying_rig else 0
         if k % 4:
             # the rig rolls this joint's axes by k quarter turns about the bone (JointMap)
             Q[j] = quat_to_matrix(quat_about_axis(target, k * np.pi / 2)) @ Q[j]
