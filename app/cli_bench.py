@@ -112,7 +112,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--frames", type=int, default=200, help="timed frames of the default model (default 200)")
     p.add_argument("--paper-frames", type=int, default=10,
                    help="timed frames of the paper-size model (default 10; ~1-3 s each on 2 cores)")
-    p.add_argument("--threads", type=int, default=0, help="torch threads (0 = torch's default)")
+    p.add_argument("--threads", type=int, default=1,
+                   help="torch threads (default 1, the live loop's setting; 0 = torch's default)")
     p.add_argument("--model", default="diffusion", help="diffusion | regressor | floor | PATH.pt")
     p.add_argument("--steps", default=None, help="diffusion steps (default: the model's own)")
     p.add_argument("--random-weights", action="store_true",

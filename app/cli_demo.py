@@ -55,7 +55,7 @@ class DemoConfig:
     record: str | None = None
     noise: bool = True
     headless: bool = True
-    threads: int = 0
+    threads: int = 1  # one window per step: 1 intra-op thread is fastest and leaves a core to the drivers/GUI
     calibration_protocol: Any = None  # a calibration.Protocol overriding the default timings
     extra: dict[str, Any] = field(default_factory=dict)
 
@@ -390,7 +390,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--steps", default=None, help="diffusion steps (default: the model's own)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-noise", action="store_true", help="ideal sensors (no noise, mounting or heading errors)")
-    p.add_argument("--threads", type=int, default=0, help="torch threads (0 = torch's default)")
+    p.add_argument("--threads", type=int, default=1, help="torch threads for inference (0 = torch's default)")
     p.add_argument("--headless", action="store_true", help="no window")
     p.add_argument("--json", action="store_true", help="headless: print one JSON object")
     p.set_defaults(func=run)
