@@ -3,6 +3,7 @@ with SIGKILL leaves a readable file up to its last flush."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import signal
@@ -37,7 +38,10 @@ def test_write_read_replay(tmp_path, session):
     sig, truth = session
     path = tmp_path / "s.h5"
     poser = make_poser("floor", body=truth.body)
-    rec = Recorder(path, SITES, metadata={"model": "floor", "steps": 0, "sensors": list(SITES)}, flush_interval=0.05)
+    # a clock that advances 10 ms per reading: the flush count must not depend on how fast this machine is
+    ticks = itertools.count(0.0, 0.01)
+    rec = Recorder(path, SITES, metadata={"model": "floor", "steps": 0, "sensors": list(SITES)}, flush_interval=0.05,
+                   clock=lambda: next(ticks))
     pipe = Pipeline(poser, SITES, calibrator=Calibrator(SITES, schedule=PROTO.schedule()), sinks=[rec], insoles=True)
     frames = frames_from_signals(sig, t0=10.0, insoles=True)
     live = []
