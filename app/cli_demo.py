@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -417,6 +418,10 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--json needs --headless")
     cfg = config_from_args(args)
     if not cfg.headless:
+        if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY") or os.environ.get("QT_QPA_PLATFORM")):
+            # Qt would abort the process with a page about platform plugins; say what to do instead
+            raise OSError("no display to open the window on: run `imucap demo --headless --json`, "
+                          "or under a virtual display: `xvfb-run -a imucap demo`")
         from .gui.main_window import run_gui
 
         return run_gui(cfg)
