@@ -6,20 +6,11 @@ from __future__ import annotations
 import json
 
 import numpy as np
-import pytest
 import torch
 
 import app.cli_bench as cli_bench
 from app.cli import main
 from inference.denoiser import LoadedModel, ModelConfig, build_model
-
-
-@pytest.fixture(autouse=True)
-def _restore_threads():
-    # the CLI's --threads sets torch's global thread count; give it back
-    old = torch.get_num_threads()
-    yield
-    torch.set_num_threads(old)
 
 
 def _tiny_paper():

@@ -17,15 +17,6 @@ from inference.evaluation import synthetic_motion
 from inference.loaders import load_motion
 from inference.training import feature_stats
 
-
-@pytest.fixture(autouse=True)
-def _restore_threads():
-    # the CLI's --threads sets torch's global thread count; give it back
-    old = torch.get_num_threads()
-    yield
-    torch.set_num_threads(old)
-
-
 KEYS = {"clips", "frames", "ga_deg", "la_deg", "jpe_cm", "jitter_ratio", "re2_m", "re5_m", "re10_m",
         "model", "sensors", "steps", "insoles"}
 

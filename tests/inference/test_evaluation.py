@@ -4,8 +4,6 @@ through one harness, metrics come back with the contract's keys."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
-import torch
 
 from inference.evaluation import (
     SIX,
@@ -20,13 +18,6 @@ from inference.features import SL_CONTACT, observation_mask
 
 KEYS = {"clips", "frames", "ga_deg", "la_deg", "jpe_cm", "jitter_ratio", "re2_m", "re5_m", "re10_m"}
 
-
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    old = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(old)
 
 
 def test_noise_free_inputs_equal_training_features():

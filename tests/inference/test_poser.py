@@ -18,15 +18,6 @@ from inference.skeleton import SEGMENT_INDEX
 from inference.training import feature_stats
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    # the suite shares 2 cores with other work; oversubscribed OpenMP threads crawl
-    old = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(old)
-
-
 @pytest.fixture(scope="module")
 def clip():
     m = synthetic_motion(seconds=3.0, seed=1)
