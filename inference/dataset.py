@@ -174,27 +174,37 @@ class FeatureDataset:
         return Normalizer.fit(self.clips)
 
     def window(self, i: int, start: int, window: int = WINDOW) -> np.ndarray:
-        """Frames [start, start+window) of clip i; a short clip is front-padded with its
-        first frame at dp = 0 (start is then ignored)."""
+        """Frames [start, start+window) of clip i; frames before the clip's start (start < 0,
+        or a clip shorter than the window) are its first frame held still (dp = 0), the way
+        a live session starts from a standing history."""
         c = self.clips[i]
         T = c.shape[0]
-        if T >= window:
+        start = min(start, T - window)  # never past the end (a short clip: all of it)
+        if start >= 0:
             return c[start:start + window]
+        pad = min(-start, window)
         first = c[:1].copy()
         first[:, SL_DP] = 0.0
-        return np.concatenate([np.repeat(first, window - T, 0), c], axis=0)
+        return np.concatenate([np.repeat(first, pad, 0), c[: window - pad]], axis=0)
 
     def sample(self, rng: np.random.Generator, batch: int, window: int = WINDOW) -> dict[str, np.ndarray]:
         """A training batch: x (B, window, 190) float32 unnormalised, height (B,),
-        offsets (B, 24, 3), contact_offsets (B, 4, 3), and the clip index (B,)."""
+        offsets (B, 24, 3), contact_offsets (B, 4, 3), and the clip index (B,).
+
+        Each window *ends* at a uniformly drawn frame of its clip (front-padded with the
+        standing first frame when that is less than a window in). Why: the live poser
+        reconstructs the last frame of its window, so every frame of a clip has to be a
+        possible last frame. Drawing windows that fit inside the clip instead made the last
+        frame of a short clip (most HDM05 clips are 1-3 s) always its final, standing frame,
+        and models trained that way never learned mid-squat or mid-kick last frames."""
         if not self.clips:
             raise ValueError("empty dataset")
         idx = rng.choice(len(self.clips), size=batch, p=self.weights)
         x = np.empty((batch, window, N_FEATURES), dtype=np.float32)
         for b, i in enumerate(idx):
             T = self.clips[i].shape[0]
-            start = int(rng.integers(0, T - window + 1)) if T >= window else 0
-            x[b] = self.window(int(i), start, window)
+            end = int(rng.integers(1, T + 1))  # exclusive end: the last frame is end - 1
+            x[b] = self.window(int(i), end - window, window)
         return {
             "x": x, "height": self.heights[idx].astype(np.float32),
             "offsets": self.offsets[idx].astype(np.float32),
@@ -207,7 +217,9 @@ class FeatureDataset:
         path = Path(path)
         lengths = np.array([c.shape[0] for c in self.clips], dtype=np.int64)
         data = np.concatenate(self.clips, 0) if self.clips else np.zeros((0, N_FEATURES), np.float32)
-        tmp = path.with_name(path.name + ".tmp.npz")
+        # per-process temporary name: two runs building the same cache at once must not
+        # rename each other's file away (seen when training two models in parallel)
+        tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp.npz")
         np.savez(
             tmp, data=data, lengths=lengths, heights=self.heights, offsets=self.offsets,
             contact_offsets=self.contact_offsets,

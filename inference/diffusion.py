@@ -227,6 +227,10 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
     ``mode="ddim"`` instead carries the latent with deterministic DDIM updates and
     re-noises only the known part (RePaint-style, without resampling); it is here for
     comparison in evaluation.
+    ``mode="replace"`` is Algorithm 1 with the known entries left clean in ``z`` (only the
+    current estimate of the unknown ones is re-noised), for models trained the same way
+    (``TrainConfig.cond_prob``): the model then always sees the measurements exactly
+    instead of a noisy copy of them, which a small CPU-trained model needs (NOTES.md).
 
     One model call per step; per step cost beyond the model is a few elementwise ops.
     """
@@ -237,13 +241,15 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
         m = mask.to(dtype=torch.bool, device=x_input.device)
         height = height.to(x_input.dtype)
         x = x_input
-        if mode == "paper":
+        if mode in ("paper", "replace"):
             for t in steps:
                 if t == 0:
                     z = x
                 else:
                     noise = torch.randn(x.shape, generator=generator, dtype=x.dtype)
                     z = schedule.sqrt_ab(t) * x + schedule.sqrt_1mab(t) * noise
+                    if mode == "replace":
+                        z = torch.where(m, x_input, z)
                 x0 = _call(model, z, t, height)
                 x = torch.where(m, x_input, x0)
             return x
@@ -261,7 +267,7 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
                 known = schedule.q_sample(x_input, s, generator=generator)
                 z = torch.where(m, known, z)
             return x
-        raise ValueError(f"unknown inpainting mode {mode!r} (paper, ddim)")
+        raise ValueError(f"unknown inpainting mode {mode!r} (paper, replace, ddim)")
 
 
 __all__ = [

@@ -171,7 +171,7 @@ class Poser:
         start_pose: str = "npose",
         root_correction: bool = True,
         root_xy0: tuple[float, float] = (0.0, 0.0),
-        inpaint_mode: str = "paper",
+        inpaint_mode: str | None = None,
         freeze: bool = True,
     ) -> None:
         self.model = model
@@ -185,7 +185,8 @@ class Poser:
         self.window = model.config.window if model is not None else WINDOW
         self.root_correction = root_correction and self.kind != "floor"
         self.start_pose = start_pose
-        self.inpaint_mode = inpaint_mode
+        # None = the mode the model was trained for (meta["inpaint_mode"], else the paper's)
+        self.inpaint_mode = inpaint_mode or ((model.meta or {}).get("inpaint_mode") if model else None) or "paper"
         self.seed = seed
         self.root_xy0 = (float(root_xy0[0]), float(root_xy0[1]))
         self.schedule = Schedule.cosine()

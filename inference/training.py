@@ -103,7 +103,11 @@ class TrainConfig:
     kind: str = "diffusion"  # or "regressor"
     model: ModelConfig = field(default_factory=ModelConfig)
     loss: LossWeights = field(default_factory=LossWeights)
-    mask: MaskConfig = field(default_factory=MaskConfig)  # regressor only
+    mask: MaskConfig = field(default_factory=MaskConfig)  # regressor; diffusion when cond_prob > 0
+    # diffusion only: share of training windows noised only where unobserved (a mask drawn
+    # from `mask`; observed entries stay clean), the rest noised everywhere as in the
+    # paper. > 0 makes the shipped poser inpaint in "replace" mode (diffusion.inpaint).
+    cond_prob: float = 0.0
     steps: int = 100_000  # total optimiser steps (also the horizon of the LR decay)
     batch: int = 64  # global batch (split over ranks)
     window: int = WINDOW
@@ -408,6 +412,11 @@ def motion_losses(pred_n: Tensor, true_n: Tensor, mean: Tensor, std: Tensor, off
     return terms
 
 
+def inpaint_mode_for(cfg: TrainConfig) -> str:
+    """How a model trained with `cfg` should inpaint: the way it saw known entries."""
+    return "replace" if cfg.kind == "diffusion" and cfg.cond_prob > 0 else "paper"
+
+
 def total_loss(terms: dict[str, Tensor], weights: LossWeights) -> Tensor:
     return sum(getattr(weights, k) * v for k, v in terms.items())
 
@@ -487,7 +496,15 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
         t = torch.randint(0, ctx.schedule.T + 1, (B,), generator=gen)
         noise = torch.randn(xn.shape, generator=gen)
         z = ctx.schedule.q_sample(xn, t, noise=noise)
-        pred = model(z, t, height)
+        if cfg.cond_prob > 0:
+            # conditioning by replacement: known entries clean in z (and exact in the
+            # output), so the loss is spent on what inpainting has to infer
+            m = torch.as_tensor(random_observation_mask(rng, B, x.shape[1], cfg.mask))
+            m &= torch.as_tensor(rng.random(B) < cfg.cond_prob)[:, None, None]
+            z = torch.where(m, xn, z)
+            pred = torch.where(m, xn, model(z, t, height))
+        else:
+            pred = model(z, t, height)
     else:
         m = torch.as_tensor(random_observation_mask(rng, B, x.shape[1], cfg.mask))
         pred = model(torch.where(m, xn, torch.zeros(())), m, height)
@@ -523,7 +540,8 @@ def validate(model: nn.Module, val_set: Dataset, ctx: StepContext) -> dict[str, 
         x_in = xn.clone()
         x_in[:, -1] = torch.where(obs, xn[:, -1], xn[:, -2])
         if cfg.kind == "diffusion":
-            out = inpaint(model, x_in, mask, h, paper_steps(), generator=gen, schedule=ctx.schedule)
+            out = inpaint(model, x_in, mask, h, paper_steps(), generator=gen, schedule=ctx.schedule,
+                          mode=inpaint_mode_for(cfg))
         else:
             out = torch.where(mask, x_in, model(x_in, mask, h))
         pred = out[:, -1] * ctx.std + ctx.mean
@@ -741,7 +759,8 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
         if cfg.keep_every and step % cfg.keep_every == 0:
             atomic_torch_save(obj, out / f"step_{step:07d}.pt")
         save_model(out / MODEL_FILE, ema.model, cfg.kind, mean_np, std_np, step=step,
-                   meta={"val": val, "train_config": cfg.to_dict(), "default_steps": cfg.infer_steps})
+                   meta={"val": val, "train_config": cfg.to_dict(), "default_steps": cfg.infer_steps,
+                         "inpaint_mode": inpaint_mode_for(cfg)})
         return last
 
     logf = open(out / LOG_FILE, "a") if d.main else None  # noqa: SIM115
@@ -849,7 +868,8 @@ def export_model(checkpoint: str | os.PathLike, dest: str | os.PathLike, fp16: b
     cfg = dict(ck["train_config"])
     steps = default_steps if default_steps is not None else cfg.get("infer_steps")
     save_model(dest, model, ck["kind"], ck["norm_mean"], ck["norm_std"], step=int(ck["step"]),
-               meta={"val": ck.get("val"), "train_config": cfg, "default_steps": steps}, fp16=fp16)
+               meta={"val": ck.get("val"), "train_config": cfg, "default_steps": steps,
+                     "inpaint_mode": inpaint_mode_for(TrainConfig.from_dict(cfg))}, fp16=fp16)
 
 
 __all__ = [

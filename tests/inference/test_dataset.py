@@ -94,6 +94,22 @@ def test_sampling_windows_padding_and_energy_weights():
     np.testing.assert_array_equal(w[: WINDOW - clip.shape[0]], np.tile(first, (WINDOW - clip.shape[0], 1)))
 
 
+def test_windows_end_at_every_frame_of_a_clip():
+    """The live poser reconstructs the last frame of its window: sampling must make every
+    frame of a clip (also of a clip shorter than the window) a possible last frame."""
+    ds = FeatureDataset.from_motions([moving_motion(T=150, speed=1.5)])  # 50 frames at 20 Hz
+    clip = ds.clips[0]
+    assert clip.shape[0] < WINDOW
+    b = ds.sample(np.random.default_rng(1), 400)
+    last = b["x"][:, -1]
+    hit = {int(np.flatnonzero((clip == row).all(axis=1))[0]) for row in last}
+    assert hit == set(range(clip.shape[0]))
+    # a window ending k frames in: the standing first frame held, then frames 0..k-1
+    w = ds.window(0, 5 - WINDOW)
+    np.testing.assert_array_equal(w[-5:], clip[:5])
+    assert (w[:-5, SL_DP] == 0).all() and np.array_equal(w[0, SL_ROT], clip[0, SL_ROT])
+
+
 def _write_clips(root: Path, n: int) -> list[Path]:
     root.mkdir(parents=True, exist_ok=True)
     paths = []

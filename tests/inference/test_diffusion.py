@@ -96,7 +96,7 @@ def _window(seed=0):
     return x, mask
 
 
-@pytest.mark.parametrize("mode", ["paper", "ddim"])
+@pytest.mark.parametrize("mode", ["paper", "replace", "ddim"])
 def test_inpaint_keeps_observed_exactly(mode):
     x, mask = _window()
     out = inpaint(Mean(), x, mask, torch.full((2,), 1.7), paper_steps(), generator=torch.Generator().manual_seed(1),
@@ -106,7 +106,7 @@ def test_inpaint_keeps_observed_exactly(mode):
     assert not torch.equal(out[~mask], x[~mask])
 
 
-@pytest.mark.parametrize("mode", ["paper", "ddim"])
+@pytest.mark.parametrize("mode", ["paper", "replace", "ddim"])
 def test_inpaint_with_perfect_denoiser_recovers_target(mode):
     x, mask = _window()
     target = torch.randn_like(x)
@@ -115,6 +115,31 @@ def test_inpaint_with_perfect_denoiser_recovers_target(mode):
     assert oracle.calls == [1000, 500, 10, 0]  # one model call per step, in order
     assert torch.equal(out[~mask], target[~mask])
     assert torch.equal(out[mask], x[mask])
+
+
+class Recorder(torch.nn.Module):
+    """Keeps every z it is called with; predicts zeros."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.seen: list[tuple[int, torch.Tensor]] = []
+
+    def forward(self, z, t, h):
+        self.seen.append((int(t[0]), z.clone()))
+        return torch.zeros_like(z)
+
+
+@pytest.mark.parametrize("mode", ["paper", "replace"])
+def test_replace_mode_shows_the_model_clean_measurements(mode):
+    x, mask = _window()
+    rec = Recorder()
+    inpaint(rec, x, mask, torch.ones(2), [1000, 400, 10, 0], generator=torch.Generator().manual_seed(0), mode=mode)
+    for t, z in rec.seen:
+        clean = torch.equal(z[mask], x[mask])
+        # replace: known entries exact at every level; paper (Algorithm 1): noised except at t = 0
+        assert clean == (mode == "replace" or t == 0), (mode, t)
+        if t > 0:
+            assert not torch.equal(z[~mask], torch.zeros_like(z[~mask]))  # unknowns are re-noised
 
 
 def test_inpaint_reproducible_with_generator_and_inference_mode():

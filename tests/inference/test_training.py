@@ -19,7 +19,9 @@ from inference.rotations import matrix_to_rot6d, rot6d_to_matrix
 from inference.training import (
     EMA,
     LossWeights,
+    StepContext,
     TrainConfig,
+    batch_loss,
     contact_offsets_for,
     feature_stats,
     motion_losses,
@@ -167,6 +169,39 @@ def test_torchrun_two_processes(tmp_path):
     cfg.steps = 3
     res = train(cfg, out, resume=True, progress=False)
     assert res.step == 3 and len(res.losses) == 1 and math.isfinite(res.losses[0])
+
+
+def test_conditioned_diffusion_training_sees_known_entries_clean(tmp_path):
+    """cond_prob: windows are noised only where unobserved; with the history always known
+    the model must be handed frames 0..N-2 exactly, and the shipped file says to inpaint
+    the same way."""
+    from inference.diffusion import Schedule
+
+    cfg = _cfg(cond_prob=1.0, augment_yaw=False, mask={"p_history_known": 1.0, "p_burst": 0.0,
+                                                        "p_frame_drop": 0.0})
+    ds = synthetic_dataset(3, 70, seed=0)
+    batch = ds.sample(np.random.default_rng(0), 4, 61)
+    mean, std = (torch.as_tensor(a, dtype=torch.float32) for a in feature_stats(ds.clips))
+    seen = []
+
+    def model(z, t, h):
+        seen.append(z.clone())
+        return torch.zeros_like(z)
+
+    ctx = StepContext(cfg=cfg, mean=mean, std=std, schedule=Schedule.cosine())
+    batch_loss(model, batch, ctx, np.random.default_rng(1), torch.Generator().manual_seed(1))
+    xn = (torch.as_tensor(batch["x"]) - mean) / std
+    assert torch.equal(seen[0][:, :-1], xn[:, :-1])
+    assert not torch.equal(seen[0][:, -1], xn[:, -1])  # the last frame is partly unknown, so noised
+    res = train(cfg, tmp_path / "run", progress=False)
+    assert res.step == 4
+    assert load_model(tmp_path / "run" / "model.pt").meta["inpaint_mode"] == "replace"
+    assert load_model_meta_mode(_cfg(), tmp_path / "plain") == "paper"
+
+
+def load_model_meta_mode(cfg: TrainConfig, out: Path) -> str:
+    train(cfg, out, progress=False, stop_after=1)
+    return load_model(out / "model.pt").meta["inpaint_mode"]
 
 
 def test_loss_weights_from_config():
