@@ -289,6 +289,8 @@ class DemoSession:
             "sensors": list(c.sensors), "insoles": c.insoles, "protocol": c.protocol,
             "assignment": self.assignment, "motion": c.file or c.motion, "seed": c.seed,
             "source": "imucap demo (simulated suit)", "body_height_m": float(self.truth.body.height),
+            # the exact bones the poser used, so `imucap replay/export` rebuild the same body
+            "body_offsets": np.round(self.truth.body.offsets, 6).tolist(),
         }
 
     def steps_count(self) -> int:

@@ -1,0 +1,183 @@
+"""Offline replay of a recorded session: the raw 60 Hz sensor stream of a recording goes
+through the same ``Pipeline`` as live (recorded calibration -> resampler -> poser), with
+any model, step count and any subset of the recorded sensors.
+
+Why this and not ``recording.replay``: a researcher re-runs one session many ways ("what
+would 3 sensors have given?", "the regressor on the same data?"), so the sensor subset,
+the insoles and progress reporting are parameters here, the stream is read into arrays
+once (not a Python list of per-frame stacks), and every calibration the session made is
+applied at the time it took effect, as it was live (a session recalibrated twice is
+replayed in three pieces, the poser restarting from standing at each, as it did).
+
+Known difference from live: after a recalibration started, the live pipeline posed
+nothing until the new calibration took effect; the recording does not say when that
+window began, so a replay poses those frames with the previous calibration.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from calibration import Calibration
+from drivers.hub import HubFrame
+from inference.skeleton import SITES, parse_sites
+
+from .pipeline import LivePose, Pipeline
+from .recording import Recording
+
+if TYPE_CHECKING:
+    from inference.poser import Poser
+
+
+def resolve_sensors(rec: Recording, sensors: str | Sequence[str] | None) -> tuple[str, ...]:
+    """The recorded sites to use (default: all of them), in the recording's order. Unknown
+    names or sites the recording lacks are a ValueError that lists what it has."""
+    if sensors is None:
+        return rec.sites
+    have = ", ".join(rec.sites) or "none"
+    try:
+        wanted = parse_sites(sensors)
+    except ValueError as exc:
+        raise ValueError(f"--sensors: {exc}. This recording has: {have}") from None
+    if not wanted:
+        raise ValueError(f"--sensors: give at least one site; this recording has: {have}")
+    missing = [s for s in wanted if s not in rec.sites]
+    if missing:
+        raise ValueError(f"--sensors: {', '.join(missing)} not in this recording; it has: {have}")
+    return tuple(s for s in rec.sites if s in set(wanted))
+
+
+def recording_has_insoles(rec: Recording) -> bool:
+    ins = rec.raw.get("insoles", {})
+    return bool(len(ins.get("present", ())) and np.any(ins["present"]))
+
+
+def resolve_insoles(rec: Recording, insoles: bool | None) -> bool:
+    """Use the insoles? Default: as the session did (metadata ``insoles``), if the recording
+    holds insole data at all; asking for them when it does not is a ValueError."""
+    has = recording_has_insoles(rec)
+    if insoles is None:
+        return bool(rec.metadata.get("insoles", has)) and has
+    if insoles and not has:
+        raise ValueError("--insoles: this recording holds no insole data")
+    return bool(insoles)
+
+
+class _Stream:
+    """The raw stream as stacked arrays, yielding HubFrames (views, not copies)."""
+
+    def __init__(self, rec: Recording) -> None:
+        r = rec.raw
+        self.sites = rec.sites
+        self.t = np.asarray(r["t"], dtype=np.float64)
+        self.index = np.asarray(r["index"], dtype=np.int64)
+        n, S = len(self.t), len(self.sites)
+
+        def stack(name: str, width: int) -> np.ndarray:
+            if not S:
+                return np.zeros((n, 0, width))
+            return np.stack([np.asarray(r[s][name], dtype=np.float64) for s in self.sites], axis=1)
+
+        self.quat = stack("quat", 4)
+        self.free_acc, self.acc, self.gyro = stack("free_acc", 3), stack("acc", 3), stack("gyro", 3)
+        self.present = (np.stack([np.asarray(r[s]["present"], bool) for s in self.sites], axis=1) if S
+                        else np.zeros((n, 0), bool))
+        ins = r["insoles"]
+        self.force = np.asarray(ins["force"], dtype=np.float64)
+        self.contacts = np.asarray(ins["contacts"], dtype=bool)
+        self.ins_present = np.asarray(ins["present"], dtype=bool)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def frame(self, i: int) -> HubFrame:
+        return HubFrame(t=float(self.t[i]), index=int(self.index[i]), sites=self.sites, quat=self.quat[i],
+                        free_acc=self.free_acc[i], acc=self.acc[i], gyro=self.gyro[i], present=self.present[i],
+                        insole_force=self.force[i], contacts=self.contacts[i], insole_present=bool(self.ins_present[i]))
+
+    def __iter__(self) -> Iterator[HubFrame]:
+        return (self.frame(i) for i in range(len(self)))
+
+
+@dataclass
+class ReplayResult:
+    """What a replay produced: the poses (20 Hz, as live) and how it ran."""
+
+    poses: list[LivePose]
+    sensors: tuple[str, ...]
+    insoles: bool
+    hub_frames: int
+    calibrations_used: int
+    stats: dict[str, Any] = field(default_factory=dict)
+
+
+def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] | None = None,
+                     insoles: bool | None = None, calibration: Calibration | None = None,
+                     progress: Callable[[int, int, int], None] | None = None) -> ReplayResult:
+    """Run ``rec``'s raw stream through a Pipeline with ``poser``.
+
+    sensors: the recorded sites whose measurements the poser gets (default all; the
+    others are inpainted, as live with a smaller suit); insoles: see ``resolve_insoles``;
+    calibration: use this one from the first frame instead of the recorded ones;
+    progress(done_frames, total_frames, poses) is called about every 1% of the stream.
+    """
+    use = resolve_sensors(rec, sensors)
+    ins = resolve_insoles(rec, insoles)
+    if calibration is None and not rec.calibrations:
+        raise ValueError(f"{rec.path} holds no calibration (the session never calibrated); nothing to replay")
+    cals = [(-np.inf, calibration)] if calibration is not None else sorted(rec.calibrations, key=lambda c: c[0])
+    stream = _Stream(rec)
+    pipe = Pipeline(poser, rec.sites, active_sites=use, insoles=ins)
+    poses: list[LivePose] = []
+    k = 0  # next calibration to apply
+    used = 0
+    n = len(stream)
+    every = max(n // 100, 1)
+    for i in range(n):
+        t = stream.t[i]
+        took_effect_now = False
+        while k < len(cals) and t >= cals[k][0]:
+            pipe.set_calibration(cals[k][1], float(max(cals[k][0], t)))
+            took_effect_now = took_effect_now or t == cals[k][0]  # live, that frame was the last calibrating one
+            k += 1
+            used += 1
+        if took_effect_now:
+            # live, the pipeline consumed this frame while calibrating and noted its index, so
+            # the next frame is not taken for a dropped one
+            pipe._last_index = int(stream.index[i])
+        elif pipe.calibration is not None:
+            poses += pipe.push(stream.frame(i))
+        if progress is not None and (i % every == 0 or i == n - 1):
+            progress(i + 1, n, len(poses))
+    pipe.close()
+    return ReplayResult(poses=poses, sensors=use, insoles=ins, hub_frames=n, calibrations_used=used,
+                        stats=pipe.stats.summary())
+
+
+def compare_to_recorded(rec: Recording, poses: Sequence[LivePose]) -> dict[str, Any]:
+    """Mean global angle error (deg, the paper's GA over the body without hands/toes)
+    between replayed poses and the recorded live ones at the same session times: how far
+    a re-run (another model, fewer sensors) is from what was seen live. None when no
+    frame times match."""
+    from inference.metrics import global_angle_error
+
+    r = rec.recon
+    if not poses or len(r["t"]) == 0:
+        return {"vs_recorded_frames": 0, "vs_recorded_ga_deg": None}
+    t_rep = np.array([lp.t for lp in poses])
+    j = np.searchsorted(r["t"], t_rep)
+    j = np.clip(j, 0, len(r["t"]) - 1)
+    ok = np.abs(r["t"][j] - t_rep) < 1e-6
+    if not ok.any():
+        return {"vs_recorded_frames": 0, "vs_recorded_ga_deg": None}
+    R_rep = np.stack([lp.pose.rot for lp, o in zip(poses, ok) if o])
+    ga = global_angle_error(R_rep, r["R"][j[ok]])
+    return {"vs_recorded_frames": int(ok.sum()), "vs_recorded_ga_deg": round(float(np.mean(ga)), 3)}
+
+
+__all__ = ["replay_recording", "resolve_sensors", "resolve_insoles", "recording_has_insoles", "compare_to_recorded",
+           "ReplayResult", "SITES"]

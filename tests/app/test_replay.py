@@ -1,0 +1,87 @@
+"""Offline replay of a recording (app/replay.py): all sensors reproduce the live
+reconstruction; a subset keeps the chosen sensors' segments and inpaints the rest;
+wrong sites, missing insoles or calibrations are clear errors."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from app.recording import read_recording
+from app.replay import compare_to_recorded, replay_recording, resolve_insoles, resolve_sensors
+from inference.poser import make_poser
+from inference.rotations import matrix_angle_between
+from inference.skeleton import SEGMENT_INDEX, SITE_INDEX
+
+
+def _rot(poses):
+    return np.stack([lp.pose.rot for lp in poses])
+
+
+def test_all_sensors_reproduce_the_live_reconstruction(recorded):
+    rec = read_recording(recorded.path)
+    res = replay_recording(rec, make_poser("floor", body=recorded.body))
+    assert res.sensors == recorded.sites and res.insoles is True and res.calibrations_used == 1
+    assert res.hub_frames == rec.n_frames
+    assert len(res.poses) == len(recorded.live) == len(rec.recon["t"])
+    assert np.allclose([lp.t for lp in res.poses], rec.recon["t"])
+    assert np.allclose(_rot(res.poses), _rot(recorded.live), atol=1e-6)
+    assert np.array_equal(np.stack([lp.pose.contacts for lp in res.poses]), rec.recon["contacts"])
+    cmp = compare_to_recorded(rec, res.poses)
+    assert cmp["vs_recorded_frames"] == len(res.poses) and cmp["vs_recorded_ga_deg"] < 1e-3
+
+
+def test_a_sensor_subset_keeps_its_segments_and_inpaints_the_others(recorded):
+    rec = read_recording(recorded.path)
+    res = replay_recording(rec, make_poser("floor", body=recorded.body), sensors="r_shank,pelvis,l_shank")
+    assert res.sensors == ("pelvis", "l_shank", "r_shank")  # the recording's order
+    observed = np.stack([lp.observed_sites for lp in res.poses])
+    assert observed[:, [SITE_INDEX[s] for s in ("pelvis", "l_shank", "r_shank")]].all()
+    assert not observed[:, [SITE_INDEX[s] for s in ("head", "l_wrist", "r_wrist")]].any()
+    R, R_live = _rot(res.poses), rec.recon["R"]
+    kept = np.rad2deg(matrix_angle_between(R[:, SEGMENT_INDEX["l_shank"]], R_live[:, SEGMENT_INDEX["l_shank"]]))
+    dropped = np.rad2deg(matrix_angle_between(R[:, SEGMENT_INDEX["r_forearm"]], R_live[:, SEGMENT_INDEX["r_forearm"]]))
+    assert kept.max() < 0.01  # measured segments are the measurement
+    assert dropped.mean() > 3.0  # the floor holds an unmeasured forearm standing; live it was measured
+    assert compare_to_recorded(rec, res.poses)["vs_recorded_ga_deg"] > 1.0
+
+
+def test_site_errors_list_what_the_recording_has(recorded):
+    rec = read_recording(recorded.path)
+    with pytest.raises(ValueError, match="elbow") as e1:
+        resolve_sensors(rec, "pelvis,elbow")
+    with pytest.raises(ValueError, match="torso") as e2:
+        resolve_sensors(rec, ["torso"])
+    for e in (e1, e2):
+        assert "pelvis, head, l_wrist, r_wrist, l_shank, r_shank" in str(e.value)
+    assert resolve_sensors(rec, None) == recorded.sites
+
+
+def test_insoles_default_to_the_session_and_cannot_be_invented(recorded):
+    rec = read_recording(recorded.path)
+    assert resolve_insoles(rec, None) is True and resolve_insoles(rec, False) is False
+    raw = dict(rec.raw)
+    raw["insoles"] = {**rec.raw["insoles"], "present": np.zeros_like(rec.raw["insoles"]["present"])}
+    bare = replace(rec, raw=raw)
+    assert resolve_insoles(bare, None) is False
+    with pytest.raises(ValueError, match="no insole data"):
+        resolve_insoles(bare, True)
+
+
+def test_every_recorded_calibration_takes_effect_and_none_is_an_error(recorded):
+    rec = read_recording(recorded.path)
+    t_cal, cal = rec.calibrations[0]
+    once = replay_recording(rec, make_poser("floor", body=recorded.body))
+    t_mid = float(rec.raw["t"][(np.searchsorted(rec.raw["t"], t_cal) + rec.n_frames) // 2])
+    twice = replay_recording(replace(rec, calibrations=[(t_cal, cal), (t_mid, cal)]),
+                             make_poser("floor", body=recorded.body))
+    assert twice.calibrations_used == 2
+    assert len(once.poses) - 4 <= len(twice.poses) < len(once.poses)  # the resampler restarts at t_mid
+    assert not any(abs(lp.t - t_mid) < 1e-9 for lp in twice.poses)  # that frame was the calibrating one
+    with pytest.raises(ValueError, match="no calibration"):
+        replay_recording(replace(rec, calibrations=[]), make_poser("floor", body=recorded.body))
+    # an explicit calibration replaces the recorded ones from the first frame
+    own = replay_recording(replace(rec, calibrations=[]), make_poser("floor", body=recorded.body), calibration=cal)
+    assert own.calibrations_used == 1 and len(own.poses) > len(once.poses)
