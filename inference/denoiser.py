@@ -5,8 +5,10 @@ and the body-height embedding are two tokens that serve as the cross-attention m
 AND are prepended to the 61 frame tokens for self-attention. The output head reads
 only the frame tokens and predicts the clean window x0 (normalised features).
 
-The model does not take the observation mask: inpainting (diffusion.inpaint) is what
-makes one model serve every sensor subset, which is the point of the method.
+The paper's model does not take the observation mask: inpainting (diffusion.inpaint) is
+what makes one model serve every sensor subset. ``ModelConfig.mask_input`` adds the mask as
+190 more input channels of each frame token (still one model for every subset, trained on
+random masks); why it is the shipped choice is in NOTES.md ("Session 2").
 """
 
 from __future__ import annotations
@@ -52,6 +54,10 @@ class ModelConfig:
     # through unchanged instead of having to be re-learned. Without it, a CPU-sized
     # training budget left the model blurring even a clean input (18 deg at t = 0; NOTES).
     skip: bool = False
+    # the frame tokens also read the per-feature known/unknown mask. Without it a model
+    # trained by replacement (TrainConfig.cond_prob) must guess from the values alone
+    # whether an entry is a clean measurement or noise, which a CPU budget did not teach.
+    mask_input: bool = False
     T: int = 1000
 
     @classmethod
@@ -90,7 +96,7 @@ class Denoiser(nn.Module):
         super().__init__()
         self.config = cfg = config or ModelConfig()
         d = cfg.d_model
-        self.in_proj = nn.Linear(cfg.features, d)
+        self.in_proj = nn.Linear(cfg.features * (2 if cfg.mask_input else 1), d)
         # learned positions for [step, height, frame_0 .. frame_{N-1}]
         self.pos = nn.Parameter(torch.zeros(1, cfg.window + 2, d))
         nn.init.normal_(self.pos, std=0.02)
@@ -118,11 +124,17 @@ class Denoiser(nn.Module):
         h = ((height.to(dtype) - HEIGHT_MEAN) / HEIGHT_STD)[:, None]
         return torch.stack([step, self.height_mlp(h)], dim=1)
 
-    def forward(self, z: Tensor, t: Tensor, height: Tensor) -> Tensor:
-        """z (B, N, F) noised window, t (B,) int levels, height (B,) metres -> x0 (B, N, F)."""
+    def forward(self, z: Tensor, t: Tensor, height: Tensor, mask: Tensor | None = None) -> Tensor:
+        """z (B, N, F) noised window, t (B,) int levels, height (B,) metres -> x0 (B, N, F).
+        mask (B, N, F) bool, True = known: read only by ``mask_input`` models (None there
+        means nothing is known: unconditional generation)."""
         n = z.shape[1]
         cond = self.cond_tokens(t, height)
-        tokens = torch.cat([cond, self.in_proj(z)], dim=1) + self.pos[:, : n + 2]
+        inp = z
+        if self.config.mask_input:
+            m = torch.zeros_like(z) if mask is None else mask.to(z.dtype)
+            inp = torch.cat([z, m], dim=-1)
+        tokens = torch.cat([cond, self.in_proj(inp)], dim=1) + self.pos[:, : n + 2]
         if self.training or torch.is_grad_enabled():
             h = self.decoder(tokens, cond)
         else:
@@ -170,11 +182,13 @@ def freeze_for_cpu(model: nn.Module, batch: int = 1, window: int | None = None) 
     (1, 61, 190)): same outputs, ~25-30% less time per call on CPU for live-size models
     (benchmarks/bench_model.py; int8 dynamic quantisation, bfloat16 and torch.compile
     bought nothing at these sizes). The result only accepts that shape; call it exactly
-    like the model: ``f(z, t, height)``."""
+    like the model: ``f(z, t, height)``, or ``f(z, t, height, mask)`` for ``mask_input``."""
     model = model.eval()
     cfg = model.config
     n = window or cfg.window
     example = (torch.zeros(batch, n, cfg.features), torch.zeros(batch, dtype=torch.long), torch.full((batch,), 1.7))
+    if cfg.mask_input:
+        example = (*example, torch.ones(batch, n, cfg.features, dtype=torch.bool))
     with torch.inference_mode(False), torch.no_grad(), warnings.catch_warnings():
         # TorchScript is deprecated in favour of torch.compile, which here compiles for
         # ~40 s and then runs no faster than eager (NOTES.md); keep the lever that works

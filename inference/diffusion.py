@@ -164,9 +164,16 @@ def validate_steps(steps: Sequence[int], T: int = T_DEFAULT) -> None:
 
 # --------------------------------------------------------------------- samplers
 
-def _call(model, z: Tensor, t: int, height: Tensor) -> Tensor:
+def _call(model, z: Tensor, t: int, height: Tensor, mask: Tensor | None = None) -> Tensor:
     tt = torch.full((z.shape[0],), t, dtype=torch.long, device=z.device)
+    if mask is not None:
+        return model(z, tt, height, mask)
     return model(z, tt, height)
+
+
+def wants_mask(model) -> bool:
+    """Whether a denoiser reads the known/unknown mask (ModelConfig.mask_input)."""
+    return bool(getattr(getattr(model, "config", None), "mask_input", False))
 
 
 def sample(model, shape: tuple[int, ...], height: Tensor, steps: Sequence[int],
@@ -212,7 +219,7 @@ def ddim_step(schedule: Schedule, z: Tensor, x0: Tensor, t: int, s: int, eta: fl
 
 def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequence[int],
             generator: torch.Generator | None = None, schedule: Schedule | None = None,
-            mode: str = "paper") -> Tensor:
+            mode: str = "paper", mask_input: bool | None = None) -> Tensor:
     """Inpaint the unobserved features of a window (the paper's Algorithm 1).
 
     x_input: (B, N, F) normalised features; unobserved entries hold an initial guess (the
@@ -232,6 +239,9 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
     (``TrainConfig.cond_prob``): the model then always sees the measurements exactly
     instead of a noisy copy of them, which a small CPU-trained model needs (NOTES.md).
 
+    ``mask_input``: hand the model the mask too (default: ``wants_mask(model)``; pass it
+    for a traced model, which has no config).
+
     One model call per step; per step cost beyond the model is a few elementwise ops.
     """
     schedule = schedule or Schedule.cosine()
@@ -240,6 +250,7 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
         x_input = x_input.float()
         m = mask.to(dtype=torch.bool, device=x_input.device)
         height = height.to(x_input.dtype)
+        mk = m if (wants_mask(model) if mask_input is None else mask_input) else None
         x = x_input
         if mode in ("paper", "replace"):
             for t in steps:
@@ -250,7 +261,7 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
                     z = schedule.sqrt_ab(t) * x + schedule.sqrt_1mab(t) * noise
                     if mode == "replace":
                         z = torch.where(m, x_input, z)
-                x0 = _call(model, z, t, height)
+                x0 = _call(model, z, t, height, mk)
                 x = torch.where(m, x_input, x0)
             return x
         if mode == "ddim":
@@ -258,7 +269,7 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
             noise = torch.randn(x.shape, generator=generator, dtype=x.dtype)
             z = schedule.sqrt_ab(t0) * x + schedule.sqrt_1mab(t0) * noise
             for i, t in enumerate(steps):
-                x0 = _call(model, z, t, height)
+                x0 = _call(model, z, t, height, mk)
                 x = torch.where(m, x_input, x0)
                 if i + 1 == len(steps):
                     break
@@ -273,5 +284,5 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
 __all__ = [
     "T_DEFAULT", "PAPER_STEPS_10D", "Schedule", "cosine_alpha_bar", "paper_steps", "paper_like_steps",
     "even_steps",
-    "parse_steps", "validate_steps", "sample", "ddim_step", "inpaint",
+    "parse_steps", "validate_steps", "sample", "ddim_step", "inpaint", "wants_mask",
 ]

@@ -58,6 +58,10 @@ DEFAULT_WEIGHTS: dict[str, Path] = {
     "regressor": WEIGHTS_DIR / "regressor.pt",
 }
 POSER_KINDS = ("diffusion", "regressor", "floor")
+# what of the history the model is told is known: all of it (the paper: measured and
+# reconstructed features), or only what was measured (reconstructions are then just the
+# starting guess, re-inferred every frame from 3 s of measurements)
+HISTORY_MODES = ("reconstructed", "measured")
 CONTACT_THRESHOLD = 0.5
 
 
@@ -173,6 +177,7 @@ class Poser:
         root_xy0: tuple[float, float] = (0.0, 0.0),
         inpaint_mode: str | None = None,
         freeze: bool = True,
+        history: str = "reconstructed",
     ) -> None:
         self.model = model
         self.kind = "floor" if model is None else model.kind
@@ -186,6 +191,9 @@ class Poser:
         self.root_correction = root_correction and self.kind != "floor"
         self.start_pose = start_pose
         # None = the mode the model was trained for (meta["inpaint_mode"], else the paper's)
+        if history not in HISTORY_MODES:
+            raise ValueError(f"unknown history mode {history!r} ({', '.join(HISTORY_MODES)})")
+        self.history_mode = history
         self.inpaint_mode = inpaint_mode or ((model.meta or {}).get("inpaint_mode") if model else None) or "paper"
         self.seed = seed
         self.root_xy0 = (float(root_xy0[0]), float(root_xy0[1]))
@@ -220,6 +228,9 @@ class Poser:
             self._buf = stand_n.repeat(1, 2 * N, 1).contiguous()
             self._pos = N - 1
             self._mask = torch.ones(1, N, N_FEATURES, dtype=torch.bool)
+            # per-frame masks aligned with _buf ("measured" history); the standing start
+            # counts as known: it is the calibration pose the session began in
+            self._mbuf = torch.ones(1, 2 * N, N_FEATURES, dtype=torch.bool)
             self._stand_win = stand_n.expand(1, N, N_FEATURES)
             R0 = rot6d_to_matrix(self._stand[SL_ROT].view(N_SEGMENTS, 6))
             j0 = forward_kinematics(R0, torch.zeros(3), self._offsets)
@@ -237,6 +248,7 @@ class Poser:
         N = self.window
         if self._pos + 1 >= 2 * N:
             self._buf[:, : N - 1] = self._buf[:, N + 1:].clone()
+            self._mbuf[:, : N - 1] = self._mbuf[:, N + 1:].clone()
             self._pos = N - 2
         self._pos += 1
         return self._buf[:, self._pos - N + 1: self._pos + 1]
@@ -252,7 +264,8 @@ class Poser:
     def _predict(self, win: Tensor, mask: Tensor) -> Tensor:
         if self.kind == "diffusion":
             return inpaint(self._net, win, mask, self._height, self.steps, generator=self._gen,
-                           schedule=self.schedule, mode=self.inpaint_mode)
+                           schedule=self.schedule, mode=self.inpaint_mode,
+                           mask_input=self.model.config.mask_input)
         if self.kind == "regressor":
             return regress(self._net, win, mask, self._height)
         return torch.where(mask, win, self._stand_win)
@@ -274,8 +287,13 @@ class Poser:
 
             win = self._advance()
             win[0, -1] = torch.where(m, fn, win[0, -2])
-            self._mask[0, -1] = m
-            out = self._predict(win, self._mask)
+            if self.history_mode == "measured":
+                self._mbuf[0, self._pos] = m
+                mask = self._mbuf[:, self._pos - self.window + 1: self._pos + 1]
+            else:
+                self._mask[0, -1] = m
+                mask = self._mask
+            out = self._predict(win, mask)
             y = out[0, -1] * self._std + self._mean  # physical units, fresh tensor
 
             # clean the reconstruction: valid rotations, 0/1 contacts (what the data holds)

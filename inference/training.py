@@ -502,7 +502,8 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
             m = torch.as_tensor(random_observation_mask(rng, B, x.shape[1], cfg.mask))
             m &= torch.as_tensor(rng.random(B) < cfg.cond_prob)[:, None, None]
             z = torch.where(m, xn, z)
-            pred = torch.where(m, xn, model(z, t, height))
+            out = model(z, t, height, m) if cfg.model.mask_input else model(z, t, height)
+            pred = torch.where(m, xn, out)
         else:
             pred = model(z, t, height)
     else:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import torch
 
@@ -174,3 +176,27 @@ def test_skip_parameterisation_passes_clean_input_through_and_round_trips(tmp_pa
     assert back.config.skip
     with torch.no_grad():
         assert torch.allclose(back.model(z, torch.tensor([500, 3]), h), m(z, torch.tensor([500, 3]), h), atol=1e-5)
+
+
+def test_mask_input_model_reads_the_mask_traced_or_not():
+    """mask_input: the same window with a different known/unknown mask gives a different
+    prediction; the frozen trace and inpainting pass the mask the same way."""
+    from inference.denoiser import freeze_for_cpu
+    from inference.diffusion import inpaint, paper_steps, wants_mask
+
+    torch.manual_seed(0)
+    m = Denoiser(replace(ModelConfig.tiny(), mask_input=True)).eval()
+    assert wants_mask(m) and not wants_mask(Denoiser(ModelConfig.tiny()))
+    z, t, h = _inputs(1)
+    mask = torch.ones_like(z, dtype=torch.bool)
+    mask[:, -1] = False
+    with torch.inference_mode():
+        a, b = m(z, t, h, mask), m(z, t, h, ~mask)
+        assert not torch.allclose(a, b)
+        assert torch.equal(m(z, t, h), m(z, t, h, torch.zeros_like(mask)))  # None = nothing known
+        f = freeze_for_cpu(m)
+        assert torch.allclose(f(z, t, h, mask), a, atol=1e-5)
+    x = inpaint(m, z, mask, h, paper_steps(), generator=torch.Generator().manual_seed(0), mode="replace")
+    y = inpaint(f, z, mask, h, paper_steps(), generator=torch.Generator().manual_seed(0), mode="replace",
+                mask_input=True)
+    assert torch.allclose(x, y, atol=1e-4)

@@ -197,6 +197,9 @@ def test_conditioned_diffusion_training_sees_known_entries_clean(tmp_path):
     assert res.step == 4
     assert load_model(tmp_path / "run" / "model.pt").meta["inpaint_mode"] == "replace"
     assert load_model_meta_mode(_cfg(), tmp_path / "plain") == "paper"
+    masked = _cfg(cond_prob=1.0, model={**TINY, "mask_input": True})
+    assert train(masked, tmp_path / "masked", progress=False, stop_after=1).step == 1
+    assert load_model(tmp_path / "masked" / "model.pt").config.mask_input
 
 
 def load_model_meta_mode(cfg: TrainConfig, out: Path) -> str:
