@@ -198,3 +198,37 @@ def test_missing_default_weights_say_how_to_train(monkeypatch, tmp_path):
     assert poser_mod.resolve_model("floor") is None
     with pytest.raises(FileNotFoundError):
         poser_mod.resolve_model(str(tmp_path / "missing.pt"))
+
+
+class MaskSpy(nn.Module):
+    """A denoiser that reads the mask (mask_input) and keeps the last one it was given."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.config = ModelConfig.tiny()
+        self.config.mask_input = True
+        self.masks: list[torch.Tensor] = []
+
+    def forward(self, z, t, h, mask=None):
+        self.masks.append(mask.clone())
+        return torch.zeros_like(z)
+
+
+@pytest.mark.parametrize("history", ["reconstructed", "measured"])
+def test_history_mode_decides_what_the_model_is_told_is_known(history):
+    spy = MaskSpy()
+    lm = LoadedModel(model=spy, kind="diffusion", config=spy.config, norm_mean=np.zeros(N_FEATURES, np.float32),
+                     norm_std=np.ones(N_FEATURES, np.float32), meta={"inpaint_mode": "replace"})
+    p = Poser(lm, steps="1000,0", history=history)
+    assert p.inpaint_mode == "replace"  # the model file's mode is the default
+    masks = [observation_mask(list(SIX)), observation_mask(["pelvis"]), observation_mask(list(SIX))]
+    for i in range(70):
+        p.step(np.zeros(N_FEATURES), masks[i % 3])
+    seen = spy.masks[-1][0].numpy()  # (N, F) of the last frame's last call
+    expect_recent = np.stack([masks[i % 3] for i in range(70 - p.window, 70)])
+    if history == "measured":
+        np.testing.assert_array_equal(seen, expect_recent)
+    else:
+        assert seen[:-1].all() and np.array_equal(seen[-1], expect_recent[-1])
+    with pytest.raises(ValueError, match="history mode"):
+        Poser(lm, history="guessed")
