@@ -217,6 +217,9 @@ def ddim_step(schedule: Schedule, z: Tensor, x0: Tensor, t: int, s: int, eta: fl
     return out
 
 
+INPAINT_MODES = ("paper", "replace", "ddim", "replace-ddim")
+
+
 def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequence[int],
             generator: torch.Generator | None = None, schedule: Schedule | None = None,
             mode: str = "paper", mask_input: bool | None = None) -> Tensor:
@@ -238,6 +241,9 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
     current estimate of the unknown ones is re-noised), for models trained the same way
     (``TrainConfig.cond_prob``): the model then always sees the measurements exactly
     instead of a noisy copy of them, which a small CPU-trained model needs (NOTES.md).
+    ``mode="replace-ddim"``: the same, but one noise draw at the first level and then
+    deterministic DDIM updates of the unknown entries (no fresh noise per step), so the
+    frame-to-frame randomness of the live output is one draw instead of one per step.
 
     ``mask_input``: hand the model the mask too (default: ``wants_mask(model)``; pass it
     for a traced model, which has no config).
@@ -278,11 +284,21 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
                 known = schedule.q_sample(x_input, s, generator=generator)
                 z = torch.where(m, known, z)
             return x
-        raise ValueError(f"unknown inpainting mode {mode!r} (paper, replace, ddim)")
+        if mode == "replace-ddim":
+            t0 = steps[0]
+            noise = torch.randn(x.shape, generator=generator, dtype=x.dtype)
+            z = torch.where(m, x_input, schedule.sqrt_ab(t0) * x + schedule.sqrt_1mab(t0) * noise)
+            for i, t in enumerate(steps):
+                x = torch.where(m, x_input, _call(model, z, t, height, mk))
+                if i + 1 == len(steps):
+                    break
+                z = torch.where(m, x_input, ddim_step(schedule, z, x, t, steps[i + 1]))
+            return x
+        raise ValueError(f"unknown inpainting mode {mode!r} ({', '.join(INPAINT_MODES)})")
 
 
 __all__ = [
     "T_DEFAULT", "PAPER_STEPS_10D", "Schedule", "cosine_alpha_bar", "paper_steps", "paper_like_steps",
     "even_steps",
-    "parse_steps", "validate_steps", "sample", "ddim_step", "inpaint", "wants_mask",
+    "parse_steps", "validate_steps", "sample", "ddim_step", "inpaint", "wants_mask", "INPAINT_MODES",
 ]
