@@ -45,7 +45,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="sensor noise model on the synthesized signals (default on)")
     p.add_argument("--limit", type=int, default=None, help="only the first N motion files (sorted)")
     p.add_argument("--seed", type=int, default=0, help="seed of sensor noise and inpainting noise")
-    p.add_argument("--threads", type=int, default=0, help="torch threads (0 = torch's default)")
+    # default 1: the live loop is one small model call per step, and with more threads two
+    # evaluations at once spin in OpenMP barriers (~15x slower, seen in session 2)
+    p.add_argument("--threads", type=int, default=1, help="torch threads (0 = torch's default)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.add_argument("--report", type=Path, default=None, metavar="FILE.md",
                    help="also write the markdown table over the standard sensor sets x models")
