@@ -21,6 +21,11 @@ import json
 import sys
 from pathlib import Path
 
+# choices only (cheap modules; the heavy imports stay in run())
+INPAINT_MODES = ("paper", "replace", "ddim", "replace-ddim")
+HISTORY_MODES = ("reconstructed", "measured")
+NOISE_MODES = ("fresh", "fixed")
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("train", help="train the model (diffusion) or the regressive baseline",
@@ -35,6 +40,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--export", type=Path, metavar="FILE", help="write OUT/last.pt's EMA weights to FILE and exit")
     p.add_argument("--fp16", action="store_true", help="with --export: store half-precision weights")
     p.add_argument("--default-steps", help="with --export: step list the poser uses (e.g. 10, paper, 1000,500,0)")
+    p.add_argument("--inpaint-mode", choices=INPAINT_MODES,
+                   help="with --export: how the poser inpaints with this model (default: as trained)")
+    p.add_argument("--history", choices=HISTORY_MODES,
+                   help="with --export: what of the history the poser tells the model is known")
+    p.add_argument("--noise", choices=NOISE_MODES, help="with --export: inpainting noise per frame")
     p.set_defaults(func=run)
 
 
@@ -48,7 +58,9 @@ def run(args: argparse.Namespace) -> int:
             from inference.diffusion import parse_steps
 
             parse_steps(args.default_steps)  # reject a bad list now, not in the poser
-        export_model(args.out / LAST, args.export, fp16=args.fp16, default_steps=args.default_steps)
+        poser = {k: v for k, v in (("inpaint_mode", args.inpaint_mode), ("history", args.history),
+                                   ("noise", args.noise)) if v is not None}
+        export_model(args.out / LAST, args.export, fp16=args.fp16, default_steps=args.default_steps, poser=poser)
         print(json.dumps({"exported": str(args.export), "fp16": args.fp16}))
         return 0
     if args.config is not None:

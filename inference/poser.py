@@ -62,6 +62,10 @@ POSER_KINDS = ("diffusion", "regressor", "floor")
 # reconstructed features), or only what was measured (reconstructions are then just the
 # starting guess, re-inferred every frame from 3 s of measurements)
 HISTORY_MODES = ("reconstructed", "measured")
+# inpainting noise: a fresh draw every frame (the paper), or the same draw every frame, which
+# makes the output a deterministic function of the window, so it only moves when the
+# measurements do (much less jitter at the same accuracy; NOTES.md "Session 2")
+NOISE_MODES = ("fresh", "fixed")
 CONTACT_THRESHOLD = 0.5
 
 
@@ -177,7 +181,8 @@ class Poser:
         root_xy0: tuple[float, float] = (0.0, 0.0),
         inpaint_mode: str | None = None,
         freeze: bool = True,
-        history: str = "reconstructed",
+        history: str | None = None,
+        noise: str | None = None,
     ) -> None:
         self.model = model
         self.kind = "floor" if model is None else model.kind
@@ -191,9 +196,16 @@ class Poser:
         self.root_correction = root_correction and self.kind != "floor"
         self.start_pose = start_pose
         # None = the mode the model was trained for (meta["inpaint_mode"], else the paper's)
+        # None = what the model file recommends (meta, set at export), else the paper's way
+        meta = (model.meta or {}) if model is not None else {}
+        history = history or meta.get("history") or "reconstructed"
+        noise = noise or meta.get("noise") or "fresh"
         if history not in HISTORY_MODES:
             raise ValueError(f"unknown history mode {history!r} ({', '.join(HISTORY_MODES)})")
+        if noise not in NOISE_MODES:
+            raise ValueError(f"unknown noise mode {noise!r} ({', '.join(NOISE_MODES)})")
         self.history_mode = history
+        self.noise_mode = noise
         self.inpaint_mode = inpaint_mode or ((model.meta or {}).get("inpaint_mode") if model else None) or "paper"
         self.seed = seed
         self.root_xy0 = (float(root_xy0[0]), float(root_xy0[1]))
@@ -263,6 +275,8 @@ class Poser:
     # ------------------------------------------------------------------ one step
     def _predict(self, win: Tensor, mask: Tensor) -> Tensor:
         if self.kind == "diffusion":
+            if self.noise_mode == "fixed":
+                self._gen.manual_seed(self.seed)
             return inpaint(self._net, win, mask, self._height, self.steps, generator=self._gen,
                            schedule=self.schedule, mode=self.inpaint_mode,
                            mask_input=self.model.config.mask_input)

@@ -866,9 +866,11 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
 
 
 def export_model(checkpoint: str | os.PathLike, dest: str | os.PathLike, fp16: bool = False,
-                 default_steps: str | None = None) -> None:
+                 default_steps: str | None = None, poser: dict | None = None) -> None:
     """Write the EMA weights of a training checkpoint as an inference model file (what is
-    shipped: fp16 halves it; denoiser.load_model casts back to float32)."""
+    shipped: fp16 halves it; denoiser.load_model casts back to float32). ``poser``: the
+    poser defaults to record with it (``inpaint_mode``, ``history``, ``noise``; see Poser),
+    chosen by whoever measured them on this model."""
     ck = torch.load(checkpoint, map_location="cpu", weights_only=False)
     if ck.get("format") != CHECKPOINT_FORMAT:
         raise ValueError(f"{checkpoint} is not an imucap training checkpoint")
@@ -876,9 +878,10 @@ def export_model(checkpoint: str | os.PathLike, dest: str | os.PathLike, fp16: b
     model.load_state_dict(ck["ema"])
     cfg = dict(ck["train_config"])
     steps = default_steps if default_steps is not None else cfg.get("infer_steps")
-    save_model(dest, model, ck["kind"], ck["norm_mean"], ck["norm_std"], step=int(ck["step"]),
-               meta={"val": ck.get("val"), "train_config": cfg, "default_steps": steps,
-                     "inpaint_mode": inpaint_mode_for(TrainConfig.from_dict(cfg))}, fp16=fp16)
+    meta = {"val": ck.get("val"), "train_config": cfg, "default_steps": steps,
+            "inpaint_mode": inpaint_mode_for(TrainConfig.from_dict(cfg))}
+    meta.update(poser or {})
+    save_model(dest, model, ck["kind"], ck["norm_mean"], ck["norm_std"], step=int(ck["step"]), meta=meta, fp16=fp16)
 
 
 __all__ = [

@@ -232,3 +232,28 @@ def test_history_mode_decides_what_the_model_is_told_is_known(history):
         assert seen[:-1].all() and np.array_equal(seen[-1], expect_recent[-1])
     with pytest.raises(ValueError, match="history mode"):
         Poser(lm, history="guessed")
+
+
+@pytest.mark.parametrize("noise", ["fresh", "fixed"])
+def test_noise_mode_fixed_reuses_one_draw_per_frame(noise):
+    """fixed: every frame's inpainting starts from the same noise (the generator is reseeded),
+    so the output is a deterministic function of the window; fresh: new noise each frame.
+    The model file's meta picks the default, as `imucap train --export --noise` writes it."""
+    from app import cli_train
+
+    assert cli_train.NOISE_MODES == poser_mod.NOISE_MODES and cli_train.HISTORY_MODES == poser_mod.HISTORY_MODES
+    from inference.diffusion import INPAINT_MODES
+
+    assert cli_train.INPAINT_MODES == INPAINT_MODES
+    lm = _loaded("diffusion")
+    lm.meta = {"noise": noise, "history": "measured"}
+    p = Poser(lm, steps="1000,400,0")
+    assert p.noise_mode == noise and p.history_mode == "measured"
+    states = []
+    for _ in range(3):
+        p.step(np.zeros(N_FEATURES), observation_mask(list(SIX)))
+        states.append(p._gen.get_state())
+    assert torch.equal(states[0], states[1]) == (noise == "fixed")
+    assert torch.equal(states[1], states[2]) == (noise == "fixed")
+    with pytest.raises(ValueError, match="noise mode"):
+        Poser(lm, noise="brown")

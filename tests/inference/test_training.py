@@ -139,9 +139,10 @@ def test_resume_reproduces_uninterrupted_run(tmp_path, kind):
     from app.cli import main
 
     assert main(["train", "--out", str(tmp_path / "part"), "--export", str(tmp_path / "ship.pt"), "--fp16",
-                 "--default-steps", "10"]) == 0
+                 "--default-steps", "10", "--history", "measured", "--noise", "fixed"]) == 0
     shipped = load_model(tmp_path / "ship.pt")
     assert shipped.meta["default_steps"] == "10" and shipped.step == 4
+    assert shipped.meta["history"] == "measured" and shipped.meta["noise"] == "fixed"
     for k, v in lm.model.state_dict().items():
         assert torch.allclose(v, shipped.model.state_dict()[k], atol=1e-2, rtol=1e-2), k
 
