@@ -68,7 +68,7 @@ from pathlib import Path
 
 import numpy as np
 
-from inference.rotations import matrix_to_euler
+from inference.rotations import matrix_about_axis, matrix_to_euler
 from inference.skeleton import N_SEGMENTS, SEGMENT_INDEX
 
 from .exporters import ExportMotion, atomic_target
@@ -105,13 +105,11 @@ def coordinate_names() -> list[str]:
 
 
 def _rx(deg: float) -> np.ndarray:
-    a = np.deg2rad(deg)
-    return np.array([[1.0, 0.0, 0.0], [0.0, np.cos(a), -np.sin(a)], [0.0, np.sin(a), np.cos(a)]])
+    return matrix_about_axis(np.array([1.0, 0.0, 0.0]), np.deg2rad(deg))
 
 
 def _rz(deg: float) -> np.ndarray:
-    a = np.deg2rad(deg)
-    return np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    return matrix_about_axis(np.array([0.0, 0.0, 1.0]), np.deg2rad(deg))
 
 
 def opensim_default_pose() -> np.ndarray:

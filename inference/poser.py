@@ -195,7 +195,6 @@ class Poser:
         self.window = model.config.window if model is not None else WINDOW
         self.root_correction = root_correction and self.kind != "floor"
         self.start_pose = start_pose
-        # None = the mode the model was trained for (meta["inpaint_mode"], else the paper's)
         # None = what the model file recommends (meta, set at export), else the paper's way
         meta = (model.meta or {}) if model is not None else {}
         history = history or meta.get("history") or "reconstructed"
@@ -206,7 +205,7 @@ class Poser:
             raise ValueError(f"unknown noise mode {noise!r} ({', '.join(NOISE_MODES)})")
         self.history_mode = history
         self.noise_mode = noise
-        self.inpaint_mode = inpaint_mode or ((model.meta or {}).get("inpaint_mode") if model else None) or "paper"
+        self.inpaint_mode = inpaint_mode or meta.get("inpaint_mode") or "paper"
         self.seed = seed
         self.root_xy0 = (float(root_xy0[0]), float(root_xy0[1]))
         self.schedule = Schedule.cosine()
@@ -242,7 +241,8 @@ class Poser:
             self._mask = torch.ones(1, N, N_FEATURES, dtype=torch.bool)
             # per-frame masks aligned with _buf ("measured" history); the standing start
             # counts as known: it is the calibration pose the session began in
-            self._mbuf = torch.ones(1, 2 * N, N_FEATURES, dtype=torch.bool)
+            self._mbuf = (torch.ones(1, 2 * N, N_FEATURES, dtype=torch.bool)
+                          if self.history_mode == "measured" else None)
             self._stand_win = stand_n.expand(1, N, N_FEATURES)
             R0 = rot6d_to_matrix(self._stand[SL_ROT].view(N_SEGMENTS, 6))
             j0 = forward_kinematics(R0, torch.zeros(3), self._offsets)
@@ -260,7 +260,8 @@ class Poser:
         N = self.window
         if self._pos + 1 >= 2 * N:
             self._buf[:, : N - 1] = self._buf[:, N + 1:].clone()
-            self._mbuf[:, : N - 1] = self._mbuf[:, N + 1:].clone()
+            if self._mbuf is not None:
+                self._mbuf[:, : N - 1] = self._mbuf[:, N + 1:].clone()
             self._pos = N - 2
         self._pos += 1
         return self._buf[:, self._pos - N + 1: self._pos + 1]
