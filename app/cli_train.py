@@ -1,6 +1,6 @@
 """`imucap train`: train the DiffusionPoser denoiser or the regressive baseline.
 
-    imucap train --config cfg.json --out runs/x [--resume] [--steps N]
+    imucap train --config cfg.json --out runs/x [--resume | --init other/last.pt] [--steps N]
                  [--model diffusion|regressor] [--seed S]
 
 Multi-process (one process per core or GPU):
@@ -33,6 +33,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--config", type=Path, help="training config JSON (TrainConfig fields)")
     p.add_argument("--out", type=Path, required=True, help="run directory: last.pt, model.pt, train.jsonl")
     p.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
+    p.add_argument("--init", type=Path, metavar="LAST_PT",
+                   help="start from another run's last.pt (weights, EMA, normaliser; fresh optimiser): fine-tuning")
     p.add_argument("--steps", type=int, help="total optimiser steps (overrides the config)")
     p.add_argument("--model", choices=("diffusion", "regressor"), help="model kind (overrides the config)")
     p.add_argument("--seed", type=int, help="random seed (overrides the config)")
@@ -76,7 +78,9 @@ def run(args: argparse.Namespace) -> int:
         cfg.kind = args.model
     if args.seed is not None:
         cfg.seed = args.seed
-    res = train(cfg, args.out, resume=args.resume, progress=not args.no_progress)
+    if args.init is not None and args.resume:
+        raise ValueError("--init starts a new run; --resume continues one: pass only one")
+    res = train(cfg, args.out, resume=args.resume, progress=not args.no_progress, init_from=args.init)
     if res.checkpoint is not None and _is_main():
         summary = {"step": res.step, "loss": res.last_loss, "checkpoint": str(res.checkpoint),
                    "stopped_early": res.stopped_early}

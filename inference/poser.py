@@ -12,7 +12,9 @@ last 60 frames) and whose last frame holds the new measurement. Each step:
    the standing pose;
 3. clean the reconstructed frame (6D -> rotation -> 6D, contacts to 0/1), correct the
    root displacement from the predicted contacts, write it back into the history;
-4. integrate the root path and run FK for the outputs.
+4. integrate the root path and run FK for the outputs; the output root goes through a
+   light speed-adaptive low-pass (``smoothing.ROOT_SMOOTHING``, ``smooth_root=False`` to
+   skip it): per-frame inference makes it wobble, and that wobble was most of the jitter.
 
 Frame of reference: the model is trained with random-heading augmentation and
 heading-invariant normalisation (``training.rotate_yaw`` / ``feature_stats``), i.e. it
@@ -47,10 +49,11 @@ from torch import Tensor
 from .body import Body, contact_points, forward_kinematics, npose_rotations, tpose
 from .denoiser import Denoiser, LoadedModel, freeze_for_cpu, load_model
 from .diffusion import Schedule, inpaint, paper_steps, parse_steps
-from .features import N_FEATURES, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
+from .features import FPS_MODEL, N_FEATURES, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
 from .regressor import regress
 from .rotations import matrix_to_rot6d, rot6d_to_matrix
 from .skeleton import N_CONTACTS, N_SEGMENTS
+from .smoothing import ROOT_SMOOTHING, VectorOneEuro
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 DEFAULT_WEIGHTS: dict[str, Path] = {
@@ -183,6 +186,7 @@ class Poser:
         freeze: bool = True,
         history: str | None = None,
         noise: str | None = None,
+        smooth_root: bool = True,
     ) -> None:
         self.model = model
         self.kind = "floor" if model is None else model.kind
@@ -207,6 +211,8 @@ class Poser:
         self.noise_mode = noise
         self.inpaint_mode = inpaint_mode or meta.get("inpaint_mode") or "paper"
         self.seed = seed
+        # output only: the integrated root path (and so every later frame) is unfiltered
+        self._root_filter = VectorOneEuro(FPS_MODEL, ROOT_SMOOTHING) if smooth_root else None
         self.root_xy0 = (float(root_xy0[0]), float(root_xy0[1]))
         self.schedule = Schedule.cosine()
         # the live loop always calls the denoiser with one (1, N, 190) window: a frozen
@@ -249,6 +255,8 @@ class Poser:
             self._prev_cps = contact_points(R0, j0, self._contact_offsets)
             self._root_xy = torch.tensor(self.root_xy0, dtype=torch.float64)
             self._gen = torch.Generator().manual_seed(self.seed)
+        if self._root_filter is not None:
+            self._root_filter.reset()
         self.index = 0
 
     def _normalize(self, x: Tensor) -> Tensor:
@@ -329,6 +337,8 @@ class Poser:
 
             self._root_xy += y[SL_DP].to(torch.float64)
             root = torch.cat([self._root_xy.to(torch.float32), y[SL_PZ]])
+            if self._root_filter is not None:
+                root = self._root_filter(root)
             joints = joints_rel + root
             feats = torch.where(m, f_in.to(torch.float64).reshape(N_FEATURES), y.to(torch.float64))
             frame = PoseFrame(

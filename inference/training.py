@@ -91,6 +91,11 @@ class LossWeights:
     fk: float = 2.0
     drift: float = 0.05
     slide: float = 0.02
+    # the live poser outputs only a window's last frame, the one without future context;
+    # these repeat the simple and fk terms on that frame alone to spend more of a small
+    # model's capacity there (0 = the paper's uniform weighting over the window)
+    last: float = 0.0
+    fk_last: float = 0.0
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -398,7 +403,10 @@ def motion_losses(pred_n: Tensor, true_n: Tensor, mean: Tensor, std: Tensor, off
     zero = torch.zeros(B, N, 3, dtype=pred.dtype)
     jp = forward_kinematics(Rp, zero, off)
     jt = forward_kinematics(Rt, zero, off)
-    terms["fk"] = (jp - jt).square().sum(-1).mean()
+    fk_err = (jp - jt).square().sum(-1)
+    terms["fk"] = fk_err.mean()
+    terms["last"] = F.mse_loss(pred_n[:, -1], true_n[:, -1])
+    terms["fk_last"] = fk_err[:, -1].mean()
 
     pp = torch.cumsum(pred[..., SL_DP], dim=1)
     pt = torch.cumsum(true[..., SL_DP], dim=1)
@@ -680,7 +688,8 @@ def threading_main() -> bool:
 def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
           train_set: Dataset | None = None, val_set: Dataset | None = None,
           stop_after: int | None = None, progress: bool = True,
-          log: Callable[[str], None] | None = None) -> TrainResult:
+          log: Callable[[str], None] | None = None,
+          init_from: str | os.PathLike | None = None) -> TrainResult:
     """Train (or resume) a model into ``out_dir``.
 
     Writes ``last.pt`` (full checkpoint: model, EMA, optimizer, step, config, normaliser,
@@ -688,6 +697,10 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
     ``train.jsonl`` (one JSON object per log/validation event). ``stop_after`` ends this
     run after that many total steps (with a checkpoint), as an interruption would;
     ``cfg.steps`` stays the schedule's horizon. Datasets default to ``cfg.data``.
+
+    ``init_from`` (a ``last.pt`` of another run) starts a new run from that run's weights,
+    EMA weights and normaliser, with a fresh optimiser and this config: fine-tuning a
+    trained model on another mask distribution or loss costs a fraction of training anew.
     """
     out = Path(out_dir)
     d = init_distributed()
@@ -713,6 +726,14 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
         cfg = TrainConfig(**merged)
     elif last.exists():
         raise FileExistsError(f"{last} exists; pass --resume to continue it or choose another --out")
+    init: dict | None = None
+    if init_from is not None and ckpt is None:
+        init = torch.load(init_from, map_location="cpu", weights_only=False)
+        if init.get("format") != CHECKPOINT_FORMAT:
+            raise ValueError(f"--init {init_from}: not an imucap training checkpoint (last.pt)")
+        if init["kind"] != cfg.kind or ModelConfig.from_dict(init["model_config"]) != cfg.model:
+            raise ValueError(f"--init {init_from}: its model ({init['kind']}, {init['model_config']}) "
+                             f"differs from this config's ({cfg.kind}, {cfg.model.to_dict()})")
 
     data = cfg.data or default_data()
     if "train" not in data and train_set is None:
@@ -727,8 +748,9 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
                 val_set = load_dataset(data["val"])
         _barrier(d)
 
-    if ckpt is not None:
-        mean_np, std_np = ckpt["norm_mean"], ckpt["norm_std"]
+    if ckpt is not None or init is not None:
+        src = ckpt if ckpt is not None else init
+        mean_np, std_np = src["norm_mean"], src["norm_std"]
     else:
         # our own statistics (not a dataset-provided normaliser): they must match the
         # augmentation, and they travel with every checkpoint and model file
@@ -746,6 +768,10 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
         opt.load_state_dict(ckpt["optimizer"])
         ema.load_state_dict(ckpt["ema"])
         start = int(ckpt["step"])
+    elif init is not None:
+        # start from the averaged weights (the better model) and keep averaging from there
+        model.load_state_dict(init["ema"])
+        ema.load_state_dict(init["ema"])
     net: nn.Module = model
     if d.enabled:
         from torch.nn.parallel import DistributedDataParallel as DDP
@@ -781,7 +807,8 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
 
     if d.main:
         write_log({"event": "start", "step": start, "world": d.world, "kind": cfg.kind, "time": time.time(),
-                   "params": sum(p.numel() for p in model.parameters()), "resume": ckpt is not None})
+                   "params": sum(p.numel() for p in model.parameters()), "resume": ckpt is not None,
+                   "init_from": str(init_from) if init is not None else None})
     pbar = None
     if progress and d.main:
         from tqdm import tqdm

@@ -147,10 +147,15 @@ def test_root_correction_inside_the_poser():
         fr = p.step(feats, none)
     np.testing.assert_allclose(fr.root[:2], 0.0, atol=1e-6)
     assert fr.contacts.all()
-    p = Poser(lm, body, steps=[0], root_correction=False)
+    p = Poser(lm, body, steps=[0], root_correction=False, smooth_root=False)
     for _ in range(5):
         fr = p.step(feats, none)
     np.testing.assert_allclose(fr.root[:2], [0.5, 0.0], atol=1e-5)
+    # the output filter trails the raw path a little and keeps the same heading
+    p = Poser(lm, body, steps=[0], root_correction=False)
+    xs = [p.step(feats, none).root[0] for _ in range(40)]
+    assert 0.0 < xs[4] < 0.5 and np.all(np.diff(xs) > 0)
+    assert 4.0 - 0.2 < xs[-1] < 4.0
 
 
 def test_floor_baseline_holds_unobserved_and_root(clip):

@@ -48,7 +48,7 @@ def _batch(contacts: float | None = None):
 def test_losses_zero_for_perfect_prediction_positive_otherwise():
     xn, mean, std, off, cl = _batch(contacts=0.0)
     terms = motion_losses(xn.clone(), xn, mean, std, off, cl)
-    assert set(terms) == {"simple", "vel", "fk", "drift", "slide"}
+    assert set(terms) == {"simple", "vel", "fk", "drift", "slide", "last", "fk_last"}
     for k, v in terms.items():
         assert float(v) == pytest.approx(0.0, abs=1e-9), k
     # perturb orientations, root motion and contacts: every term turns positive
@@ -213,3 +213,45 @@ def test_loss_weights_from_config():
     assert cfg.loss == LossWeights(fk=3.0) and cfg.model.layers == 2 and cfg.model.d_model == ModelConfig().d_model
     with pytest.raises(ValueError):
         TrainConfig.from_dict({"nonsense": 1})
+
+
+def test_init_from_starts_a_new_run_from_another_runs_weights(tmp_path):
+    base = train(_cfg(steps=2), tmp_path / "base", progress=False)
+    assert base.step == 2
+    src = torch.load(tmp_path / "base" / "last.pt", weights_only=False)
+    # a different mask distribution and loss: what fine-tuning changes
+    tuned_cfg = _cfg(steps=1, cond_prob=1.0, mask={"p_history_known": 0.0}, lr=0.0, lr_min=0.0,
+                     loss={"last": 1.0, "fk_last": 1.0})
+    res = train(tuned_cfg, tmp_path / "tuned", progress=False, init_from=tmp_path / "base" / "last.pt")
+    assert res.step == 1  # a new run: its own step count from 0
+    out = torch.load(tmp_path / "tuned" / "last.pt", weights_only=False)
+    # lr 0: the weights are the source's EMA weights, the normaliser is the source's
+    for k, v in src["ema"].items():
+        assert torch.allclose(out["model"][k], v), k
+    assert np.array_equal(out["norm_mean"], src["norm_mean"])
+    assert out["train_config"]["mask"]["p_history_known"] == 0.0
+    start = json.loads((tmp_path / "tuned" / "train.jsonl").read_text().splitlines()[0])
+    assert start["init_from"].endswith("last.pt")
+    # a run of another size cannot start from these weights
+    with pytest.raises(ValueError, match="differs"):
+        train(_cfg(steps=1, model={**TINY, "ff": TINY["ff"] * 2}), tmp_path / "other", progress=False,
+              init_from=tmp_path / "base" / "last.pt")
+
+
+def test_last_frame_terms_see_only_the_last_frame():
+    from inference.training import motion_losses
+
+    torch.manual_seed(0)
+    B, N = 2, 5
+    mean, std = torch.zeros(190), torch.ones(190)
+    true = torch.randn(B, N, 190) * 0.1
+    offsets = torch.randn(B, 24, 3) * 0.1
+    contact = torch.randn(B, 4, 3) * 0.05
+    pred = true.clone()
+    pred[:, 0, :] += 0.5  # error away from the last frame only
+    terms = motion_losses(pred, true, mean, std, offsets, contact)
+    assert terms["simple"] > 0 and terms["last"] == 0 and terms["fk_last"] == 0
+    pred = true.clone()
+    pred[:, -1, :] += 0.5
+    terms = motion_losses(pred, true, mean, std, offsets, contact)
+    assert terms["last"] == pytest.approx(0.25) and terms["fk_last"] > 0
