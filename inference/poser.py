@@ -10,7 +10,8 @@ last 60 frames) and whose last frame holds the new measurement. Each step:
 2. inpaint with mask = all of the history + the observed features of frame N-1
    (``diffusion.inpaint``, Algorithm 1) -- or, for the baselines, one regressor pass or
    the standing pose;
-3. clean the reconstructed frame (6D -> rotation -> 6D, contacts to 0/1), correct the
+3. clean the reconstructed frame (6D -> rotation -> 6D, contacts to 0/1, each knee a
+   hinge about its lateral axis: ``joint_constraints``, ``knee_hinge=False`` to skip), correct the
    root displacement from the predicted contacts, write it back into the history;
 4. integrate the root path and run FK for the outputs; the output root goes through a
    light speed-adaptive low-pass (``smoothing.ROOT_SMOOTHING``, ``smooth_root=False`` to
@@ -50,6 +51,7 @@ from .body import Body, contact_points, forward_kinematics, npose_rotations, tpo
 from .denoiser import Denoiser, LoadedModel, freeze_for_cpu, load_model
 from .diffusion import Schedule, inpaint, paper_steps, parse_steps
 from .features import FPS_MODEL, N_FEATURES, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
+from .joint_constraints import constrain_knees
 from .regressor import regress
 from .rotations import matrix_to_rot6d, rot6d_to_matrix
 from .skeleton import N_CONTACTS, N_SEGMENTS
@@ -187,6 +189,7 @@ class Poser:
         history: str | None = None,
         noise: str | None = None,
         smooth_root: bool = True,
+        knee_hinge: bool = True,
     ) -> None:
         self.model = model
         self.kind = "floor" if model is None else model.kind
@@ -211,6 +214,8 @@ class Poser:
         self.noise_mode = noise
         self.inpaint_mode = inpaint_mode or meta.get("inpaint_mode") or "paper"
         self.seed = seed
+        # the floor is by definition the standing pose wherever nothing is measured
+        self.knee_hinge = knee_hinge and self.kind != "floor"
         # output only: the integrated root path (and so every later frame) is unfiltered
         self._root_filter = VectorOneEuro(FPS_MODEL, ROOT_SMOOTHING) if smooth_root else None
         self.root_xy0 = (float(root_xy0[0]), float(root_xy0[1]))
@@ -321,6 +326,8 @@ class Poser:
 
             # clean the reconstruction: valid rotations, 0/1 contacts (what the data holds)
             R = rot6d_to_matrix(y[SL_ROT].reshape(N_SEGMENTS, 6))
+            if self.knee_hinge:
+                R = constrain_knees(R, m[SL_ROT].view(N_SEGMENTS, 6).all(dim=-1))
             y[SL_ROT] = torch.where(m[SL_ROT], y[SL_ROT], matrix_to_rot6d(R).reshape(-1))
             prob = y[SL_CONTACT].clamp(0.0, 1.0)
             contact = prob > CONTACT_THRESHOLD
