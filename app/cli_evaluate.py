@@ -43,6 +43,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="diffusion | regressor | floor (shipped weights / baseline) or a model file PATH.pt")
     p.add_argument("--noise", action=argparse.BooleanOptionalAction, default=True,
                    help="sensor noise model on the synthesized signals (default on)")
+    p.add_argument("--smoothing", action=argparse.BooleanOptionalAction, default=True,
+                   help="the poser's 1-Euro output filters (root, unmeasured orientations); --no-smoothing "
+                        "scores the raw per-frame reconstructions")
     p.add_argument("--limit", type=int, default=None, help="only the first N motion files (sorted)")
     p.add_argument("--seed", type=int, default=0, help="seed of sensor noise and inpainting noise")
     # default 1: the live loop is one small model call per step, and with more threads two
@@ -108,11 +111,12 @@ def run(args: argparse.Namespace) -> int:
         kind = "floor" if model is None else model.kind
         st = (steps if steps is not None else default_steps(model)) if kind == "diffusion" else []
         summary, clips = evaluate_motions(motions, model, set_sites, insoles, st or None, noise, args.seed,
-                                          progress=progress, keep=keep, desc=f"{label or spec}")
+                                          progress=progress, keep=keep, desc=f"{label or spec}",
+                                          smoothing=args.smoothing)
         summary.update({
             "model": str(spec), "kind": kind, "sensors": list(set_sites),
             "insoles": insoles, "steps": _steps_label(st, kind), "step_list": st if kind == "diffusion" else None,
-            "noise": bool(noise is not None), "seed": args.seed,
+            "noise": bool(noise is not None), "seed": args.seed, "smoothing": args.smoothing,
         })
         return summary, clips
 

@@ -13,9 +13,10 @@ last 60 frames) and whose last frame holds the new measurement. Each step:
 3. clean the reconstructed frame (6D -> rotation -> 6D, contacts to 0/1, each knee a
    hinge about its lateral axis: ``joint_constraints``, ``knee_hinge=False`` to skip), correct the
    root displacement from the predicted contacts, write it back into the history;
-4. integrate the root path and run FK for the outputs; the output root goes through a
-   light speed-adaptive low-pass (``smoothing.ROOT_SMOOTHING``, ``smooth_root=False`` to
-   skip it): per-frame inference makes it wobble, and that wobble was most of the jitter.
+4. integrate the root path and run FK for the outputs; the output root and the
+   unmeasured orientations go through light speed-adaptive low-passes (``smoothing``,
+   ``smoothing=False`` to skip): per-frame inference makes them wobble. Output only: the
+   history and the root integration use the unfiltered values.
 
 Frame of reference: the model is trained with random-heading augmentation and
 heading-invariant normalisation (``training.rotate_yaw`` / ``feature_stats``), i.e. it
@@ -55,7 +56,7 @@ from .joint_constraints import constrain_knees
 from .regressor import regress
 from .rotations import matrix_to_rot6d, rot6d_to_matrix
 from .skeleton import N_CONTACTS, N_SEGMENTS
-from .smoothing import ROOT_SMOOTHING, VectorOneEuro
+from .smoothing import ROOT_SMOOTHING, ROTATION_SMOOTHING, RotationOneEuro, VectorOneEuro
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 DEFAULT_WEIGHTS: dict[str, Path] = {
@@ -188,7 +189,7 @@ class Poser:
         freeze: bool = True,
         history: str | None = None,
         noise: str | None = None,
-        smooth_root: bool = True,
+        smoothing: bool = True,
         knee_hinge: bool = True,
     ) -> None:
         self.model = model
@@ -217,7 +218,9 @@ class Poser:
         # the floor is by definition the standing pose wherever nothing is measured
         self.knee_hinge = knee_hinge and self.kind != "floor"
         # output only: the integrated root path (and so every later frame) is unfiltered
-        self._root_filter = VectorOneEuro(FPS_MODEL, ROOT_SMOOTHING) if smooth_root else None
+        self.smoothing = smoothing
+        self._root_filter = VectorOneEuro(FPS_MODEL, ROOT_SMOOTHING) if smoothing else None
+        self._rot_filter = RotationOneEuro(FPS_MODEL, ROTATION_SMOOTHING) if smoothing else None
         self.root_xy0 = (float(root_xy0[0]), float(root_xy0[1]))
         self.schedule = Schedule.cosine()
         # the live loop always calls the denoiser with one (1, N, 190) window: a frozen
@@ -260,8 +263,9 @@ class Poser:
             self._prev_cps = contact_points(R0, j0, self._contact_offsets)
             self._root_xy = torch.tensor(self.root_xy0, dtype=torch.float64)
             self._gen = torch.Generator().manual_seed(self.seed)
-        if self._root_filter is not None:
+        if self._root_filter is not None and self._rot_filter is not None:
             self._root_filter.reset()
+            self._rot_filter.reset()
         self.index = 0
 
     def _normalize(self, x: Tensor) -> Tensor:
@@ -326,8 +330,9 @@ class Poser:
 
             # clean the reconstruction: valid rotations, 0/1 contacts (what the data holds)
             R = rot6d_to_matrix(y[SL_ROT].reshape(N_SEGMENTS, 6))
+            seg_measured = m[SL_ROT].view(N_SEGMENTS, 6).all(dim=-1)
             if self.knee_hinge:
-                R = constrain_knees(R, m[SL_ROT].view(N_SEGMENTS, 6).all(dim=-1))
+                R = constrain_knees(R, seg_measured)
             y[SL_ROT] = torch.where(m[SL_ROT], y[SL_ROT], matrix_to_rot6d(R).reshape(-1))
             prob = y[SL_CONTACT].clamp(0.0, 1.0)
             contact = prob > CONTACT_THRESHOLD
@@ -344,8 +349,10 @@ class Poser:
 
             self._root_xy += y[SL_DP].to(torch.float64)
             root = torch.cat([self._root_xy.to(torch.float32), y[SL_PZ]])
-            if self._root_filter is not None:
+            if self._root_filter is not None and self._rot_filter is not None:
                 root = self._root_filter(root)
+                R = self._rot_filter(R, seg_measured)
+                joints_rel = forward_kinematics(R, torch.zeros(3), self._offsets)
             joints = joints_rel + root
             feats = torch.where(m, f_in.to(torch.float64).reshape(N_FEATURES), y.to(torch.float64))
             frame = PoseFrame(

@@ -1,14 +1,16 @@
-"""A causal, speed-adaptive low-pass for the live root position.
+"""Causal, speed-adaptive low-passes for the live poser's outputs (root, orientations).
 
 Every 20 Hz frame of the live poser is a fresh inference, so the root's height and its
 per-frame displacement (and, without insoles, the contact-driven root correction) wobble
-by millimetres from frame to frame. Measured on HDM05 dg (6 sites, NOTES.md session 3)
-that wobble is most of the jitter ratio: with the true root path the same orientations
-score 2.05 instead of 3.64, while smoothing the orientations of the unmeasured segments
-bought only 3.64 -> 3.46 at a cost in angle error. A fixed low-pass would trade the
-wobble for lag in fast motion; the 1-Euro filter (Casiez, Roussel and Vogel, CHI 2012)
-lowers its cutoff when the signal is slow and raises it when fast, which is what a live
-viewer wants: a still body stays still and a jump is not delayed much.
+by millimetres from frame to frame, and so do the orientations no sensor measures.
+Measured on HDM05 dg (6 sites, NOTES.md session 3) the root wobble was most of the
+jitter ratio of the session-2 model (3.64; 2.05 with the true root path); the model
+trained to weight the last frame is more accurate but wobbles more in orientation too.
+A fixed low-pass would trade the wobble for lag in fast motion; the 1-Euro filter
+(Casiez, Roussel and Vogel, CHI 2012) lowers its cutoff when the signal is slow and
+raises it when fast, which is what a live viewer wants: a still body stays still and a
+jump is not delayed much. On rotations it moves along the geodesic; measured segments
+pass through untouched (their orientation is the measurement).
 """
 
 from __future__ import annotations
@@ -18,6 +20,8 @@ from dataclasses import asdict, dataclass
 
 import torch
 from torch import Tensor
+
+from .rotations import so3_exp, so3_log
 
 
 @dataclass(frozen=True)
@@ -32,9 +36,12 @@ class OneEuroConfig:
         return asdict(self)
 
 
-# the live root: 2 Hz at rest (time constant 80 ms), ~2.7 Hz at a walk (1.3 m/s);
-# chosen by a sweep on HDM05 dg (NOTES.md, session 3): jitter 3.64 -> 2.38, RE2 unchanged
+# chosen by sweeps on the HDM05 dg subset (NOTES.md, session 3). Root: 2 Hz at rest (time
+# constant 80 ms), ~2.7 Hz at a walk (1.3 m/s): jitter 3.64 -> 2.38, RE2 unchanged.
+# Unmeasured orientations: 4 Hz at rest (40 ms), beta per rad/s: jitter 3.55 -> 2.97 for
+# +0.2 deg GA with the session-3 model.
 ROOT_SMOOTHING = OneEuroConfig(min_cutoff_hz=2.0, beta=0.5)
+ROTATION_SMOOTHING = OneEuroConfig(min_cutoff_hz=4.0, beta=0.3)
 
 
 def smoothing_gain(cutoff_hz: Tensor | float, dt: float) -> Tensor:
@@ -68,3 +75,36 @@ class VectorOneEuro:
         gain = smoothing_gain(cutoff, self.dt).to(x.dtype)
         self._x = self._x + gain[..., None] * step
         return self._x.clone()
+
+
+class RotationOneEuro:
+    """1-Euro filter of rotations (S, 3, 3), one state per rotation; the speed that sets
+    each cutoff is the filtered angular rate (rad/s)."""
+
+    def __init__(self, fps: float, config: OneEuroConfig | None = None) -> None:
+        self.dt = 1.0 / float(fps)
+        self.config = config or OneEuroConfig()
+        self._rate_gain = float(smoothing_gain(self.config.rate_cutoff_hz, self.dt))
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the past: the next sample passes through and starts the state."""
+        self._R: Tensor | None = None
+        self._rate: Tensor | None = None
+
+    def __call__(self, R: Tensor, passthrough: Tensor | None = None) -> Tensor:
+        """Filtered R (S, 3, 3); ``passthrough`` (S,) bool: returned as given (and kept
+        as the state), for measured segments."""
+        if self._R is None or self._rate is None:
+            self._R = R.clone()
+            self._rate = torch.zeros(R.shape[0], dtype=R.dtype)
+            return R.clone()
+        step = so3_log(self._R.transpose(-1, -2) @ R)  # (S, 3) in each rotation's own frame
+        self._rate = self._rate + self._rate_gain * (step.norm(dim=-1) / self.dt - self._rate)
+        cutoff = self.config.min_cutoff_hz + self.config.beta * self._rate
+        gain = smoothing_gain(cutoff, self.dt).to(R.dtype)
+        out = self._R @ so3_exp(step * gain[:, None])
+        if passthrough is not None:
+            out = torch.where(passthrough[:, None, None], R, out)
+        self._R = out
+        return out.clone()

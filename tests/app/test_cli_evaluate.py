@@ -61,6 +61,13 @@ def test_json_contract_and_nulls(capsys, data_dir, tiny_models):
     assert res["re2_m"] is not None and res["re5_m"] is None and res["re10_m"] is None
     assert all(np.isfinite(res[k]) for k in ("ga_deg", "la_deg", "jpe_cm", "jitter_ratio"))
     assert [c["name"] for c in res["per_clip"]] == ["walk_a", "walk_b"]
+    assert res["smoothing"] is True
+    # the raw per-frame reconstructions: same angles up to the filter, a rougher path
+    code, out, _ = _run(capsys, "--data", str(data_dir), "--sensors", "pelvis,l_wrist,r_wrist", "--steps", "2",
+                        "--model", str(tiny_models["diffusion"]), "--json", "--no-smoothing")
+    raw = json.loads(out)
+    assert code == 0 and raw["smoothing"] is False
+    assert raw["jitter_ratio"] > res["jitter_ratio"]
 
 
 def test_floor_with_insoles_and_bvh_export(capsys, data_dir, tmp_path):

@@ -147,7 +147,7 @@ def test_root_correction_inside_the_poser():
         fr = p.step(feats, none)
     np.testing.assert_allclose(fr.root[:2], 0.0, atol=1e-6)
     assert fr.contacts.all()
-    p = Poser(lm, body, steps=[0], root_correction=False, smooth_root=False)
+    p = Poser(lm, body, steps=[0], root_correction=False, smoothing=False)
     for _ in range(5):
         fr = p.step(feats, none)
     np.testing.assert_allclose(fr.root[:2], [0.5, 0.0], atol=1e-5)

@@ -49,3 +49,30 @@ def test_reset_restarts_from_the_next_sample():
     _run(f, np.zeros((10, 2)))
     f.reset()
     np.testing.assert_allclose(f(torch.tensor([3.0, -1.0], dtype=torch.float64)).numpy(), [3.0, -1.0])
+
+
+def test_rotation_filter_smooths_unmeasured_and_passes_measured():
+    from inference.rotations import so3_exp, so3_log
+    from inference.smoothing import RotationOneEuro
+
+    rng = np.random.default_rng(1)
+    n = 200
+    base = so3_exp(torch.as_tensor(rng.normal(size=(2, 3))))
+    wobble = so3_exp(torch.as_tensor(rng.normal(scale=0.02, size=(n, 2, 3))))  # ~1 deg noise
+    Rs = base[None] @ wobble
+    f = RotationOneEuro(20.0)
+    keep = torch.tensor([False, True])
+    out = torch.stack([f(R, keep) for R in Rs])
+    torch.testing.assert_close(out[:, 1], Rs[:, 1])  # measured: untouched
+    err_in = so3_log(base[0].T @ Rs[20:, 0]).norm(dim=-1).mean()
+    err_out = so3_log(base[0].T @ out[20:, 0]).norm(dim=-1).mean()
+    assert err_out < 0.6 * err_in
+    # still valid rotations
+    eye = torch.eye(3, dtype=out.dtype).expand(n, 3, 3)
+    torch.testing.assert_close(out[:, 0].transpose(-1, -2) @ out[:, 0], eye)
+    # a steady turn is followed, not stopped: after settling it trails by a bounded angle
+    turn = so3_exp(torch.tensor([[0.0, 0.0, 0.1]], dtype=torch.float64) * torch.arange(n, dtype=torch.float64)[:, None])
+    f = RotationOneEuro(20.0)
+    out = torch.stack([f(R[None])[0] for R in turn])
+    lag = so3_log(out[-1].T @ turn[-1]).norm()
+    assert 0.0 < float(lag) < 0.15
