@@ -46,7 +46,7 @@ from torch import Tensor, nn
 
 from .body import Body, anthropometric_offsets, contact_points, forward_kinematics
 from .denoiser import ModelConfig, atomic_torch_save, build_model, save_model
-from .diffusion import Schedule, inpaint, paper_steps
+from .diffusion import Schedule, inpaint, paper_steps, parse_steps
 from .features import (
     FPS_MODEL,
     N_FEATURES,
@@ -117,6 +117,11 @@ class TrainConfig:
     # usual uniform draw, > 1 spends more of the training on the high-noise levels the
     # live step list (1000/700/400/10/0) relies on; at t ~ 0 an x0 model has little to learn
     t_power: float = 1.0
+    # diffusion only: share of training windows whose level is one of the live step list
+    # (``infer_steps``) instead of a random one. With 3 live steps (1000/400/0) the model is
+    # only ever called at three levels; a small model trained uniformly spends ~99 % of its
+    # samples elsewhere
+    t_focus: float = 0.0
     steps: int = 100_000  # total optimiser steps (also the horizon of the LR decay)
     batch: int = 64  # global batch (split over ranks)
     window: int = WINDOW
@@ -489,6 +494,21 @@ def step_seeds(seed: int, rank: int, step: int) -> tuple[np.random.Generator, to
     return rng, gen
 
 
+def training_levels(cfg: TrainConfig, batch: int, gen: torch.Generator, T: int) -> Tensor:
+    """Diffusion levels of one batch: uniform in 0..T (or biased by ``t_power``), with a
+    share ``t_focus`` replaced by levels of the live step list."""
+    if cfg.t_power == 1.0:
+        t = torch.randint(0, T + 1, (batch,), generator=gen)
+    else:
+        u = torch.rand(batch, generator=gen) ** (1.0 / cfg.t_power)
+        t = (u * (T + 1)).long().clamp(max=T)
+    if cfg.t_focus > 0:
+        levels = torch.as_tensor(parse_steps(cfg.infer_steps or "paper"), dtype=torch.long)
+        pick = levels[torch.randint(0, len(levels), (batch,), generator=gen)]
+        t = torch.where(torch.rand(batch, generator=gen) < cfg.t_focus, pick, t)
+    return t
+
+
 def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.Generator,
                gen: torch.Generator) -> tuple[Tensor, dict[str, float]]:
     """Loss of one batch for either model kind; returns (weighted total, unweighted terms)."""
@@ -505,11 +525,7 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
         x = rotate_yaw(x, torch.rand(B, generator=gen) * (2 * math.pi))
     xn = (x - ctx.mean) / ctx.std
     if cfg.kind == "diffusion":
-        if cfg.t_power == 1.0:
-            t = torch.randint(0, ctx.schedule.T + 1, (B,), generator=gen)
-        else:
-            u = torch.rand(B, generator=gen) ** (1.0 / cfg.t_power)
-            t = (u * (ctx.schedule.T + 1)).long().clamp(max=ctx.schedule.T)
+        t = training_levels(cfg, B, gen, ctx.schedule.T)
         noise = torch.randn(xn.shape, generator=gen)
         z = ctx.schedule.q_sample(xn, t, noise=noise)
         if cfg.cond_prob > 0:

@@ -255,3 +255,16 @@ def test_last_frame_terms_see_only_the_last_frame():
     pred[:, -1, :] += 0.5
     terms = motion_losses(pred, true, mean, std, offsets, contact)
     assert terms["last"] == pytest.approx(0.25) and terms["fk_last"] > 0
+
+
+def test_t_focus_draws_the_live_levels():
+    from inference.training import training_levels
+
+    gen = torch.Generator().manual_seed(0)
+    uniform = training_levels(_cfg(), 4000, gen, 1000)
+    assert uniform.min() >= 0 and uniform.max() <= 1000 and len(set(uniform.tolist())) > 900
+    focused = training_levels(_cfg(t_focus=1.0, infer_steps="1000,400,0"), 4000, gen, 1000)
+    assert set(focused.tolist()) == {1000, 400, 0}
+    half = training_levels(_cfg(t_focus=0.5, infer_steps="1000,400,0"), 4000, gen, 1000)
+    share = float(torch.isin(half, torch.tensor([1000, 400, 0])).float().mean())
+    assert 0.45 < share < 0.56
