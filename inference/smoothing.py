@@ -50,61 +50,57 @@ def smoothing_gain(cutoff_hz: Tensor | float, dt: float) -> Tensor:
     return 1.0 / (1.0 + tau / dt)
 
 
-class VectorOneEuro:
+class _OneEuro:
+    """State and gains shared by the filters: the last output and the filtered speed."""
+
+    def __init__(self, fps: float, config: OneEuroConfig | None = None) -> None:
+        self.dt = 1.0 / float(fps)
+        self.config = config or OneEuroConfig()
+        self._rate_gain = float(smoothing_gain(self.config.rate_cutoff_hz, self.dt))
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the past: the next sample passes through and starts the state."""
+        self._last: Tensor | None = None
+        self._rate: Tensor | None = None
+
+    def _gain(self, speed: Tensor) -> Tensor:
+        """Update the filtered speed with this sample's and return the smoothing gain."""
+        assert self._rate is not None
+        self._rate = self._rate + self._rate_gain * (speed - self._rate)
+        return smoothing_gain(self.config.min_cutoff_hz + self.config.beta * self._rate, self.dt)
+
+    def _start(self, x: Tensor, rows: tuple[int, ...]) -> Tensor:
+        self._last = x.clone()
+        self._rate = torch.zeros(rows, dtype=x.dtype)
+        return x.clone()
+
+
+class VectorOneEuro(_OneEuro):
     """1-Euro filter of a vector signal (..., D): each row's cutoff follows its speed."""
 
-    def __init__(self, fps: float, config: OneEuroConfig | None = None) -> None:
-        self.dt = 1.0 / float(fps)
-        self.config = config or OneEuroConfig()
-        self._rate_gain = float(smoothing_gain(self.config.rate_cutoff_hz, self.dt))
-        self.reset()
-
-    def reset(self) -> None:
-        """Forget the past: the next sample passes through and starts the state."""
-        self._x: Tensor | None = None
-        self._rate: Tensor | None = None
-
     def __call__(self, x: Tensor) -> Tensor:
-        if self._x is None or self._rate is None:
-            self._x = x.clone()
-            self._rate = torch.zeros(x.shape[:-1], dtype=x.dtype)
-            return x.clone()
-        step = x - self._x
-        self._rate = self._rate + self._rate_gain * (step.norm(dim=-1) / self.dt - self._rate)
-        cutoff = self.config.min_cutoff_hz + self.config.beta * self._rate
-        gain = smoothing_gain(cutoff, self.dt).to(x.dtype)
-        self._x = self._x + gain[..., None] * step
-        return self._x.clone()
+        if self._last is None:
+            return self._start(x, tuple(x.shape[:-1]))
+        step = x - self._last
+        gain = self._gain(step.norm(dim=-1) / self.dt).to(x.dtype)
+        self._last = self._last + gain[..., None] * step
+        return self._last.clone()
 
 
-class RotationOneEuro:
+class RotationOneEuro(_OneEuro):
     """1-Euro filter of rotations (S, 3, 3), one state per rotation; the speed that sets
     each cutoff is the filtered angular rate (rad/s)."""
-
-    def __init__(self, fps: float, config: OneEuroConfig | None = None) -> None:
-        self.dt = 1.0 / float(fps)
-        self.config = config or OneEuroConfig()
-        self._rate_gain = float(smoothing_gain(self.config.rate_cutoff_hz, self.dt))
-        self.reset()
-
-    def reset(self) -> None:
-        """Forget the past: the next sample passes through and starts the state."""
-        self._R: Tensor | None = None
-        self._rate: Tensor | None = None
 
     def __call__(self, R: Tensor, passthrough: Tensor | None = None) -> Tensor:
         """Filtered R (S, 3, 3); ``passthrough`` (S,) bool: returned as given (and kept
         as the state), for measured segments."""
-        if self._R is None or self._rate is None:
-            self._R = R.clone()
-            self._rate = torch.zeros(R.shape[0], dtype=R.dtype)
-            return R.clone()
-        step = so3_log(self._R.transpose(-1, -2) @ R)  # (S, 3) in each rotation's own frame
-        self._rate = self._rate + self._rate_gain * (step.norm(dim=-1) / self.dt - self._rate)
-        cutoff = self.config.min_cutoff_hz + self.config.beta * self._rate
-        gain = smoothing_gain(cutoff, self.dt).to(R.dtype)
-        out = self._R @ so3_exp(step * gain[:, None])
+        if self._last is None:
+            return self._start(R, (R.shape[0],))
+        step = so3_log(self._last.transpose(-1, -2) @ R)  # (S, 3) in each rotation's own frame
+        gain = self._gain(step.norm(dim=-1) / self.dt).to(R.dtype)
+        out = self._last @ so3_exp(step * gain[:, None])
         if passthrough is not None:
             out = torch.where(passthrough[:, None, None], R, out)
-        self._R = out
+        self._last = out
         return out.clone()
