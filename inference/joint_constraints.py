@@ -46,6 +46,10 @@ def rotation_about(axis: Tensor, angle: Tensor) -> Tensor:
     return eye + torch.sin(a) * k + (1.0 - torch.cos(a)) * (k @ k)
 
 
+_THIGHS = [t for t, _ in KNEES]
+_SHANKS = [s for _, s in KNEES]
+
+
 def constrain_knees(R: Tensor, measured: Tensor) -> Tensor:
     """Global orientations (..., 24, 3, 3) with each knee made a hinge about KNEE_AXIS.
 
@@ -56,14 +60,10 @@ def constrain_knees(R: Tensor, measured: Tensor) -> Tensor:
     degrees of freedom, the shank only adds flexion). Both measured: unchanged.
     """
     axis = torch.tensor(KNEE_AXIS, dtype=R.dtype)
+    Rt, Rs = R[..., _THIGHS, :, :], R[..., _SHANKS, :, :]  # (..., 2, 3, 3), both knees at once
+    hinge = rotation_about(axis, hinge_angle(Rt.transpose(-1, -2) @ Rs, axis))
+    mt, ms = measured[..., _THIGHS], measured[..., _SHANKS]
     out = R.clone()
-    for t, s in KNEES:
-        Rt, Rs = R[..., t, :, :], R[..., s, :, :]
-        theta = hinge_angle(Rt.transpose(-1, -2) @ Rs, axis)
-        hinge = rotation_about(axis, theta)
-        mt, ms = measured[..., t], measured[..., s]
-        thigh = torch.where((ms & ~mt)[..., None, None], Rs @ hinge.transpose(-1, -2), Rt)
-        shank = torch.where((~ms)[..., None, None], Rt @ hinge, Rs)
-        out[..., t, :, :] = thigh
-        out[..., s, :, :] = shank
+    out[..., _THIGHS, :, :] = torch.where((ms & ~mt)[..., None, None], Rs @ hinge.transpose(-1, -2), Rt)
+    out[..., _SHANKS, :, :] = torch.where((~ms)[..., None, None], Rt @ hinge, Rs)
     return out
