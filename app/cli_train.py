@@ -36,6 +36,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--init", type=Path, metavar="LAST_PT",
                    help="start from another run's last.pt (weights, EMA, normaliser; fresh optimiser): fine-tuning")
     p.add_argument("--steps", type=int, help="total optimiser steps (overrides the config)")
+    p.add_argument("--stop-after", type=int, metavar="N",
+                   help="end this run at total step N with a checkpoint, as an interruption would (the LR "
+                        "schedule keeps its --steps horizon)")
     p.add_argument("--model", choices=("diffusion", "regressor"), help="model kind (overrides the config)")
     p.add_argument("--seed", type=int, help="random seed (overrides the config)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -80,7 +83,8 @@ def run(args: argparse.Namespace) -> int:
         cfg.seed = args.seed
     if args.init is not None and args.resume:
         raise ValueError("--init starts a new run; --resume continues one: pass only one")
-    res = train(cfg, args.out, resume=args.resume, progress=not args.no_progress, init_from=args.init)
+    res = train(cfg, args.out, resume=args.resume, progress=not args.no_progress, init_from=args.init,
+                stop_after=args.stop_after)
     if res.checkpoint is not None and _is_main():
         summary = {"step": res.step, "loss": res.last_loss, "checkpoint": str(res.checkpoint),
                    "stopped_early": res.stopped_early}

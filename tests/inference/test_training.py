@@ -268,3 +268,21 @@ def test_t_focus_draws_the_live_levels():
     half = training_levels(_cfg(t_focus=0.5, infer_steps="1000,400,0"), 4000, gen, 1000)
     share = float(torch.isin(half, torch.tensor([1000, 400, 0])).float().mean())
     assert 0.45 < share < 0.56
+
+
+def test_cli_init_and_stop_after(tmp_path, capsys):
+    from app.cli import main
+
+    base = tmp_path / "base.json"
+    base.write_text(json.dumps(_cfg(steps=2).to_dict()))
+    assert main(["train", "--config", str(base), "--out", str(tmp_path / "a"), "--no-progress"]) == 0
+    tuned = tmp_path / "tuned.json"
+    tuned.write_text(json.dumps(_cfg(steps=4, t_focus=0.5, infer_steps="1000,400,0").to_dict()))
+    assert main(["train", "--config", str(tuned), "--out", str(tmp_path / "b"), "--init",
+                 str(tmp_path / "a" / "last.pt"), "--stop-after", "1", "--no-progress"]) == 0
+    ck = torch.load(tmp_path / "b" / "last.pt", weights_only=False)
+    assert ck["step"] == 1 and ck["train_config"]["steps"] == 4 and ck["train_config"]["t_focus"] == 0.5
+    capsys.readouterr()
+    assert main(["train", "--config", str(tuned), "--out", str(tmp_path / "b"), "--resume", "--init",
+                 str(tmp_path / "a" / "last.pt")]) != 0
+    assert "pass only one" in capsys.readouterr().err
