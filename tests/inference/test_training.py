@@ -286,3 +286,10 @@ def test_cli_init_and_stop_after(tmp_path, capsys):
     assert main(["train", "--config", str(tuned), "--out", str(tmp_path / "b"), "--resume", "--init",
                  str(tmp_path / "a" / "last.pt")]) != 0
     assert "pass only one" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("path", sorted((Path(__file__).resolve().parents[2] / "configs").glob("*.json")),
+                         ids=lambda p: p.name)
+def test_shipped_configs_parse(path):
+    cfg = TrainConfig.load(path)
+    assert cfg.kind in ("diffusion", "regressor") and cfg.steps > 0 and cfg.data.get("train")
