@@ -218,12 +218,15 @@ def test_hub_selector_survives_an_unplugged_xbus_and_forwards_events():
             assert "disconnected" in kinds and "reconnected" in kinds
             present = np.array([f.present for f in frames])
             assert present[:, 1].mean() > 0.9  # head kept flowing
-            assert present[-30:, 0].mean() > 0.9  # pelvis is back
             assert sims["pelvis"].commands.count(0x10) >= 2  # re-configured after the re-plug
             deadline = time.monotonic() + 2.0
             while hub.tracks["pelvis"].thread is not None and time.monotonic() < deadline:
                 time.sleep(0.05)
             assert hub.tracks["pelvis"].thread is None  # back on the selector
+            # and flowing again there (judged once it is back: while its reconnect thread
+            # hands it over, a loaded machine may deliver its samples in bursts)
+            present = np.array([f.present for f in hub.frames(duration=1.0)])
+            assert present[:, 0].mean() > 0.9
     finally:
         for sim in sims.values():
             sim.stop()
