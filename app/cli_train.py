@@ -50,6 +50,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--history", choices=HISTORY_MODES,
                    help="with --export: what of the history the poser tells the model is known")
     p.add_argument("--noise", choices=NOISE_MODES, help="with --export: inpainting noise per frame")
+    p.add_argument("--contact-threshold", type=float,
+                   help="with --export: predicted contact value above which the root correction counts a foot "
+                        "point as planted (default 0.5)")
     p.set_defaults(func=run)
 
 
@@ -64,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
 
             parse_steps(args.default_steps)  # reject a bad list now, not in the poser
         poser = {k: v for k, v in (("inpaint_mode", args.inpaint_mode), ("history", args.history),
-                                   ("noise", args.noise)) if v is not None}
+                                   ("noise", args.noise), ("contact_threshold", args.contact_threshold))
+                 if v is not None}
         export_model(args.out / LAST, args.export, fp16=args.fp16, default_steps=args.default_steps, poser=poser)
         print(json.dumps({"exported": str(args.export), "fp16": args.fp16}))
         return 0

@@ -72,6 +72,11 @@ HISTORY_MODES = ("reconstructed", "measured")
 # makes the output a deterministic function of the window, so it only moves when the
 # measurements do (much less jitter at the same accuracy; NOTES.md "Session 2")
 NOISE_MODES = ("fresh", "fixed")
+# a predicted contact value above this puts the foot point on the ground for the root
+# correction. A model unsure of a contact predicts something in between, and a swinging foot
+# taken as planted cancels the step; how sure a model is depends on the model, so the model
+# file may carry its own (meta "contact_threshold", `imucap train --export --contact-threshold`).
+# The shipped diffusion model carries 0.85 (NOTES.md, session 3); this is the default otherwise.
 CONTACT_THRESHOLD = 0.5
 
 
@@ -191,6 +196,7 @@ class Poser:
         noise: str | None = None,
         smoothing: bool = True,
         knee_hinge: bool = True,
+        contact_threshold: float | None = None,
     ) -> None:
         self.model = model
         self.kind = "floor" if model is None else model.kind
@@ -214,6 +220,8 @@ class Poser:
         self.history_mode = history
         self.noise_mode = noise
         self.inpaint_mode = inpaint_mode or meta.get("inpaint_mode") or "paper"
+        self.contact_threshold = float(contact_threshold if contact_threshold is not None
+                                       else meta.get("contact_threshold", CONTACT_THRESHOLD))
         self.seed = seed
         # the floor is by definition the standing pose wherever nothing is measured
         self.knee_hinge = knee_hinge and self.kind != "floor"
@@ -335,7 +343,7 @@ class Poser:
                 R = constrain_knees(R, seg_measured)
             y[SL_ROT] = torch.where(m[SL_ROT], y[SL_ROT], matrix_to_rot6d(R).reshape(-1))
             prob = y[SL_CONTACT].clamp(0.0, 1.0)
-            contact = prob > CONTACT_THRESHOLD
+            contact = prob > self.contact_threshold
             y[SL_CONTACT] = torch.where(m[SL_CONTACT], y[SL_CONTACT], contact.to(y.dtype))
 
             joints_rel = forward_kinematics(R, torch.zeros(3), self._offsets)

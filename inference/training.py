@@ -912,7 +912,8 @@ def export_model(checkpoint: str | os.PathLike, dest: str | os.PathLike, fp16: b
                  default_steps: str | None = None, poser: dict | None = None) -> None:
     """Write the EMA weights of a training checkpoint as an inference model file (what is
     shipped: fp16 halves it; denoiser.load_model casts back to float32). ``poser``: the
-    poser defaults to record with it (``inpaint_mode``, ``history``, ``noise``; see Poser),
+    poser defaults to record with it (``inpaint_mode``, ``history``, ``noise``,
+    ``contact_threshold``; see Poser),
     chosen by whoever measured them on this model."""
     ck = torch.load(checkpoint, map_location="cpu", weights_only=False)
     if ck.get("format") != CHECKPOINT_FORMAT:

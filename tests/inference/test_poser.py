@@ -39,16 +39,19 @@ class Echo(nn.Module):
     """A denoiser that returns its input: with the single clean step [0] the poser then
     holds every unobserved feature at its previous value (a perfect 'hold' prior)."""
 
-    def __init__(self, dp: tuple[float, float] | None = None, mean=None, std=None):
+    def __init__(self, dp: tuple[float, float] | None = None, mean=None, std=None, contact: float | None = None):
         super().__init__()
         self.config = ModelConfig.tiny()
         self.dp = dp
+        self.contact = contact
         self.mean, self.std = mean, std
 
     def forward(self, z, t, height):
         out = z.clone()
         if self.dp is not None:  # predict a constant root displacement (normalised units)
             out[..., SL_DP] = (torch.tensor(self.dp) - self.mean[SL_DP]) / self.std[SL_DP]
+        if self.contact is not None:  # an unsure contact value on every foot point
+            out[..., SL_CONTACT] = (self.contact - self.mean[SL_CONTACT]) / self.std[SL_CONTACT]
         return out
 
 
@@ -156,6 +159,22 @@ def test_root_correction_inside_the_poser():
     xs = [p.step(feats, none).root[0] for _ in range(40)]
     assert 0.0 < xs[4] < 0.5 and np.all(np.diff(xs) > 0)
     assert 4.0 - 0.2 < xs[-1] < 4.0
+
+
+def test_contact_threshold_decides_which_contacts_correct_the_root():
+    """Contacts predicted at 0.7: planted for a 0.5 threshold (the root holds still), not
+    for 0.85 (the model's displacement goes through)."""
+    body = Body.from_height(1.75)
+    mean, std = np.zeros(N_FEATURES, np.float32), np.ones(N_FEATURES, np.float32)
+    echo = Echo(dp=(0.1, 0.0), mean=torch.as_tensor(mean), std=torch.as_tensor(std), contact=0.7)
+    lm = LoadedModel(model=echo, kind="diffusion", config=ModelConfig.tiny(), norm_mean=mean, norm_std=std)
+    feats, none = np.zeros(N_FEATURES), np.zeros(N_FEATURES, bool)
+    for thr, moves in ((0.5, False), (0.85, True)):
+        p = Poser(lm, body, steps=[0], smoothing=False, contact_threshold=thr)
+        for _ in range(5):
+            fr = p.step(feats, none)
+        assert fr.contacts.all() != moves
+        np.testing.assert_allclose(fr.root[0], 0.5 if moves else 0.0, atol=1e-5)
 
 
 def test_floor_baseline_holds_unobserved_and_root(clip):

@@ -139,10 +139,17 @@ def test_resume_reproduces_uninterrupted_run(tmp_path, kind):
     from app.cli import main
 
     assert main(["train", "--out", str(tmp_path / "part"), "--export", str(tmp_path / "ship.pt"), "--fp16",
-                 "--default-steps", "10", "--history", "measured", "--noise", "fixed"]) == 0
+                 "--default-steps", "10", "--history", "measured", "--noise", "fixed",
+                 "--contact-threshold", "0.8"]) == 0
     shipped = load_model(tmp_path / "ship.pt")
     assert shipped.meta["default_steps"] == "10" and shipped.step == 4
     assert shipped.meta["history"] == "measured" and shipped.meta["noise"] == "fixed"
+    assert shipped.meta["contact_threshold"] == 0.8
+    from inference.poser import CONTACT_THRESHOLD, Poser
+
+    assert Poser(shipped, freeze=False).contact_threshold == 0.8
+    assert Poser(lm, freeze=False).contact_threshold == CONTACT_THRESHOLD  # a file without one: the default
+    assert Poser(shipped, freeze=False, contact_threshold=0.6).contact_threshold == 0.6
     for k, v in lm.model.state_dict().items():
         assert torch.allclose(v, shipped.model.state_dict()[k], atol=1e-2, rtol=1e-2), k
 
