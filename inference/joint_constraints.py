@@ -18,6 +18,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from .rotations import matrix_about_axis
 from .skeleton import SEGMENT_INDEX
 
 KNEE_AXIS = (0.0, 1.0, 0.0)  # in the thigh's frame (our T-pose: lateral)
@@ -36,16 +37,6 @@ def hinge_angle(local: Tensor, axis: Tensor) -> Tensor:
     return torch.atan2(s, c)
 
 
-def rotation_about(axis: Tensor, angle: Tensor) -> Tensor:
-    """(..., 3, 3) rotations by ``angle`` about one fixed unit ``axis`` (3,)."""
-    k = torch.zeros(3, 3, dtype=axis.dtype)
-    k[0, 1], k[0, 2], k[1, 2] = -axis[2], axis[1], -axis[0]
-    k = k - k.T
-    a = angle[..., None, None]
-    eye = torch.eye(3, dtype=axis.dtype)
-    return eye + torch.sin(a) * k + (1.0 - torch.cos(a)) * (k @ k)
-
-
 _THIGHS = [t for t, _ in KNEES]
 _SHANKS = [s for _, s in KNEES]
 
@@ -61,7 +52,8 @@ def constrain_knees(R: Tensor, measured: Tensor) -> Tensor:
     """
     axis = torch.tensor(KNEE_AXIS, dtype=R.dtype)
     Rt, Rs = R[..., _THIGHS, :, :], R[..., _SHANKS, :, :]  # (..., 2, 3, 3), both knees at once
-    hinge = rotation_about(axis, hinge_angle(Rt.transpose(-1, -2) @ Rs, axis))
+    theta = hinge_angle(Rt.transpose(-1, -2) @ Rs, axis)
+    hinge = matrix_about_axis(axis.expand(*theta.shape, 3), theta)
     mt, ms = measured[..., _THIGHS], measured[..., _SHANKS]
     out = R.clone()
     out[..., _THIGHS, :, :] = torch.where((ms & ~mt)[..., None, None], Rs @ hinge.transpose(-1, -2), Rt)

@@ -227,8 +227,8 @@ class Poser:
         self.knee_hinge = knee_hinge and self.kind != "floor"
         # output only: the integrated root path (and so every later frame) is unfiltered
         self.smoothing = smoothing
-        self._root_filter = VectorOneEuro(FPS_MODEL, ROOT_SMOOTHING) if smoothing else None
-        self._rot_filter = RotationOneEuro(FPS_MODEL, ROTATION_SMOOTHING) if smoothing else None
+        self._filters = ((VectorOneEuro(FPS_MODEL, ROOT_SMOOTHING), RotationOneEuro(FPS_MODEL, ROTATION_SMOOTHING))
+                         if smoothing else None)
         self.root_xy0 = (float(root_xy0[0]), float(root_xy0[1]))
         self.schedule = Schedule.cosine()
         # the live loop always calls the denoiser with one (1, N, 190) window: a frozen
@@ -271,9 +271,8 @@ class Poser:
             self._prev_cps = contact_points(R0, j0, self._contact_offsets)
             self._root_xy = torch.tensor(self.root_xy0, dtype=torch.float64)
             self._gen = torch.Generator().manual_seed(self.seed)
-        if self._root_filter is not None and self._rot_filter is not None:
-            self._root_filter.reset()
-            self._rot_filter.reset()
+        for f in self._filters or ():
+            f.reset()
         self.index = 0
 
     def _normalize(self, x: Tensor) -> Tensor:
@@ -357,9 +356,10 @@ class Poser:
 
             self._root_xy += y[SL_DP].to(torch.float64)
             root = torch.cat([self._root_xy.to(torch.float32), y[SL_PZ]])
-            if self._root_filter is not None and self._rot_filter is not None:
-                root = self._root_filter(root)
-                R = self._rot_filter(R, seg_measured)
+            if self._filters is not None:
+                root_filter, rot_filter = self._filters
+                root = root_filter(root)
+                R = rot_filter(R, seg_measured)
                 joints_rel = forward_kinematics(R, torch.zeros(3), self._offsets)
             joints = joints_rel + root
             feats = torch.where(m, f_in.to(torch.float64).reshape(N_FEATURES), y.to(torch.float64))

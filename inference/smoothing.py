@@ -16,7 +16,7 @@ pass through untouched (their orientation is the measurement).
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import torch
 from torch import Tensor
@@ -31,9 +31,6 @@ class OneEuroConfig:
     min_cutoff_hz: float = 2.0
     beta: float = 0.5
     rate_cutoff_hz: float = 1.0
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
 
 # chosen by sweeps on the HDM05 dg subset (NOTES.md, session 3). Root: 2 Hz at rest (time
