@@ -197,6 +197,35 @@ def freeze_for_cpu(model: nn.Module, batch: int = 1, window: int | None = None) 
         return torch.jit.freeze(traced)
 
 
+def deepened_state_dict(state: dict[str, Tensor], model: nn.Module) -> dict[str, Tensor]:
+    """``model``'s state with a shallower trained model of the same width in its first
+    layers and every extra layer an exact identity (the outputs of its attention and
+    feed-forward blocks zeroed, which pre-norm residual layers turn into a pass-through).
+
+    The deeper model starts with the trained one's outputs and its new layers learn from
+    there: more capacity for a fine-tune without paying for training from scratch.
+    """
+    own = model.state_dict()
+    unknown = set(state) - set(own)
+    if unknown:
+        raise ValueError(f"the trained state has parameters this model lacks: {sorted(unknown)[:3]}")
+    out = {}
+    for k, v in own.items():
+        if k in state:
+            if state[k].shape != v.shape:
+                raise ValueError(f"{k}: trained shape {tuple(state[k].shape)} != {tuple(v.shape)} (width differs)")
+            out[k] = state[k].clone()
+        elif k.startswith("decoder.layers.") and k.endswith(
+                ("self_attn.out_proj.weight", "self_attn.out_proj.bias", "multihead_attn.out_proj.weight",
+                 "multihead_attn.out_proj.bias", "linear2.weight", "linear2.bias")):
+            out[k] = torch.zeros_like(v)
+        elif k.startswith("decoder.layers."):
+            out[k] = v.clone()
+        else:
+            raise ValueError(f"{k}: missing from the trained state")
+    return out
+
+
 def count_parameters(model: nn.Module) -> int:
     return sum(p.numel() for p in model.parameters())
 

@@ -35,7 +35,7 @@ import signal
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -45,7 +45,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from .body import Body, anthropometric_offsets, contact_points, forward_kinematics
-from .denoiser import ModelConfig, atomic_torch_save, build_model, save_model
+from .denoiser import ModelConfig, atomic_torch_save, build_model, deepened_state_dict, save_model
 from .diffusion import Schedule, inpaint, paper_steps, parse_steps
 from .features import (
     FPS_MODEL,
@@ -60,7 +60,7 @@ from .features import (
 )
 from .regressor import MaskConfig, random_observation_mask
 from .rotations import axis_angle_to_matrix, matrix_angle_between, matrix_to_rot6d, rot6d_to_matrix
-from .skeleton import METRIC_EXCLUDED, N_SEGMENTS, SEGMENT_INDEX
+from .skeleton import CONTACTS, METRIC_EXCLUDED, N_SEGMENTS, SEGMENT_INDEX, SEGMENTS, SITES
 
 CHECKPOINT_FORMAT = "imucap-train-v1"
 LAST = "last.pt"
@@ -132,6 +132,9 @@ class TrainConfig:
     grad_clip: float = 1.0
     ema_decay: float = 0.999
     augment_yaw: bool = True
+    # share of training windows mirrored left <-> right (``mirror_features``): the data has
+    # few actors, each with their own handedness and habits; a mirrored actor is a new one
+    augment_mirror: float = 0.0
     seed: int = 0
     T: int = 1000
     log_every: int = 50
@@ -378,6 +381,51 @@ def rotate_yaw(x: Tensor, angle: Tensor) -> Tensor:
     return out
 
 
+def _swap_side(names: tuple[str, ...]) -> list[int]:
+    """Index of each name's left/right counterpart (itself for midline names)."""
+    flip = {"l_": "r_", "r_": "l_"}
+    return [names.index(flip[n[:2]] + n[2:]) if n[:2] in flip else i for i, n in enumerate(names)]
+
+
+def mirror_tables() -> tuple[np.ndarray, np.ndarray]:
+    """(source index, sign) per feature such that ``x[..., index] * sign`` is the frame of
+    the same motion reflected in the sagittal plane (world y -> -y, M = diag(1, -1, 1)),
+    left and right swapped.
+
+    The body's rest pose is the identity for every segment and its offsets are mirror
+    images of each other, so the mirrored orientation of a segment is M R M of its
+    counterpart: its first 6D column (R e_x) maps to M c0, the second (R e_y) to -M c1.
+    Site accelerations map to M a, dp to (x, -y); contacts swap sides.
+    """
+    idx = np.arange(N_FEATURES)
+    sign = np.ones(N_FEATURES, dtype=np.float32)
+    seg, site, con = _swap_side(SEGMENTS), _swap_side(SITES), _swap_side(CONTACTS)
+    for i, j in enumerate(seg):
+        idx[SL_ROT.start + 6 * i: SL_ROT.start + 6 * i + 6] = SL_ROT.start + 6 * j + np.arange(6)
+        sign[SL_ROT.start + 6 * i: SL_ROT.start + 6 * i + 6] = (1, -1, 1, -1, 1, -1)
+    for i, j in enumerate(site):
+        idx[SL_ACC.start + 3 * i: SL_ACC.start + 3 * i + 3] = SL_ACC.start + 3 * j + np.arange(3)
+        sign[SL_ACC.start + 3 * i: SL_ACC.start + 3 * i + 3] = (1, -1, 1)
+    sign[SL_DP.start + 1] = -1
+    for i, j in enumerate(con):
+        idx[SL_CONTACT.start + i] = SL_CONTACT.start + j
+    return idx, sign
+
+
+def mirror_features(x: Tensor) -> Tensor:
+    """Windows (..., F) of unnormalised features reflected left <-> right (see mirror_tables)."""
+    idx, sign = mirror_tables()
+    return x[..., torch.as_tensor(idx)] * torch.as_tensor(sign, dtype=x.dtype)
+
+
+def mirror_points(p: Tensor, names: tuple[str, ...]) -> Tensor:
+    """Per-name 3-vectors (..., len(names), 3) in a segment frame (bone offsets, contact
+    points) for the mirrored body: sides swapped, y negated."""
+    out = p[..., _swap_side(names), :].clone()
+    out[..., 1] = -out[..., 1]
+    return out
+
+
 # --------------------------------------------------------------------------- losses
 
 def contact_offsets_for(offsets: np.ndarray, heights: np.ndarray) -> np.ndarray:
@@ -523,6 +571,11 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
     contact_local = torch.as_tensor(contact_np, dtype=torch.float32)
     if cfg.augment_yaw:
         x = rotate_yaw(x, torch.rand(B, generator=gen) * (2 * math.pi))
+    if cfg.augment_mirror > 0:
+        flip = torch.rand(B, generator=gen) < cfg.augment_mirror
+        x = torch.where(flip[:, None, None], mirror_features(x), x)
+        offsets = torch.where(flip[:, None, None], mirror_points(offsets, SEGMENTS), offsets)
+        contact_local = torch.where(flip[:, None, None], mirror_points(contact_local, CONTACTS), contact_local)
     xn = (x - ctx.mean) / ctx.std
     if cfg.kind == "diffusion":
         t = training_levels(cfg, B, gen, ctx.schedule.T)
@@ -747,7 +800,9 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
         init = torch.load(init_from, map_location="cpu", weights_only=False)
         if init.get("format") != CHECKPOINT_FORMAT:
             raise ValueError(f"--init {init_from}: not an imucap training checkpoint (last.pt)")
-        if init["kind"] != cfg.kind or ModelConfig.from_dict(init["model_config"]) != cfg.model:
+        init_model = ModelConfig.from_dict(init["model_config"])
+        deeper = replace(init_model, layers=cfg.model.layers) == cfg.model and cfg.model.layers > init_model.layers
+        if init["kind"] != cfg.kind or (init_model != cfg.model and not (deeper and cfg.kind == "diffusion")):
             raise ValueError(f"--init {init_from}: its model ({init['kind']}, {init['model_config']}) "
                              f"differs from this config's ({cfg.kind}, {cfg.model.to_dict()})")
 
@@ -786,8 +841,10 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
         start = int(ckpt["step"])
     elif init is not None:
         # start from the averaged weights (the better model) and keep averaging from there
-        model.load_state_dict(init["ema"])
-        ema.load_state_dict(init["ema"])
+        # a deeper diffusion model takes the trained layers and starts its extra ones as identities
+        state = init["ema"] if init_model == cfg.model else deepened_state_dict(init["ema"], model)
+        model.load_state_dict(state)
+        ema.load_state_dict(state)
     net: nn.Module = model
     if d.enabled:
         from torch.nn.parallel import DistributedDataParallel as DDP

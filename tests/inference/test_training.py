@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import torch
 
-from inference.denoiser import ModelConfig, load_model
+from inference.denoiser import ModelConfig, build_model, load_model
 from inference.features import SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT
 from inference.rotations import matrix_to_rot6d, rot6d_to_matrix
 from inference.training import (
@@ -24,6 +24,8 @@ from inference.training import (
     batch_loss,
     contact_offsets_for,
     feature_stats,
+    mirror_features,
+    mirror_points,
     motion_losses,
     rotate_yaw,
     synthetic_dataset,
@@ -82,6 +84,59 @@ def test_rotate_yaw_is_a_consistent_rigid_turn():
     assert torch.allclose(y[..., SL_ACC].reshape(1, 61, 13, 3), acc @ Rz.T, atol=1e-5)
     assert torch.allclose(y[..., SL_DP], x[..., SL_DP] @ Rz[:2, :2].T, atol=1e-6)
     assert torch.equal(y[..., SL_PZ], x[..., SL_PZ]) and torch.equal(y[..., SL_CONTACT], x[..., SL_CONTACT])
+
+
+def test_mirror_features_equal_the_features_of_the_mirrored_motion():
+    """Reflect a walk physically (world y -> -y, left <-> right, on the mirrored body) and
+    derive its features from scratch: they must equal mirror_features of the original's,
+    orientations, accelerations, root motion and contacts alike."""
+    from inference.body import Body
+    from inference.evaluation import synthetic_motion
+    from inference.feature_codec import features_from_motion
+    from inference.motion import Motion
+    from inference.skeleton import SEGMENTS
+
+    m = synthetic_motion(seconds=3.0)
+    M = np.diag([1.0, -1.0, 1.0])
+    swap = [SEGMENTS.index({"l_": "r_", "r_": "l_"}.get(n[:2], n[:2]) + n[2:]) for n in SEGMENTS]
+    off = mirror_points(torch.as_tensor(m.body.offsets), SEGMENTS).numpy()
+    mm = Motion(rot=M @ m.rot[:, swap] @ M, root=m.root @ M, fps=m.fps,
+                body=Body.from_offsets(off, m.body.height), name="mirrored")
+    x = features_from_motion(m)
+    xm = features_from_motion(mm)
+    assert x[:, SL_CONTACT].std() > 0 and np.abs(x[:, SL_DP]).max() > 0  # a real walk, not a still pose
+    got = mirror_features(torch.as_tensor(x)).numpy()
+    np.testing.assert_allclose(got, xm, atol=1e-4)
+    assert not np.allclose(got, x, atol=1e-2)
+    np.testing.assert_array_equal(mirror_features(mirror_features(torch.as_tensor(x))).numpy(), x)
+
+
+def test_mirror_augmentation_mirrors_the_window_and_its_body(tmp_path):
+    """augment_mirror = 1 on a batch must score exactly what no mirroring scores on the
+    mirrored batch (features, bone offsets and heel/toe points all mirrored)."""
+    from inference.diffusion import Schedule
+    from inference.skeleton import CONTACTS, SEGMENTS
+
+    ds = synthetic_dataset(3, 70, seed=0)
+    batch = ds.sample(np.random.default_rng(0), 4, 61)
+    batch["contact_offsets"] = contact_offsets_for(batch["offsets"], batch["height"])
+    flipped = dict(batch, x=mirror_features(torch.as_tensor(batch["x"])).numpy(),
+                   offsets=mirror_points(torch.as_tensor(batch["offsets"]), SEGMENTS).numpy(),
+                   contact_offsets=mirror_points(torch.as_tensor(batch["contact_offsets"]), CONTACTS).numpy())
+    mean, std = (torch.as_tensor(a, dtype=torch.float32) for a in feature_stats(ds.clips))
+    torch.manual_seed(0)
+    model = build_model("diffusion", ModelConfig.from_dict(TINY)).eval()
+
+    def loss(b, p):
+        cfg = _cfg(augment_yaw=False, augment_mirror=p)
+        ctx = StepContext(cfg=cfg, mean=mean, std=std, schedule=Schedule.cosine())
+        return batch_loss(model, b, ctx, np.random.default_rng(1), torch.Generator().manual_seed(1))[1]
+
+    mirrored, plain = loss(batch, 1.0), loss(flipped, 1e-12)  # same draws; the second flips nothing
+    for k in mirrored:
+        assert mirrored[k] == pytest.approx(plain[k], rel=1e-4, abs=1e-7), k
+    assert loss(batch, 1e-12)["fk"] != pytest.approx(plain["fk"], rel=1e-3)
+    assert TrainConfig.from_dict(_cfg(augment_mirror=0.5).to_dict()).augment_mirror == 0.5
 
 
 def test_yaw_invariant_stats():
@@ -242,6 +297,35 @@ def test_init_from_starts_a_new_run_from_another_runs_weights(tmp_path):
     # a run of another size cannot start from these weights
     with pytest.raises(ValueError, match="differs"):
         train(_cfg(steps=1, model={**TINY, "ff": TINY["ff"] * 2}), tmp_path / "other", progress=False,
+              init_from=tmp_path / "base" / "last.pt")
+
+
+def test_deeper_model_starts_from_a_shallower_ones_outputs(tmp_path):
+    """--init into a diffusion model with more layers (same width): the trained layers are
+    copied and the extra ones start as identities, so the deeper model's outputs equal the
+    trained one's before it learns anything; the extra layers then train."""
+    from inference.denoiser import deepened_state_dict
+
+    train(_cfg(steps=2), tmp_path / "base", progress=False)
+    src = torch.load(tmp_path / "base" / "last.pt", weights_only=False)
+    shallow = build_model("diffusion", ModelConfig.from_dict(TINY)).eval()
+    shallow.load_state_dict(src["ema"])
+    deep = build_model("diffusion", ModelConfig.from_dict({**TINY, "layers": 3})).eval()
+    deep.load_state_dict(deepened_state_dict(src["ema"], deep))
+    g = torch.Generator().manual_seed(3)
+    z, t, h = torch.randn(2, 61, 190, generator=g), torch.tensor([1000, 400]), torch.tensor([1.6, 1.8])
+    with torch.no_grad():
+        assert torch.allclose(deep(z, t, h), shallow(z, t, h), atol=1e-5)
+    with torch.enable_grad():  # the nn.TransformerDecoder path, not the lean one
+        assert torch.allclose(deep(z, t, h), shallow(z, t, h), atol=1e-5)
+
+    res = train(_cfg(steps=2, model={**TINY, "layers": 3}), tmp_path / "deep", progress=False,
+                init_from=tmp_path / "base" / "last.pt")
+    assert res.step == 2
+    out = torch.load(tmp_path / "deep" / "last.pt", weights_only=False)["model"]
+    assert out["decoder.layers.2.linear2.weight"].abs().sum() > 0  # the new layer learned
+    with pytest.raises(ValueError, match="differs"):  # shallower, or another width, is refused
+        train(_cfg(steps=1, model={**TINY, "layers": 3, "d_model": 64}), tmp_path / "wide", progress=False,
               init_from=tmp_path / "base" / "last.pt")
 
 
