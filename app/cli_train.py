@@ -12,6 +12,11 @@ The config is a JSON object with the fields of ``inference.training.TrainConfig`
 With ``--resume`` and no ``--config`` the run continues with the configuration stored in
 its checkpoint. ``--export FILE`` trains nothing: it writes OUT/last.pt's EMA weights as an
 inference model file (``--fp16`` to halve it, ``--default-steps`` for the live poser).
+
+``--contact-detector`` trains the shank contact detector instead (inference/contact_detector.py)
+on the issue's training split (or ``--data PATH...``), reports its accuracy on the held-out
+sets (or ``--val PATH...``) and writes OUT/contact_detector.pt; copy that to
+inference/weights/ to ship it.
 """
 
 from __future__ import annotations
@@ -53,6 +58,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--contact-threshold", type=float,
                    help="with --export: predicted contact value above which the root correction counts a foot "
                         "point as planted (default 0.5)")
+    p.add_argument("--contact-detector", action="store_true",
+                   help="train the shank contact detector (writes OUT/contact_detector.pt)")
+    p.add_argument("--data", nargs="+", type=Path, metavar="PATH",
+                   help="with --contact-detector: motion files/folders to train on (default: the issue's split)")
+    p.add_argument("--val", nargs="+", type=Path, metavar="PATH",
+                   help="with --contact-detector: held-out motion files/folders (default: dg and the sad walks)")
     p.set_defaults(func=run)
 
 
@@ -61,6 +72,8 @@ def run(args: argparse.Namespace) -> int:
 
     from inference.training import LAST, TrainConfig, export_model, train
 
+    if args.contact_detector:
+        return run_contact_detector(args)
     if args.export is not None:
         if args.default_steps is not None:
             from inference.diffusion import parse_steps
@@ -96,6 +109,36 @@ def run(args: argparse.Namespace) -> int:
             summary.update(res.val)
         print(json.dumps(summary), file=sys.stdout)
     return 130 if res.stopped_early else 0
+
+
+def run_contact_detector(args: argparse.Namespace) -> int:
+    import torch
+
+    from inference import splits
+    from inference.contact_detector import DetectorTraining, save_detector, train_detector
+
+    torch.set_num_threads(1)
+    build = lambda paths: splits.build_files(paths, progress=not args.no_progress)  # noqa: E731
+    train_clips = build(args.data).clips if args.data else splits.train_set(progress=not args.no_progress).clips
+    val = ({"val": build(args.val).clips} if args.val else
+           {"dg": splits.val_set(progress=False).clips, "sad": build(splits.root_val_files()).clips})
+    cfg = DetectorTraining(steps=args.steps or DetectorTraining.steps, seed=args.seed or 0)
+    args.out.mkdir(parents=True, exist_ok=True)
+    with open(args.out / "train.jsonl", "a") as log:
+        def report(entry: dict) -> None:
+            log.write(json.dumps(entry) + "\n")
+            log.flush()
+            if not args.no_progress:
+                print(json.dumps(entry), file=sys.stderr)
+
+        det = train_detector(train_clips, val, cfg, progress=report)
+    final = cfg.log[-1]
+    meta = {"steps": cfg.steps, "seed": cfg.seed, "train_frames": int(sum(len(c) for c in train_clips)),
+            "data": [str(p) for p in args.data] if args.data else "inference.splits:train_set",
+            **{k: v for k, v in final.items() if k.startswith("acc_")}}
+    save_detector(args.out / "contact_detector.pt", det, meta)
+    print(json.dumps({"contact_detector": str(args.out / "contact_detector.pt"), **meta}))
+    return 0
 
 
 def _is_main() -> bool:

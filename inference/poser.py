@@ -40,6 +40,7 @@ raises a FileNotFoundError that says how to train one.
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,6 +50,7 @@ import torch
 from torch import Tensor
 
 from .body import Body, contact_points, forward_kinematics, npose_rotations, tpose
+from .contact_detector import DETECTOR_THRESHOLD, SHANK_INDEX, ContactDetector, load_detector
 from .denoiser import Denoiser, LoadedModel, freeze_for_cpu, load_model
 from .diffusion import Schedule, inpaint, paper_steps, parse_steps
 from .features import FPS_MODEL, N_FEATURES, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
@@ -63,6 +65,7 @@ DEFAULT_WEIGHTS: dict[str, Path] = {
     "diffusion": WEIGHTS_DIR / "diffusionposer.pt",
     "regressor": WEIGHTS_DIR / "regressor.pt",
 }
+CONTACT_DETECTOR_WEIGHTS = WEIGHTS_DIR / "contact_detector.pt"
 POSER_KINDS = ("diffusion", "regressor", "floor")
 # what of the history the model is told is known: all of it (the paper: measured and
 # reconstructed features), or only what was measured (reconstructions are then just the
@@ -97,6 +100,20 @@ def default_weights(kind: str = "diffusion") -> Path:
             f"or pass --model PATH.pt"
         )
     return path
+
+
+def _resolve_detector(spec: ContactDetector | str | os.PathLike | None) -> ContactDetector | None:
+    """"default" = the shipped detector if it is installed (else the model's own contacts,
+    with a warning), None = none, a path = that file."""
+    if spec is None or isinstance(spec, ContactDetector):
+        return spec
+    if os.fspath(spec) == "default":
+        if not CONTACT_DETECTOR_WEIGHTS.exists():
+            warnings.warn(f"{CONTACT_DETECTOR_WEIGHTS} is missing: root correction uses the model's contacts "
+                          "(train one with `imucap train --contact-detector --export FILE`)", stacklevel=3)
+            return None
+        spec = CONTACT_DETECTOR_WEIGHTS
+    return load_detector(spec)
 
 
 def resolve_model(spec: str | os.PathLike | LoadedModel | None = "diffusion") -> LoadedModel | None:
@@ -197,6 +214,7 @@ class Poser:
         smoothing: bool = True,
         knee_hinge: bool = True,
         contact_threshold: float | None = None,
+        contact_detector: ContactDetector | str | os.PathLike | None = "default",
     ) -> None:
         self.model = model
         self.kind = "floor" if model is None else model.kind
@@ -223,6 +241,9 @@ class Poser:
         self.contact_threshold = float(contact_threshold if contact_threshold is not None
                                        else meta.get("contact_threshold", CONTACT_THRESHOLD))
         self.seed = seed
+        # contacts from both shank sensors when they are measured (contact_detector.py):
+        # far more often right than a reconstruction model's own contact features
+        self.contact_detector = None if self.kind == "floor" else _resolve_detector(contact_detector)
         # the floor is by definition the standing pose wherever nothing is measured
         self.knee_hinge = knee_hinge and self.kind != "floor"
         # output only: the integrated root path (and so every later frame) is unfiltered
@@ -247,6 +268,7 @@ class Poser:
         self._offsets = torch.as_tensor(self.body.offsets, dtype=torch.float32)
         self._contact_offsets = torch.as_tensor(self.body.contact_offsets, dtype=torch.float32)
         self._stand = torch.as_tensor(standing_features(self.body, start_pose), dtype=torch.float32)
+        self._shank_idx = torch.as_tensor(SHANK_INDEX)
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -342,7 +364,13 @@ class Poser:
                 R = constrain_knees(R, seg_measured)
             y[SL_ROT] = torch.where(m[SL_ROT], y[SL_ROT], matrix_to_rot6d(R).reshape(-1))
             prob = y[SL_CONTACT].clamp(0.0, 1.0)
-            contact = prob > self.contact_threshold
+            threshold = self.contact_threshold
+            det = self.contact_detector
+            if det is not None and not bool(m[SL_CONTACT].any()) and bool(m[self._shank_idx].all()):
+                shank = win[0, -det.context:, self._shank_idx] * self._std[self._shank_idx] \
+                    + self._mean[self._shank_idx]
+                prob, threshold = det.probabilities(shank), DETECTOR_THRESHOLD
+            contact = prob > threshold
             y[SL_CONTACT] = torch.where(m[SL_CONTACT], y[SL_CONTACT], contact.to(y.dtype))
 
             joints_rel = forward_kinematics(R, torch.zeros(3), self._offsets)

@@ -43,6 +43,11 @@ def _build(files: list[Path], progress: bool = True) -> FeatureDataset:
     return build_dataset(files, cache_root(), finder=lambda paths: [Path(p) for p in paths], progress=progress)
 
 
+def build_files(paths, progress: bool = True) -> FeatureDataset:
+    """Feature dataset (cached) of every motion file under ``paths``."""
+    return _build(find_motion_files([Path(p) for p in paths]), progress)
+
+
 def balance_sources(ds: FeatureDataset, hdm05_share: float = HDM05_SHARE) -> FeatureDataset:
     """Rescale the clip sampling probabilities so HDM05 clips get `hdm05_share` of the draws."""
     is_hdm = np.array(["hdm05" in str(n).lower() or Path(str(n)).name.startswith("HDM_") for n in ds.names])
