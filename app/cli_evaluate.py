@@ -46,6 +46,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--smoothing", action=argparse.BooleanOptionalAction, default=True,
                    help="the poser's 1-Euro output filters (root, unmeasured orientations); --no-smoothing "
                         "scores the raw per-frame reconstructions")
+    p.add_argument("--contact-detector", action=argparse.BooleanOptionalAction, default=True,
+                   help="contacts for the root correction from the shank contact detector when both shanks are "
+                        "measured (default); --no-contact-detector uses the model's own contact outputs")
     p.add_argument("--limit", type=int, default=None, help="only the first N motion files (sorted)")
     p.add_argument("--seed", type=int, default=0, help="seed of sensor noise and inpainting noise")
     # default 1: the live loop is one small model call per step, and with more threads two
@@ -112,11 +115,13 @@ def run(args: argparse.Namespace) -> int:
         st = (steps if steps is not None else default_steps(model)) if kind == "diffusion" else []
         summary, clips = evaluate_motions(motions, model, set_sites, insoles, st or None, noise, args.seed,
                                           progress=progress, keep=keep, desc=f"{label or spec}",
-                                          smoothing=args.smoothing)
+                                          smoothing=args.smoothing,
+                                          contact_detector="default" if args.contact_detector else None)
         summary.update({
             "model": str(spec), "kind": kind, "sensors": list(set_sites),
             "insoles": insoles, "steps": _steps_label(st, kind), "step_list": st if kind == "diffusion" else None,
             "noise": bool(noise is not None), "seed": args.seed, "smoothing": args.smoothing,
+            "contact_detector": args.contact_detector and kind != "floor",
         })
         return summary, clips
 

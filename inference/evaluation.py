@@ -127,11 +127,12 @@ class ClipResult:
 
 
 def reconstruct_clip(model: LoadedModel | None, inp: ClipInput, steps=None, seed: int = 0,
-                     progress: Callable[[int], object] | None = None, smoothing: bool = True) -> Reconstruction:
+                     progress: Callable[[int], object] | None = None, smoothing: bool = True,
+                     contact_detector="default") -> Reconstruction:
     """The live poser over one clip, starting from a standing history at the clip's
     first root position (only for nicer exports: every metric is translation-free)."""
     poser = Poser(model, body=inp.body, steps=steps, seed=seed, root_xy0=(inp.root[0, 0], inp.root[0, 1]),
-                  smoothing=smoothing)
+                  smoothing=smoothing, contact_detector=contact_detector)
     return reconstruct_offline(poser, inp.features, inp.mask, progress=progress)
 
 
@@ -147,10 +148,12 @@ def evaluate_motions(
     keep: bool = False,
     desc: str = "evaluate",
     smoothing: bool = True,
+    contact_detector="default",
 ) -> tuple[dict, list[ClipResult]]:
     """Evaluate one model and sensor set over motions; returns (pooled summary, per-clip
     results). ``keep`` retains reconstructions (for exports) instead of only metrics;
-    ``smoothing=False`` scores the poser's outputs without its 1-Euro filters."""
+    ``smoothing=False`` scores the poser's outputs without its 1-Euro filters;
+    ``contact_detector`` goes to the poser (None: the model's own contacts)."""
     from tqdm import tqdm
 
     inputs = [clip_input(m, sites, insoles, noise, clip_seed(seed, m.name)) for m in motions]
@@ -160,7 +163,7 @@ def evaluate_motions(
               dynamic_ncols=True) as bar:
         for inp in inputs:
             rec = reconstruct_clip(model, inp, steps, clip_seed(seed, inp.name), progress=bar.update,
-                                   smoothing=smoothing)
+                                   smoothing=smoothing, contact_detector=contact_detector)
             cm = evaluate_clip(inp.name, rec.rot, rec.root, rec.joints, inp.rot, inp.root, inp.joints, FPS_MODEL)
             results.append(ClipResult(inp.name, cm, rec if keep else None, inp if keep else None))
     return summarize([r.metrics for r in results]), results

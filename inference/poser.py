@@ -39,6 +39,7 @@ raises a FileNotFoundError that says how to train one.
 
 from __future__ import annotations
 
+import functools
 import os
 import warnings
 from collections.abc import Sequence
@@ -110,10 +111,16 @@ def _resolve_detector(spec: ContactDetector | str | os.PathLike | None) -> Conta
     if os.fspath(spec) == "default":
         if not CONTACT_DETECTOR_WEIGHTS.exists():
             warnings.warn(f"{CONTACT_DETECTOR_WEIGHTS} is missing: root correction uses the model's contacts "
-                          "(train one with `imucap train --contact-detector --export FILE`)", stacklevel=3)
+                          "(train one with `imucap train --contact-detector --out DIR`)", stacklevel=3)
             return None
-        spec = CONTACT_DETECTOR_WEIGHTS
+        return _shipped_detector(CONTACT_DETECTOR_WEIGHTS.stat().st_mtime_ns)
     return load_detector(spec)
+
+
+@functools.lru_cache(maxsize=1)
+def _shipped_detector(mtime_ns: int) -> ContactDetector:
+    """One shared instance (it holds no state between calls); reloaded if the file changes."""
+    return load_detector(CONTACT_DETECTOR_WEIGHTS)
 
 
 def resolve_model(spec: str | os.PathLike | LoadedModel | None = "diffusion") -> LoadedModel | None:

@@ -70,6 +70,19 @@ def test_json_contract_and_nulls(capsys, data_dir, tiny_models):
     assert raw["jitter_ratio"] > res["jitter_ratio"]
 
 
+def test_contact_detector_switch(capsys, data_dir, tiny_models):
+    """With both shanks measured the shipped shank detector decides the contacts of the root
+    correction; --no-contact-detector goes back to the model's own, which moves the root path."""
+    args = ("--data", str(data_dir), "--sensors", "l_shank,r_shank", "--steps", "2",
+            "--model", str(tiny_models["diffusion"]), "--json")
+    code, out, _ = _run(capsys, *args)
+    det = json.loads(out)
+    code2, out2, _ = _run(capsys, *args, "--no-contact-detector")
+    own = json.loads(out2)
+    assert code == code2 == 0 and det["contact_detector"] is True and own["contact_detector"] is False
+    assert det["re2_m"] != own["re2_m"] and np.isfinite(det["re2_m"])
+
+
 def test_floor_with_insoles_and_bvh_export(capsys, data_dir, tmp_path):
     code, out, _ = _run(capsys, "--data", str(data_dir), "--insoles", "--model", "floor", "--limit", "1",
                         "--no-noise", "--json", "--export-dir", str(tmp_path / "bvh"))

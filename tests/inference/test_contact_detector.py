@@ -125,3 +125,12 @@ def test_heading_frame_keeps_the_shanks_relative_yaw():
     y = x.clone()
     y[:, :6] = matrix_to_rot6d(Rz @ Rl)
     assert not torch.allclose(heading_frame_inputs(y), a, atol=1e-3)
+
+
+def test_missing_shipped_detector_warns_and_keeps_the_models_contacts(monkeypatch, tmp_path):
+    from inference import poser
+
+    monkeypatch.setattr(poser, "CONTACT_DETECTOR_WEIGHTS", tmp_path / "nope.pt")
+    with pytest.warns(UserWarning, match="nope.pt is missing"):
+        assert poser._resolve_detector("default") is None
+    assert poser._resolve_detector(None) is None
