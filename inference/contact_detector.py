@@ -82,6 +82,7 @@ class ContactDetector(nn.Module):
     def __init__(self, context: int = CONTEXT, hidden: int = 128) -> None:
         super().__init__()
         self.context, self.hidden = context, hidden
+        self.meta: dict = {}  # what it was trained on and how it scored (saved with it)
         n = context * len(SHANK_INDEX)
         self.register_buffer("in_mean", torch.zeros(n))
         self.register_buffer("in_std", torch.ones(n))
