@@ -31,7 +31,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from .features import SL_ACC, SL_CONTACT, SL_ROT
-from .rotations import matrix_to_rot6d, rot6d_to_matrix
+from .rotations import matrix_about_axis, matrix_to_rot6d, rot6d_to_matrix
 from .skeleton import SEGMENT_INDEX, SITE_INDEX
 
 DETECTOR_FORMAT = "imucap-contact-detector-v1"
@@ -49,6 +49,7 @@ def shank_feature_index() -> np.ndarray:
 
 
 SHANK_INDEX = shank_feature_index()
+_UP = torch.tensor([0.0, 0.0, 1.0])
 
 
 def heading_frame_inputs(shank: Tensor) -> Tensor:
@@ -57,10 +58,7 @@ def heading_frame_inputs(shank: Tensor) -> Tensor:
     R = rot6d_to_matrix(shank[..., :12].reshape(*shank.shape[:-1], 2, 6))  # (..., 2, 3, 3)
     h = R[..., 0, :2, 0] + R[..., 1, :2, 0]
     yaw = torch.atan2(h[..., 1], h[..., 0])
-    c, s = torch.cos(yaw), torch.sin(yaw)
-    z, o = torch.zeros_like(c), torch.ones_like(c)
-    # R_z(-yaw)
-    Rz = torch.stack([torch.stack([c, s, z], -1), torch.stack([-s, c, z], -1), torch.stack([z, z, o], -1)], -2)
+    Rz = matrix_about_axis(_UP.to(shank.dtype).expand(*yaw.shape, 3), -yaw)  # R_z(-yaw)
     rot = matrix_to_rot6d(Rz[..., None, :, :] @ R).reshape(*shank.shape[:-1], 12)
     acc = (Rz[..., None, :, :] @ shank[..., 12:].reshape(*shank.shape[:-1], 2, 3, 1)).reshape(*shank.shape[:-1], 6)
     return torch.cat([rot, acc], dim=-1)

@@ -27,6 +27,7 @@ Data interface (``FeatureDataset`` in inference/dataset.py, or ``ArrayDataset`` 
 from __future__ import annotations
 
 import copy
+import functools
 import importlib
 import json
 import math
@@ -387,6 +388,7 @@ def _swap_side(names: tuple[str, ...]) -> list[int]:
     return [names.index(flip[n[:2]] + n[2:]) if n[:2] in flip else i for i, n in enumerate(names)]
 
 
+@functools.lru_cache(maxsize=1)
 def mirror_tables() -> tuple[np.ndarray, np.ndarray]:
     """(source index, sign) per feature such that ``x[..., index] * sign`` is the frame of
     the same motion reflected in the sagittal plane (world y -> -y, M = diag(1, -1, 1)),
@@ -414,8 +416,15 @@ def mirror_tables() -> tuple[np.ndarray, np.ndarray]:
 
 def mirror_features(x: Tensor) -> Tensor:
     """Windows (..., F) of unnormalised features reflected left <-> right (see mirror_tables)."""
+    idx, sign = _mirror_tensors()
+    return x[..., idx] * sign.to(x.dtype)
+
+
+@functools.lru_cache(maxsize=1)
+def _mirror_tensors() -> tuple[Tensor, Tensor]:
+    """mirror_tables as tensors, built once: the augmentation runs on every training step."""
     idx, sign = mirror_tables()
-    return x[..., torch.as_tensor(idx)] * torch.as_tensor(sign, dtype=x.dtype)
+    return torch.as_tensor(idx), torch.as_tensor(sign)
 
 
 def mirror_points(p: Tensor, names: tuple[str, ...]) -> Tensor:
