@@ -1,9 +1,12 @@
 """A pseudo-terminal that looks like a USB serial port, with a stable path.
 
 The driver opens a symlink (as udev's /dev/serial/by-id links work); unplugging
-closes the pty, plugging back in makes a new one and re-points the link, so the
-driver's reconnect sees exactly what it sees with real hardware: EIO on the old
-port, then the same path working again.
+closes the pty and removes the link (as udev removes a by-id link), plugging back
+in makes a new pty and a new link, so the driver's reconnect sees exactly what it
+sees with real hardware: EIO on the old port, no such file while unplugged, then
+the same path working again. (A link left pointing at the closed pty would be a
+trap no real port sets: the kernel hands its number to the next pty opened on the
+machine, and a reconnecting driver would open someone else's device.)
 """
 
 from __future__ import annotations
@@ -36,6 +39,11 @@ class PtyPort:
         self.master, self._slave = master, slave
 
     def close(self) -> None:
+        if self.master is not None:
+            try:
+                os.unlink(self.link_path)
+            except OSError:
+                pass
         for fd in (self.master, self._slave):
             if fd is not None:
                 try:
