@@ -29,6 +29,23 @@ SUIT = ("pelvis", "torso", "head", "l_upperarm", "r_upperarm", "l_wrist", "r_wri
         "l_shank", "r_shank", "l_foot", "r_foot")
 
 
+def _state(session) -> str:
+    """What a stalled session was doing, for the failure message (a bare timeout said
+    nothing the one time this test stalled in CI)."""
+    live, hub = session.live, session.hub
+    events = [(e.device_id, e.kind, e.detail) for e in list(hub.events)[-12:]] if hub is not None else []
+    return (f"status={session.pipeline.status!r} live_error={getattr(live, 'error', None)!r} "
+            f"running={getattr(live, 'running', None)} stats={live.stats() if live else None} "
+            f"devices={hub.status() if hub is not None else None} events={events}")
+
+
+def _wait(qtbot, session, cond, timeout: int) -> None:
+    try:
+        qtbot.waitUntil(cond, timeout=timeout)
+    except qtbot.TimeoutError as exc:
+        raise AssertionError(f"timed out after {timeout} ms: {_state(session)}") from exc
+
+
 def test_demo_window(qtbot, tmp_path):
     from app.gui.main_window import DemoWindow
 
@@ -42,10 +59,10 @@ def test_demo_window(qtbot, tmp_path):
         win.show()
         qtbot.waitExposed(win)
         # frames arrive from the pipeline thread and reach the GL items
-        qtbot.waitUntil(lambda: win.frames_shown >= 3, timeout=90_000)  # slow, shared CI machines
+        _wait(qtbot, session, lambda: win.frames_shown >= 3, 90_000)  # slow, shared CI machines
         before = np.array(win.bones.pos, copy=True)
         shown = win.frames_shown
-        qtbot.waitUntil(lambda: win.frames_shown >= shown + 5, timeout=10_000)
+        _wait(qtbot, session, lambda: win.frames_shown >= shown + 5, 10_000)
         assert not np.allclose(before, win.bones.pos)
         assert np.isfinite(win.bones.pos).all()
         qtbot.waitUntil(lambda: win.table.rowCount() == len(SUIT), timeout=5_000)
