@@ -170,6 +170,26 @@ class FeatureDataset:
             weights=clip_weights(en), names=list(nm), energy=en, skipped=list(skipped), key=key,
         )
 
+    @classmethod
+    def concat(cls, parts: Sequence[FeatureDataset]) -> FeatureDataset:
+        """One dataset of every clip of ``parts``; sampling weights are recomputed from the
+        clips' kinetic energy (rebalance afterwards if the parts need shares)."""
+        parts = [p for p in parts if p.clips]
+        if not parts:
+            raise ValueError("nothing to concatenate")
+        if any(p.energy is None for p in parts):
+            raise ValueError("every part needs its clips' kinetic energy to be concatenated")
+        return cls._assemble(
+            [c for p in parts for c in p.clips],
+            np.concatenate([p.heights for p in parts]),
+            np.concatenate([p.offsets for p in parts]),
+            np.concatenate([p.contact_offsets for p in parts]),
+            np.concatenate([p.energy for p in parts]),
+            [n for p in parts for n in p.names],
+            [s for p in parts for s in p.skipped],
+            "+".join(p.key for p in parts),
+        )
+
     def normalizer(self) -> Normalizer:
         return Normalizer.fit(self.clips)
 
@@ -243,9 +263,10 @@ class FeatureDataset:
 
 
 # --------------------------------------------------------------------------- builder
-def content_key(files: Sequence[Path]) -> str:
-    """Hash of the inputs: each file's resolved path, size and mtime, plus CODE_VERSION."""
-    h = hashlib.sha256(CODE_VERSION.encode())
+def content_key(files: Sequence[Path], variant: str = "") -> str:
+    """Hash of the inputs: each file's resolved path, size and mtime, plus CODE_VERSION and
+    ``variant`` (what the loader does beyond loading, e.g. a speed change)."""
+    h = hashlib.sha256((CODE_VERSION + ("\0" + variant if variant else "")).encode())
     for f in sorted(Path(p).resolve() for p in files):
         st = f.stat()
         h.update(f"{f}\0{st.st_size}\0{st.st_mtime_ns}\n".encode())
@@ -262,10 +283,13 @@ def build_dataset(
     loader: Callable[[Path], Motion] | None = None,
     finder: Callable[[Sequence[str | Path]], list[Path]] | None = None,
     progress: bool = True,
+    variant: str = "",
 ) -> FeatureDataset:
     """Feature dataset of every motion file under `paths`, cached under `cache_dir`.
 
-    loader/finder default to ``inference.loaders.load_motion`` / ``find_motion_files``.
+    loader/finder default to ``inference.loaders.load_motion`` / ``find_motion_files``;
+    a custom loader that changes the motions must name what it does in ``variant`` (it
+    keys the cache).
     Files that fail to load are skipped with a warning and listed in ``skipped`` (one bad
     file must not cost a night's build); the cache is reused when its key matches."""
     if loader is None or finder is None:
@@ -276,7 +300,7 @@ def build_dataset(
     files = [Path(f) for f in finder(paths)]
     if not files:
         raise FileNotFoundError(f"no motion files found under {', '.join(map(str, paths))}")
-    key = content_key(files)
+    key = content_key(files, variant)
     out = cache_path(cache_dir, key)
     if out.exists():
         try:

@@ -103,5 +103,13 @@ class Motion:
         root = np.stack([np.interp(t_new, t_old, self.root[:, k]) for k in range(3)], axis=-1)
         return replace(self, rot=quat_to_matrix(q_new), root=root, fps=float(fps))
 
+    def at_speed(self, factor: float) -> Motion:
+        """The same movement performed ``factor`` times as fast (same frames, shorter
+        duration). Training augmentation: people do a squat or a kick at their own tempo,
+        and two actors' tempi are all a model learns of that from HDM05."""
+        if not factor > 0:
+            raise ValueError(f"speed factor must be positive, got {factor}")
+        return replace(self, fps=self.fps * float(factor), meta={**self.meta, "speed": float(factor)})
+
     def slice(self, start: int, stop: int) -> Motion:
         return replace(self, rot=self.rot[start:stop], root=self.root[start:stop])

@@ -8,6 +8,7 @@ as a second validation set for the root-error figures. Everything else is traine
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -39,8 +40,15 @@ def root_val_files(root: Path | None = None) -> list[Path]:
     return [f for f in find_motion_files((root or data_root()) / "bandai" / "d1") if HELD_OUT_BANDAI_STYLE in f.name]
 
 
-def _build(files: list[Path], progress: bool = True) -> FeatureDataset:
-    return build_dataset(files, cache_root(), finder=lambda paths: [Path(p) for p in paths], progress=progress)
+def _build(files: list[Path], progress: bool = True, speed: float = 1.0) -> FeatureDataset:
+    if speed == 1.0:
+        return build_dataset(files, cache_root(), finder=lambda paths: [Path(p) for p in paths], progress=progress)
+    from .loaders import load_motion
+
+    return build_dataset(
+        files, cache_root(), loader=lambda f: load_motion(f).at_speed(speed),
+        finder=lambda paths: [Path(p) for p in paths], progress=progress, variant=f"speed={speed:g}",
+    )
 
 
 def build_files(paths, progress: bool = True) -> FeatureDataset:
@@ -48,9 +56,13 @@ def build_files(paths, progress: bool = True) -> FeatureDataset:
     return _build(find_motion_files([Path(p) for p in paths]), progress)
 
 
+def _is_hdm05(name: str) -> bool:
+    return "hdm05" in name.lower() or Path(name).name.startswith("HDM_")
+
+
 def balance_sources(ds: FeatureDataset, hdm05_share: float = HDM05_SHARE) -> FeatureDataset:
     """Rescale the clip sampling probabilities so HDM05 clips get `hdm05_share` of the draws."""
-    is_hdm = np.array(["hdm05" in str(n).lower() or Path(str(n)).name.startswith("HDM_") for n in ds.names])
+    is_hdm = np.array([_is_hdm05(str(n)) for n in ds.names])
     if is_hdm.all() or not is_hdm.any():
         return ds
     w = ds.weights.astype(np.float64).copy()
@@ -60,8 +72,25 @@ def balance_sources(ds: FeatureDataset, hdm05_share: float = HDM05_SHARE) -> Fea
     return ds
 
 
-def train_set(progress: bool = True, hdm05_share: float = HDM05_SHARE) -> FeatureDataset:
-    return balance_sources(_build(train_files(), progress), hdm05_share)
+def train_set(
+    progress: bool = True, hdm05_share: float = HDM05_SHARE, hdm05_speeds: Sequence[float] = ()
+) -> FeatureDataset:
+    """The training split. ``hdm05_speeds``: extra copies of the HDM05 clips performed at
+    these speed factors (``Motion.at_speed``). Two HDM05 actors are all the training data
+    has of squats, kicks and throws, and half of the draws go to them: a model learns their
+    tempo as part of the movement (actor bd 12.2 vs unseen dg 16.6 deg GA, NOTES.md
+    "Session 5"). Bandai (many actors and styles) is left at its own speed."""
+    files = train_files()
+    base = _build(files, progress)
+    if hdm05_speeds:
+        hdm = [f for f in files if _is_hdm05(str(f))]
+        faster = []
+        for s in hdm05_speeds:
+            part = _build(hdm, progress, float(s))
+            part.names = [f"{n}@x{float(s):g}" for n in part.names]  # a clip and its copies stay apart
+            faster.append(part)
+        base = FeatureDataset.concat([base, *faster])
+    return balance_sources(base, hdm05_share)
 
 
 def val_set(progress: bool = True) -> FeatureDataset:

@@ -127,33 +127,14 @@ def world_map(up: np.ndarray) -> np.ndarray:
     return W
 
 
-def retarget(
-    src: SourceSkeleton,
-    jmap: JointMap,
-    scale: float,
-    W: np.ndarray,
-    name: str = "",
-    source: str = "",
-    meta: dict | None = None,
-) -> Motion:
-    """Our Motion from a source animation (see the module docstring for the method)."""
-    J = len(src.names)
-    ours_to_src: dict[int, int] = {SEGMENT_INDEX[s]: src.index(n) for s, n in jmap.segments.items()}
-    src_to_ours = {j: i for i, j in ours_to_src.items()}
-    # our main-child mapping expressed on source joints: bone direction of source joint j
-    # is towards the source joint that drives our segment's main child
-    src_child: dict[int, list[int]] = {}
-    for i, j in ours_to_src.items():
-        chain = []
-        c = MAIN_CHILD.get(i)
-        while c is not None:
-            if c in ours_to_src:
-                chain.append(ours_to_src[c])
-            c = MAIN_CHILD.get(c)
-        src_child[j] = chain
-
+def tpose_rotations(
+    src: SourceSkeleton, jmap: JointMap, W: np.ndarray, ours_to_src: dict[int, int], src_child: dict[int, list[int]]
+) -> np.ndarray:
+    """Step 1: each source joint's global rotation Q_j in the source's T-pose, from the
+    zero-pose geometry of ``src`` (its rest and end sites; no animation is used)."""
     Wt = W.T
-    # step 1: source T-pose global rotations
+    J = len(src.names)
+    src_to_ours = {j: i for i, j in ours_to_src.items()}
     Q = np.zeros((J, 3, 3))
     pelvis = ours_to_src[0]
     up0 = _source_direction(src, pelvis, src_child[pelvis])
@@ -180,6 +161,43 @@ def retarget(
         if k % 4:
             # the rig rolls this joint's axes by k quarter turns about the bone (JointMap)
             Q[j] = quat_to_matrix(quat_about_axis(target, k * np.pi / 2)) @ Q[j]
+
+    return Q
+
+
+def retarget(
+    src: SourceSkeleton,
+    jmap: JointMap,
+    scale: float,
+    W: np.ndarray,
+    name: str = "",
+    source: str = "",
+    meta: dict | None = None,
+    template: SourceSkeleton | None = None,
+) -> Motion:
+    """Our Motion from a source animation (see the module docstring for the method).
+
+    ``template``: another skeleton of the same rig whose zero pose defines the T-pose
+    rotations (step 1) instead of this one's (see ``tpose_rotations``)."""
+    J = len(src.names)
+    ours_to_src: dict[int, int] = {SEGMENT_INDEX[s]: src.index(n) for s, n in jmap.segments.items()}
+    # our main-child mapping expressed on source joints: bone direction of source joint j
+    # is towards the source joint that drives our segment's main child
+    src_child: dict[int, list[int]] = {}
+    for i, j in ours_to_src.items():
+        chain = []
+        c = MAIN_CHILD.get(i)
+        while c is not None:
+            if c in ours_to_src:
+                chain.append(ours_to_src[c])
+            c = MAIN_CHILD.get(c)
+        src_child[j] = chain
+
+    Wt = W.T
+    if template is not None and (template.names != src.names or template.parents != src.parents):
+        raise ValueError("a retargeting template must be a skeleton of the same rig (same joints)")
+    Q = tpose_rotations(template or src, jmap, W, ours_to_src, src_child)
+    pelvis = ours_to_src[0]
 
     # source T-pose joint positions (FK with Q), root at the origin
     P = np.zeros((J, 3))

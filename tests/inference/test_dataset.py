@@ -149,3 +149,51 @@ def test_build_dataset_caches_by_content(tmp_path: Path):
     np.savez(paths[0], speed=3.0)
     ds3 = build_dataset([data], cache, loader=loader, finder=finder, progress=False)
     assert ds3.key != ds.key and len(calls) == 6
+
+
+def test_build_dataset_variant_keys_its_own_cache(tmp_path: Path):
+    """A loader that changes the motions (here: faster) must not hit the plain cache."""
+    data = tmp_path / "data"
+    _write_clips(data, 2)
+
+    def finder(ps):
+        return sorted(Path(ps[0]).glob("*.npz"))
+
+    cache = tmp_path / "cache"
+    plain = build_dataset([data], cache, loader=lambda p: moving_motion(T=200), finder=finder, progress=False)
+    fast = build_dataset([data], cache, loader=lambda p: moving_motion(T=200).at_speed(1.25), finder=finder,
+                         progress=False, variant="speed=1.25")
+    assert fast.key != plain.key and len(list(cache.glob("*.npz"))) == 2
+    # the same frames played faster: fewer 20 Hz frames, and the root covers its path sooner
+    assert fast.clips[0].shape[0] < plain.clips[0].shape[0]
+
+
+def test_motion_at_speed_is_the_same_path_in_less_time():
+    m = moving_motion(T=241, fps=60.0)
+    f = m.at_speed(1.5)
+    assert f.fps == 90.0 and f.duration == pytest.approx(m.duration / 1.5) and f.meta["speed"] == 1.5
+    r = f.resample(60.0)  # what the dataset builder does first
+    # frame k of the faster motion is the original at time 1.5 k / 60
+    np.testing.assert_allclose(r.root[40], m.root[60], atol=1e-9)
+    np.testing.assert_allclose(r.rot[100], m.rot[150], atol=1e-9)
+    # velocities scale with the speed, accelerations with its square
+    v0 = np.diff(m.root[:, 0]).mean() * m.fps
+    v1 = np.diff(r.root[:, 0]).mean() * r.fps
+    assert v1 == pytest.approx(1.5 * v0, rel=1e-6)
+    with pytest.raises(ValueError):
+        m.at_speed(0.0)
+
+
+def test_concat_keeps_every_clip_and_reweights():
+    a = FeatureDataset.from_motions([moving_motion(T=200, speed=0.5), still_motion()], names=["a0", "a1"])
+    b = FeatureDataset.from_motions([moving_motion(T=150, speed=2.0)], names=["b0"])
+    c = FeatureDataset.concat([a, b])
+    assert c.names == ["a0", "a1", "b0"] and len(c) == 3 and c.n_frames == a.n_frames + b.n_frames
+    np.testing.assert_array_equal(c.clips[2], b.clips[0])
+    np.testing.assert_allclose(c.offsets[2], b.offsets[0])
+    assert c.weights.sum() == pytest.approx(1.0)
+    # kinetic-energy weights over the whole set: the fast clip outweighs the still one
+    assert c.weights[2] > c.weights[1]
+    b.energy = None
+    with pytest.raises(ValueError):
+        FeatureDataset.concat([a, b])
