@@ -809,7 +809,8 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
         init = torch.load(init_from, map_location="cpu", weights_only=False)
         if init.get("format") != CHECKPOINT_FORMAT:
             raise ValueError(f"--init {init_from}: not an imucap training checkpoint (last.pt)")
-        init_model = ModelConfig.from_dict(init["model_config"])
+        # dropout is training behaviour, not architecture: a fine-tune may switch it
+        init_model = replace(ModelConfig.from_dict(init["model_config"]), dropout=cfg.model.dropout)
         deeper = replace(init_model, layers=cfg.model.layers) == cfg.model and cfg.model.layers > init_model.layers
         if init["kind"] != cfg.kind or (init_model != cfg.model and not (deeper and cfg.kind == "diffusion")):
             raise ValueError(f"--init {init_from}: its model ({init['kind']}, {init['model_config']}) "

@@ -294,6 +294,14 @@ def test_init_from_starts_a_new_run_from_another_runs_weights(tmp_path):
     assert out["train_config"]["mask"]["p_history_known"] == 0.0
     start = json.loads((tmp_path / "tuned" / "train.jsonl").read_text().splitlines()[0])
     assert start["init_from"].endswith("last.pt")
+    # dropout may be switched on for a fine-tune (same weights, other training behaviour)
+    drop = train(_cfg(steps=1, lr=0.0, lr_min=0.0, model={**TINY, "dropout": 0.0}), tmp_path / "drop", progress=False,
+                 init_from=tmp_path / "base" / "last.pt")
+    assert drop.step == 1
+    out = torch.load(tmp_path / "drop" / "last.pt", weights_only=False)
+    assert out["train_config"]["model"]["dropout"] == 0.0
+    for k, v in src["ema"].items():
+        assert torch.allclose(out["model"][k], v), k
     # a run of another size cannot start from these weights
     with pytest.raises(ValueError, match="differs"):
         train(_cfg(steps=1, model={**TINY, "ff": TINY["ff"] * 2}), tmp_path / "other", progress=False,
