@@ -80,7 +80,8 @@ NOISE_MODES = ("fresh", "fixed")
 # correction. A model unsure of a contact predicts something in between, and a swinging foot
 # taken as planted cancels the step; how sure a model is depends on the model, so the model
 # file may carry its own (meta "contact_threshold", `imucap train --export --contact-threshold`).
-# The shipped diffusion model carries 0.85 (NOTES.md, session 3); this is the default otherwise.
+# The shipped diffusion model carries 0.3 (NOTES.md, session 5: swept where the shank contact
+# detector does not apply); this is the default otherwise.
 CONTACT_THRESHOLD = 0.5
 
 
