@@ -76,10 +76,11 @@ def train_set(
     progress: bool = True, hdm05_share: float = HDM05_SHARE, hdm05_speeds: Sequence[float] = ()
 ) -> FeatureDataset:
     """The training split. ``hdm05_speeds``: extra copies of the HDM05 clips performed at
-    these speed factors (``Motion.at_speed``). Two HDM05 actors are all the training data
-    has of squats, kicks and throws, and half of the draws go to them: a model learns their
-    tempo as part of the movement (actor bd 12.2 vs unseen dg 16.6 deg GA, NOTES.md
-    "Session 5"). Bandai (many actors and styles) is left at its own speed."""
+    these speed factors (``Motion.at_speed``), sharing the HDM05 half of the draws. Two
+    HDM05 actors are all the training data has of squats, kicks and throws, so their tempo
+    could be learnt as part of the movement; tried in session 5 against the unseen actor,
+    it came out level with a control run (NOTES.md), so the shipped model does not use it.
+    Bandai (many actors and styles) is left at its own speed."""
     files = train_files()
     base = _build(files, progress)
     if hdm05_speeds:

@@ -303,3 +303,34 @@ def test_cmu_31_joint_bvh(tmp_path):
     assert ang[SEGMENT_INDEX["l_thigh"]] == pytest.approx(np.degrees(np.arctan2(2.5, 6.9)), abs=0.01)
     travel = m.root[-1] - m.root[0]
     assert m.rot[0, 0, :, 0] @ travel / np.linalg.norm(travel) > 0.99
+
+
+def test_retarget_template_maps_equal_joint_angles_to_equal_orientations(tmp_path):
+    """Two actors of one rig whose fitted clavicles point differently: retargeted each with its
+    own zero pose, the same joint angles give different collar (and arm) orientations; with a
+    shared template they give the same ones, and a skeleton's own template changes nothing."""
+    from dataclasses import replace
+
+    from inference.loaders.asf_amc import parse_amc, parse_asf, to_source_skeleton
+    from inference.loaders.joint_maps import ASF
+    from inference.loaders.retarget import retarget, world_map
+
+    p = _write_asf_amc(tmp_path)
+    asf_a = parse_asf(tmp_path / "HDM_zz.asf")
+    amc = parse_amc(p, asf_a)
+    asf_b = parse_asf(tmp_path / "HDM_zz.asf")
+    asf_b.bones["lclavicle"] = replace(asf_b.bones["lclavicle"], direction=np.array([1.0, 0.6, -0.2]))
+    a, b = to_source_skeleton(asf_a, amc, 120.0), to_source_skeleton(asf_b, amc, 120.0)
+    W = world_map(np.array([0.0, 1.0, 0.0]))
+    collar, arm = SEGMENT_INDEX["l_collar"], SEGMENT_INDEX["l_upperarm"]
+
+    own_a, own_b = retarget(a, ASF, asf_a.scale, W), retarget(b, ASF, asf_b.scale, W)
+    assert np.rad2deg(matrix_angle_between(own_a.rot[:, collar], own_b.rot[:, collar])).min() > 10.0
+    shared_b = retarget(b, ASF, asf_b.scale, W, template=a)
+    np.testing.assert_allclose(shared_b.rot, own_a.rot, atol=1e-9)
+    # the body keeps b's own geometry: its clavicle still points its own way
+    assert not np.allclose(shared_b.body.offsets[arm], own_a.body.offsets[arm])
+    np.testing.assert_allclose(retarget(a, ASF, asf_a.scale, W, template=a).rot, own_a.rot, atol=1e-12)
+    other_rig = replace(a, names=[*a.names[:-1], "elsewhere"])
+    with pytest.raises(ValueError, match="same rig"):
+        retarget(b, ASF, asf_b.scale, W, template=other_rig)
