@@ -31,7 +31,7 @@ SUIT = ("pelvis", "torso", "head", "l_upperarm", "r_upperarm", "l_wrist", "r_wri
 
 def _state(session) -> str:
     """What a stalled session was doing, for the failure message (a bare timeout said
-    nothing the one time this test stalled in CI)."""
+    nothing the time this test stalled in a full run under load)."""
     live, hub = session.live, session.hub
     events = [(e.device_id, e.kind, e.detail) for e in list(hub.events)[-12:]] if hub is not None else []
     return (f"status={session.pipeline.status!r} live_error={getattr(live, 'error', None)!r} "
