@@ -30,7 +30,10 @@ def test_suit_through_hub_mixed_protocols():
     assert frames[0].sites == ("pelvis", "l_wrist", "r_wrist", "head", "l_foot")
     late = frames[len(frames) // 2 :]
     present = np.array([f.present for f in late])
-    assert present.mean(axis=0).min() > 0.9, present.mean(axis=0)
+    # (seen once in a full CI-like run: one pty site absent all through; the message says what its track saw)
+    why = {n: (tr.clock.offset, tr.device.stats.as_dict(), [e.kind for e in tr.device.events])
+           for n, tr in hub.tracks.items()}
+    assert present.mean(axis=0).min() > 0.9, (present.mean(axis=0), why)
     assert np.mean([f.insole_present for f in late]) > 0.9
     # every device ran its own clock (offsets of 100 s and more); the hub mapped them all onto one
     for tr in hub.tracks.values():
