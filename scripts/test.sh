@@ -14,4 +14,4 @@ if ! command -v xvfb-run >/dev/null; then
     libxcb-shape0 libxcb-xkb1 libdbus-1-3 libfontconfig1 >/dev/null
 fi
 .venv/bin/ruff check .
-exec xvfb-run -a -s "-screen 0 1280x1024x24" .venv/bin/python -m pytest -n 2 -q "$@"
+exec xvfb-run -a -s "-screen 0 1280x1024x24" .venv/bin/python -m pytest -n 2 --dist loadgroup -q "$@"

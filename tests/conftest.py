@@ -31,3 +31,18 @@ def _one_torch_thread():
     if torch is not None:
         torch.set_num_threads(1)
     yield
+
+
+# Tests that need the machine to keep up in real time (simulated devices streaming through
+# the drivers and the hub, the live demo) and the tests that load or train on the whole real
+# dataset (minutes of full CPU, more in a fresh clone that has no dataset cache) share one
+# xdist group, so under `--dist loadgroup` they run one after another on one worker instead
+# of starving each other: a suit test lost a device's samples for whole seconds while the
+# other worker built a dataset (session 5).
+REALTIME_MODULES = {"test_suit.py", "test_batched.py", "test_end_to_end.py", "test_gui.py", "test_cli_demo.py"}
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.get_closest_marker("data") is not None or item.path.name in REALTIME_MODULES:
+            item.add_marker(pytest.mark.xdist_group("realtime_or_heavy"))
