@@ -41,14 +41,20 @@ def root_val_files(root: Path | None = None) -> list[Path]:
 
 
 def _build(files: list[Path], progress: bool = True, speed: float = 1.0) -> FeatureDataset:
-    if speed == 1.0:
-        return build_dataset(files, cache_root(), finder=lambda paths: [Path(p) for p in paths], progress=progress)
-    from .loaders import load_motion
+    """The cached feature dataset of ``files``, performed at ``speed`` (copies at another
+    speed get their own cache and names ``<file>@x<speed>``, so a clip and its copies stay apart)."""
+    loader = None
+    if speed != 1.0:
+        from .loaders import load_motion
 
-    return build_dataset(
-        files, cache_root(), loader=lambda f: load_motion(f).at_speed(speed),
-        finder=lambda paths: [Path(p) for p in paths], progress=progress, variant=f"speed={speed:g}",
-    )
+        def loader(f: Path):
+            return load_motion(f).at_speed(speed)
+
+    ds = build_dataset(files, cache_root(), loader=loader, finder=lambda paths: [Path(p) for p in paths],
+                       progress=progress, variant="" if speed == 1.0 else f"speed={speed:g}")
+    if speed != 1.0:
+        ds.names = [f"{n}@x{speed:g}" for n in ds.names]
+    return ds
 
 
 def build_files(paths, progress: bool = True) -> FeatureDataset:
@@ -85,12 +91,7 @@ def train_set(
     base = _build(files, progress)
     if hdm05_speeds:
         hdm = [f for f in files if _is_hdm05(str(f))]
-        faster = []
-        for s in hdm05_speeds:
-            part = _build(hdm, progress, float(s))
-            part.names = [f"{n}@x{float(s):g}" for n in part.names]  # a clip and its copies stay apart
-            faster.append(part)
-        base = FeatureDataset.concat([base, *faster])
+        base = FeatureDataset.concat([base, *(_build(hdm, progress, float(s)) for s in hdm05_speeds)])
     return balance_sources(base, hdm05_share)
 
 
