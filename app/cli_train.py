@@ -29,7 +29,7 @@ from pathlib import Path
 # choices only (cheap modules; the heavy imports stay in run())
 INPAINT_MODES = ("paper", "replace", "ddim", "replace-ddim")
 HISTORY_MODES = ("reconstructed", "measured")
-NOISE_MODES = ("fresh", "fixed")
+NOISE_MODES = ("fresh", "fixed", "mean")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -218,11 +218,12 @@ def ddim_step(schedule: Schedule, z: Tensor, x0: Tensor, t: int, s: int, eta: fl
 
 
 INPAINT_MODES = ("paper", "replace", "ddim", "replace-ddim")
+INPAINT_STARTS = ("sample", "mean")
 
 
 def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequence[int],
             generator: torch.Generator | None = None, schedule: Schedule | None = None,
-            mode: str = "paper", mask_input: bool | None = None) -> Tensor:
+            mode: str = "paper", mask_input: bool | None = None, start: str = "sample") -> Tensor:
     """Inpaint the unobserved features of a window (the paper's Algorithm 1).
 
     x_input: (B, N, F) normalised features; unobserved entries hold an initial guess (the
@@ -245,6 +246,14 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
     deterministic DDIM updates of the unknown entries (no fresh noise per step), so the
     frame-to-frame randomness of the live output is one draw instead of one per step.
 
+    ``start="mean"``: the first level sees the prior's mean (zeros: no noise) in the unknown
+    entries instead of a draw. With a high first level (t0 = T) the first call then gives
+    the model's estimate of the *mean* unknown features given the known ones, where a drawn
+    start gives one sample whose error about the truth is larger wherever the measurements
+    leave the pose open (arms with only the shanks worn: HDM05 dg, 2 sites, GA 35.5 -> 31.0
+    deg; 6 sites 16.6 -> 15.7; NOTES.md "Session 6"). With the DDIM modes the whole run is then
+    deterministic and draws nothing.
+
     ``mask_input``: hand the model the mask too (default: ``wants_mask(model)``; pass it
     for a traced model, which has no config).
 
@@ -252,6 +261,14 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
     """
     schedule = schedule or Schedule.cosine()
     validate_steps(steps, schedule.T)
+    if start not in INPAINT_STARTS:
+        raise ValueError(f"unknown inpainting start {start!r} ({', '.join(INPAINT_STARTS)})")
+
+    def draw(first: bool) -> Tensor:
+        if first and start == "mean":
+            return torch.zeros(x.shape, dtype=x.dtype)
+        return torch.randn(x.shape, generator=generator, dtype=x.dtype)
+
     with torch.inference_mode():
         x_input = x_input.float()
         m = mask.to(dtype=torch.bool, device=x_input.device)
@@ -259,12 +276,11 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
         mk = m if (wants_mask(model) if mask_input is None else mask_input) else None
         x = x_input
         if mode in ("paper", "replace"):
-            for t in steps:
+            for i, t in enumerate(steps):
                 if t == 0:
                     z = x
                 else:
-                    noise = torch.randn(x.shape, generator=generator, dtype=x.dtype)
-                    z = schedule.sqrt_ab(t) * x + schedule.sqrt_1mab(t) * noise
+                    z = schedule.sqrt_ab(t) * x + schedule.sqrt_1mab(t) * draw(i == 0)
                     if mode == "replace":
                         z = torch.where(m, x_input, z)
                 x0 = _call(model, z, t, height, mk)
@@ -272,8 +288,7 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
             return x
         if mode == "ddim":
             t0 = steps[0]
-            noise = torch.randn(x.shape, generator=generator, dtype=x.dtype)
-            z = schedule.sqrt_ab(t0) * x + schedule.sqrt_1mab(t0) * noise
+            z = schedule.sqrt_ab(t0) * x + schedule.sqrt_1mab(t0) * draw(True)
             for i, t in enumerate(steps):
                 x0 = _call(model, z, t, height, mk)
                 x = torch.where(m, x_input, x0)
@@ -286,8 +301,7 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
             return x
         if mode == "replace-ddim":
             t0 = steps[0]
-            noise = torch.randn(x.shape, generator=generator, dtype=x.dtype)
-            z = torch.where(m, x_input, schedule.sqrt_ab(t0) * x + schedule.sqrt_1mab(t0) * noise)
+            z = torch.where(m, x_input, schedule.sqrt_ab(t0) * x + schedule.sqrt_1mab(t0) * draw(True))
             for i, t in enumerate(steps):
                 x = torch.where(m, x_input, _call(model, z, t, height, mk))
                 if i + 1 == len(steps):
@@ -301,4 +315,5 @@ __all__ = [
     "T_DEFAULT", "PAPER_STEPS_10D", "Schedule", "cosine_alpha_bar", "paper_steps", "paper_like_steps",
     "even_steps",
     "parse_steps", "validate_steps", "sample", "ddim_step", "inpaint", "wants_mask", "INPAINT_MODES",
+    "INPAINT_STARTS",
 ]

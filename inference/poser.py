@@ -74,8 +74,11 @@ POSER_KINDS = ("diffusion", "regressor", "floor")
 HISTORY_MODES = ("reconstructed", "measured")
 # inpainting noise: a fresh draw every frame (the paper), or the same draw every frame, which
 # makes the output a deterministic function of the window, so it only moves when the
-# measurements do (much less jitter at the same accuracy; NOTES.md "Session 2")
-NOISE_MODES = ("fresh", "fixed")
+# measurements do (much less jitter at the same accuracy; NOTES.md "Session 2"), or no draw
+# at all: the first level starts from the prior's mean (``inpaint(start="mean")``), which
+# estimates the mean pose given the measurements instead of sampling one (NOTES.md
+# "Session 6": the largest gain where few sensors leave the pose open)
+NOISE_MODES = ("fresh", "fixed", "mean")
 # a predicted contact value above this puts the foot point on the ground for the root
 # correction. A model unsure of a contact predicts something in between, and a swinging foot
 # taken as planted cancels the step; how sure a model is depends on the model, so the model
@@ -334,7 +337,8 @@ class Poser:
                 self._gen.manual_seed(self.seed)
             return inpaint(self._net, win, mask, self._height, self.steps, generator=self._gen,
                            schedule=self.schedule, mode=self.inpaint_mode,
-                           mask_input=self.model.config.mask_input)
+                           mask_input=self.model.config.mask_input,
+                           start="mean" if self.noise_mode == "mean" else "sample")
         if self.kind == "regressor":
             return regress(self._net, win, mask, self._height)
         return torch.where(mask, win, self._stand_win)

@@ -123,6 +123,11 @@ class TrainConfig:
     # only ever called at three levels; a small model trained uniformly spends ~99 % of its
     # samples elsewhere
     t_focus: float = 0.0
+    # diffusion only: share of the windows drawn at the top level T whose noised entries hold
+    # zeros (the prior's mean) instead of a draw: what a poser with noise "mean" feeds the
+    # model at its first call (``inpaint(start="mean")``). 1 = the top level is trained only
+    # that way, so its answer becomes the mean estimate of the unknown features
+    mean_start: float = 0.0
     steps: int = 100_000  # total optimiser steps (also the horizon of the LR decay)
     batch: int = 64  # global batch (split over ranks)
     window: int = WINDOW
@@ -589,6 +594,9 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
     if cfg.kind == "diffusion":
         t = training_levels(cfg, B, gen, ctx.schedule.T)
         noise = torch.randn(xn.shape, generator=gen)
+        if cfg.mean_start > 0:
+            top = (t == ctx.schedule.T) & (torch.rand(B, generator=gen) < cfg.mean_start)
+            noise = torch.where(top[:, None, None], torch.zeros(()), noise)
         z = ctx.schedule.q_sample(xn, t, noise=noise)
         if cfg.cond_prob > 0:
             # conditioning by replacement: known entries clean in z (and exact in the
@@ -636,7 +644,7 @@ def validate(model: nn.Module, val_set: Dataset, ctx: StepContext) -> dict[str, 
         x_in[:, -1] = torch.where(obs, xn[:, -1], xn[:, -2])
         if cfg.kind == "diffusion":
             out = inpaint(model, x_in, mask, h, paper_steps(), generator=gen, schedule=ctx.schedule,
-                          mode=inpaint_mode_for(cfg))
+                          mode=inpaint_mode_for(cfg), start="mean" if cfg.mean_start > 0 else "sample")
         else:
             out = torch.where(mask, x_in, model(x_in, mask, h))
         pred = out[:, -1] * ctx.std + ctx.mean

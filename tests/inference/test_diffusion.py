@@ -142,6 +142,37 @@ def test_replace_mode_shows_the_model_clean_measurements(mode):
             assert not torch.equal(z[~mask], torch.zeros_like(z[~mask]))  # unknowns are re-noised
 
 
+@pytest.mark.parametrize("mode", ["paper", "replace", "ddim", "replace-ddim"])
+def test_mean_start_shows_the_first_level_no_noise(mode):
+    """start="mean": the first call sees sqrt(ab_T) x in the unknown entries (the prior's mean
+    around the current guess, no draw); later levels of the re-noising modes still draw."""
+    x, mask = _window()
+    sched = Schedule.cosine()
+    rec = Recorder()
+    gen = torch.Generator().manual_seed(0)
+    inpaint(rec, x, mask, torch.ones(2), [1000, 400, 0], generator=gen, mode=mode, start="mean")
+    t0, z0 = rec.seen[0]
+    assert t0 == 1000
+    assert torch.allclose(z0[~mask], sched.sqrt_ab(1000) * x[~mask])
+    t1, z1 = rec.seen[1]
+    renoised = mode in ("paper", "replace")
+    assert (not torch.allclose(z1[~mask], torch.zeros(()).expand_as(z1[~mask]), atol=1e-3)) == renoised, mode
+    # a drawn start differs from the mean start at the first level
+    rec2 = Recorder()
+    inpaint(rec2, x, mask, torch.ones(2), [1000, 400, 0], generator=torch.Generator().manual_seed(0), mode=mode)
+    assert not torch.allclose(rec2.seen[0][1][~mask], z0[~mask])
+    with pytest.raises(ValueError, match="inpainting start"):
+        inpaint(rec, x, mask, torch.ones(2), [1000, 0], mode=mode, start="median")
+
+
+def test_mean_start_ddim_is_deterministic_without_a_generator():
+    x, mask = _window()
+    a = inpaint(Mean(), x, mask, torch.ones(2), [1000, 400, 0], mode="replace-ddim", start="mean")
+    torch.manual_seed(123)
+    b = inpaint(Mean(), x, mask, torch.ones(2), [1000, 400, 0], mode="replace-ddim", start="mean")
+    assert torch.equal(a, b)
+
+
 def test_inpaint_reproducible_with_generator_and_inference_mode():
     x, mask = _window()
     a = inpaint(Mean(), x, mask, torch.ones(2), even_steps(5), generator=torch.Generator().manual_seed(3))

@@ -258,6 +258,31 @@ def test_history_mode_decides_what_the_model_is_told_is_known(history):
         Poser(lm, history="guessed")
 
 
+def test_noise_mode_mean_draws_nothing_and_does_not_depend_on_the_seed():
+    """noise "mean" with the DDIM replacement mode: the first level starts from the prior's
+    mean, so the output is a function of the measurements alone: the generator is never
+    used and posers with different seeds agree exactly; a drawn start does depend on it."""
+    lm = _loaded("diffusion")
+    lm.meta = {"noise": "mean", "history": "measured", "inpaint_mode": "replace-ddim"}
+    rng = np.random.default_rng(4)
+    frames = [rng.normal(size=N_FEATURES).astype(np.float32) for _ in range(4)]
+    obs = observation_mask(["l_shank", "r_shank"])
+
+    def run(seed, **kw):
+        p = Poser(lm, steps="1000,400,0", seed=seed, **kw)
+        state = p._gen.get_state()
+        outs = [p.step(f, obs).rot.copy() for f in frames]
+        return outs, torch.equal(state, p._gen.get_state())
+
+    a, untouched = run(0)
+    b, _ = run(7)
+    assert untouched
+    assert all(np.array_equal(x, y) for x, y in zip(a, b))
+    c, _ = run(0, noise="fixed")
+    d, _ = run(7, noise="fixed")
+    assert not all(np.array_equal(x, y) for x, y in zip(c, d))
+
+
 @pytest.mark.parametrize("noise", ["fresh", "fixed"])
 def test_noise_mode_fixed_reuses_one_draw_per_frame(noise):
     """fixed: every frame's inpainting starts from the same noise (the generator is reseeded),

@@ -265,6 +265,37 @@ def test_conditioned_diffusion_training_sees_known_entries_clean(tmp_path):
     assert load_model(tmp_path / "masked" / "model.pt").config.mask_input
 
 
+def test_mean_start_trains_the_top_level_on_zeros():
+    """mean_start 1: every window drawn at t = T holds zeros in its unknown entries (what a
+    poser with noise "mean" shows the model first); windows at other levels keep their noise."""
+    from inference.diffusion import Schedule
+
+    cfg = _cfg(cond_prob=1.0, augment_yaw=False, t_focus=0.5, infer_steps="1000,400",
+               mean_start=1.0, mask={"p_history_known": 1.0, "p_burst": 0.0, "p_frame_drop": 0.0})
+    ds = synthetic_dataset(3, 70, seed=0)
+    batch = ds.sample(np.random.default_rng(0), 32, 61)
+    mean, std = (torch.as_tensor(a, dtype=torch.float32) for a in feature_stats(ds.clips))
+    seen = []
+
+    def model(z, t, h):
+        seen.append((z.clone(), t.clone()))
+        return torch.zeros_like(z)
+
+    ctx = StepContext(cfg=cfg, mean=mean, std=std, schedule=Schedule.cosine())
+    batch_loss(model, batch, ctx, np.random.default_rng(1), torch.Generator().manual_seed(1))
+    z, t = seen[0]
+    xn = (torch.as_tensor(batch["x"]) - mean) / std
+    top = t == 1000
+    assert 0 < int(top.sum()) < 32
+    last = z[:, -1]
+    expect_top = Schedule.cosine().sqrt_ab(1000) * xn[:, -1]
+    unknown = last != xn[:, -1]  # known entries are clean, the rest noised or zeroed
+    assert torch.allclose(last[top][unknown[top]], expect_top[top][unknown[top]])
+    low = ~top & (t > 0)
+    assert (last[low] - xn[:, -1][low]).abs().max() > 0.5  # still drawn noise elsewhere
+    assert _cfg(mean_start=1.0).to_dict()["mean_start"] == 1.0
+
+
 def load_model_meta_mode(cfg: TrainConfig, out: Path) -> str:
     train(cfg, out, progress=False, stop_after=1)
     return load_model(out / "model.pt").meta["inpaint_mode"]
