@@ -3,7 +3,8 @@ live poser and score the result against the truth (GA, LA, JPE, jitter, RE2/5/10
 
     imucap evaluate --data PATH... --sensors pelvis,head,l_wrist,r_wrist,l_shank,r_shank
                     [--insoles] [--steps K] [--model diffusion|regressor|floor|PATH.pt]
-                    [--noise/--no-noise] [--limit N] [--seed S] [--threads N] --json
+                    [--noise/--no-noise] [--inpaint-noise fresh|fixed|mean] [--limit N] [--seed S]
+                    [--threads N] --json
                     [--report FILE.md] [--export-dir DIR]
 
 Signals carry the sensor noise model (white noise, bias, orientation error; calibrated,
@@ -28,6 +29,8 @@ import sys
 import time
 from pathlib import Path
 
+from app.cli_train import NOISE_MODES
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("evaluate", help="score reconstructions of motion files from synthesized sensors",
@@ -43,6 +46,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="diffusion | regressor | floor (shipped weights / baseline) or a model file PATH.pt")
     p.add_argument("--noise", action=argparse.BooleanOptionalAction, default=True,
                    help="sensor noise model on the synthesized signals (default on)")
+    p.add_argument("--inpaint-noise", choices=NOISE_MODES, default=None,
+                   help="diffusion only: how inpainting starts each frame (fresh draw, one fixed draw, or the "
+                        "prior's mean); default: the model file's own")
     p.add_argument("--smoothing", action=argparse.BooleanOptionalAction, default=True,
                    help="the poser's 1-Euro output filters (root, unmeasured orientations); --no-smoothing "
                         "scores the raw per-frame reconstructions")
@@ -65,6 +71,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _safe(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("_") or "clip"
+
+
+def _inpaint_noise(model, override: str | None) -> str:
+    """The noise mode the poser ran with: the override, else the model file's, else the paper's."""
+    return override or (model.meta or {}).get("noise") or "fresh"
 
 
 def _steps_label(poser_steps: list[int], kind: str) -> int:
@@ -116,11 +127,13 @@ def run(args: argparse.Namespace) -> int:
         summary, clips = evaluate_motions(motions, model, set_sites, insoles, st or None, noise, args.seed,
                                           progress=progress, keep=keep, desc=f"{label or spec}",
                                           smoothing=args.smoothing,
-                                          contact_detector="default" if args.contact_detector else None)
+                                          contact_detector="default" if args.contact_detector else None,
+                                          inpaint_noise=args.inpaint_noise)
         summary.update({
             "model": str(spec), "kind": kind, "sensors": list(set_sites),
             "insoles": insoles, "steps": _steps_label(st, kind), "step_list": st if kind == "diffusion" else None,
             "noise": bool(noise is not None), "seed": args.seed, "smoothing": args.smoothing,
+            "inpaint_noise": _inpaint_noise(model, args.inpaint_noise) if kind == "diffusion" else None,
             "contact_detector": args.contact_detector and kind != "floor",
         })
         return summary, clips

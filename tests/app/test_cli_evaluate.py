@@ -83,6 +83,27 @@ def test_contact_detector_switch(capsys, data_dir, tiny_models):
     assert det["re2_m"] != own["re2_m"] and np.isfinite(det["re2_m"])
 
 
+def test_inpaint_noise_override(capsys, data_dir, tiny_models):
+    """--inpaint-noise runs the diffusion poser with another noise mode than the model file's
+    (here: the file has none, so the paper's fresh draws), without re-exporting the file; the
+    JSON says which mode ran. (That the mean start draws nothing in the DDIM mode is
+    tests/inference/test_poser.py's.)"""
+    args = ("--data", str(data_dir), "--sensors", "l_shank,r_shank", "--steps", "1000,400,0",
+            "--model", str(tiny_models["diffusion"]), "--json", "--no-noise")  # --seed: inpainting only
+    runs = {}
+    for mode, seed in (("default", 0), ("mean", 0), ("fixed", 0), ("fixed", 5)):
+        extra = () if mode == "default" else ("--inpaint-noise", mode)
+        code, out, _ = _run(capsys, *args, *extra, "--seed", str(seed))
+        assert code == 0
+        runs[mode, seed] = json.loads(out)
+    assert runs["default", 0]["inpaint_noise"] == "fresh" and runs["mean", 0]["inpaint_noise"] == "mean"
+    assert runs["mean", 0]["ga_deg"] != runs["default", 0]["ga_deg"]
+    assert runs["fixed", 0]["ga_deg"] != runs["fixed", 5]["ga_deg"]
+    with pytest.raises(SystemExit) as exc:  # argparse's choices
+        _run(capsys, *args, "--inpaint-noise", "brown")
+    assert exc.value.code == 2 and "brown" in capsys.readouterr().err
+
+
 def test_floor_with_insoles_and_bvh_export(capsys, data_dir, tmp_path):
     code, out, _ = _run(capsys, "--data", str(data_dir), "--insoles", "--model", "floor", "--limit", "1",
                         "--no-noise", "--json", "--export-dir", str(tmp_path / "bvh"))
