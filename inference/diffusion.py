@@ -246,8 +246,9 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
     deterministic DDIM updates of the unknown entries (no fresh noise per step), so the
     frame-to-frame randomness of the live output is one draw instead of one per step.
 
-    ``start="mean"``: the first level sees the prior's mean (zeros: no noise) in the unknown
-    entries instead of a draw. With a high first level (t0 = T) the first call then gives
+    ``start="mean"``: the first level's noised entries hold their mean ``sqrt(ab_t0) x`` (no
+    draw; ~0 at t0 = T, the prior's mean): the unknown entries in the replacement modes, every
+    entry in "paper" and "ddim". With a high first level (t0 = T) the first call then gives
     the model's estimate of the *mean* unknown features given the known ones, where a drawn
     start gives one sample whose error about the truth is larger wherever the measurements
     leave the pose open (arms with only the shanks worn: HDM05 dg, 2 sites, GA 35.5 -> 31.0
