@@ -73,11 +73,6 @@ def _safe(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("_") or "clip"
 
 
-def _inpaint_noise(model, override: str | None) -> str:
-    """The noise mode the poser ran with: the override, else the model file's, else the paper's."""
-    return override or (model.meta or {}).get("noise") or "fresh"
-
-
 def _steps_label(poser_steps: list[int], kind: str) -> int:
     """Model calls per frame: the step count for diffusion, 1 for the regressor, 0 for floor."""
     if kind == "diffusion":
@@ -98,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
         report_markdown,
     )
     from inference.features import FPS_MODEL
-    from inference.poser import default_steps, resolve_model
+    from inference.poser import default_steps, noise_mode_for, resolve_model
     from inference.skeleton import parse_sites
 
     if args.threads > 0:
@@ -133,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
             "model": str(spec), "kind": kind, "sensors": list(set_sites),
             "insoles": insoles, "steps": _steps_label(st, kind), "step_list": st if kind == "diffusion" else None,
             "noise": bool(noise is not None), "seed": args.seed, "smoothing": args.smoothing,
-            "inpaint_noise": _inpaint_noise(model, args.inpaint_noise) if kind == "diffusion" else None,
+            "inpaint_noise": noise_mode_for(model, args.inpaint_noise) if kind == "diffusion" else None,
             "contact_detector": args.contact_detector and kind != "floor",
         })
         return summary, clips

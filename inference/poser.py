@@ -197,6 +197,13 @@ def standing_features(body: Body, pose: str = "npose") -> np.ndarray:
 
 # --------------------------------------------------------------------------- the poser
 
+def noise_mode_for(model: LoadedModel | None, noise: str | None = None) -> str:
+    """The inpainting noise mode a poser runs with: ``noise`` if given, else what the model
+    file recommends (meta, set at export), else the paper's fresh draws."""
+    meta = (model.meta or {}) if model is not None else {}
+    return noise or meta.get("noise") or "fresh"
+
+
 class Poser:
     """Frame-by-frame reconstruction with a diffusion model, the regressive baseline or
     the floor baseline, all behind one interface (``step``).
@@ -241,7 +248,7 @@ class Poser:
         # None = what the model file recommends (meta, set at export), else the paper's way
         meta = (model.meta or {}) if model is not None else {}
         history = history or meta.get("history") or "reconstructed"
-        noise = noise or meta.get("noise") or "fresh"
+        noise = noise_mode_for(model, noise)
         if history not in HISTORY_MODES:
             raise ValueError(f"unknown history mode {history!r} ({', '.join(HISTORY_MODES)})")
         if noise not in NOISE_MODES:

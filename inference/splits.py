@@ -85,7 +85,9 @@ def train_set(
     these speed factors (``Motion.at_speed``), sharing the HDM05 half of the draws. Two
     HDM05 actors are all the training data has of squats, kicks and throws, so their tempo
     could be learnt as part of the movement; tried in session 5 against the unseen actor,
-    it came out level with a control run (NOTES.md), so the shipped model does not use it.
+    it came out level with a control run; re-scored with the mean start (session 6) it beat
+    the control by 0.5-0.7 deg with only the shanks worn (NOTES.md). The shipped model does
+    not use it.
     Bandai (many actors and styles) is left at its own speed."""
     files = train_files()
     base = _build(files, progress)
