@@ -86,8 +86,8 @@ def train_set(
     HDM05 actors are all the training data has of squats, kicks and throws, so their tempo
     could be learnt as part of the movement; tried in session 5 against the unseen actor,
     it came out level with a control run; re-scored with the mean start (session 6) it beat
-    the control by 0.5-0.7 deg with only the shanks worn (NOTES.md). The shipped model does
-    not use it.
+    the control by 0.5-0.7 deg with only the shanks worn (NOTES.md). The model shipped since
+    session 7 is trained with 0.8, 0.9, 1.1 and 1.25 (configs/shipped_diffusion.json).
     Bandai (many actors and styles) is left at its own speed."""
     files = train_files()
     base = _build(files, progress)
