@@ -541,16 +541,21 @@ def quat_slerp(q0: Array, q1: Array, t: Array) -> Array:
 def quat_between_vectors(a: Array, b: Array) -> Array:
     """Smallest rotation q with ``quat_rotate(q, a)`` parallel to ``b`` (lengths ignored).
 
-    Built as the normalised ``(|a||b| + a.b, a x b)``, the half-way quaternion, which
-    needs no trig. For antiparallel vectors every axis perpendicular to ``a`` is minimal;
-    we turn 180 degrees about a deterministic one instead of returning NaN. Note the
-    direction: this maps a to b (scipy's ``align_vectors(a, b)`` maps b to a).
+    Built as the normalised ``(1 + a.b, a x b)`` of the unit vectors, the half-way
+    quaternion, which needs no trig. ``1 + a.b`` is taken as ``|a + b|^2 / 2`` and
+    ``a x b`` as ``a x (a + b)``: near-antiparallel vectors make both tiny, and the plain
+    forms lose them to cancellation (a 1e-6 rad gap came out as exactly antiparallel and
+    was mapped to -a). For antiparallel vectors every axis perpendicular to ``a`` is
+    minimal; we turn 180 degrees about a deterministic one instead of returning NaN. Note
+    the direction: this maps a to b (scipy's ``align_vectors(a, b)`` maps b to a).
     """
     xp, a, b = _ns(a, b)
     na, nb = _norm(xp, a, True), _norm(xp, b, True)
-    w = na * nb + _dot(xp, a, b, True)
-    v = xp.cross(a, b)
-    anti = w <= 1e-12 * na * nb
+    ua, ub = a / xp.where(na > 0, na, 1.0), b / xp.where(nb > 0, nb, 1.0)  # a zero vector: identity
+    half = ua + ub
+    w = 0.5 * _dot(xp, half, half, True)
+    v = xp.cross(ua, half)
+    anti = w <= 1e-30
     zero = w * 0
     perp = xp.broadcast_to(_any_perpendicular(xp, a), v.shape)
     q = xp.where(anti, xp.stack([zero[..., 0], perp[..., 0], perp[..., 1], perp[..., 2]]),

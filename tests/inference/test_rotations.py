@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 import pytest
 import torch
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy.spatial.transform import Rotation, Slerp
@@ -378,6 +378,8 @@ def test_geodesic_symmetric_sign_invariant_and_consistent(q1: np.ndarray, q2: np
 # ----------------------------------------------------------------------------- alignment
 @given(arrays(np.float64, (2, 3), elements=st.floats(-10, 10)).filter(
     lambda m: np.linalg.norm(m[0]) > 1e-3 and np.linalg.norm(m[1]) > 1e-3))
+# near-antiparallel (1.25e-6 rad off): the plain 1 + a.b cancelled to 0 and a was sent to -a
+@example(np.array([[1e-5, -8.0, 0.0], [0.0, 1.0, 0.0]]))
 def test_between_vectors_maps_a_to_b_minimally(m: np.ndarray) -> None:
     a, b = m
     q = rot.quat_between_vectors(a, b)
@@ -395,6 +397,8 @@ def test_between_vectors_parallel_and_antiparallel() -> None:
         np.testing.assert_allclose(rot.quat_rotate(q, vs), sign * vs, atol=1e-12)
         angle = rot.quat_angle_between([1.0, 0, 0, 0], q)
         np.testing.assert_allclose(angle, 0 if sign > 0 else np.pi, atol=1e-7)
+    # an undefined direction (a zero vector) gives the identity, not NaN
+    np.testing.assert_array_equal(rot.quat_between_vectors(np.zeros(3), vs[0]), [1.0, 0, 0, 0])
     gt = torch.tensor([0.0, 0, 1], dtype=torch.float64)
     assert torch.allclose(rot.quat_rotate(rot.quat_between_vectors(gt, -gt), gt), -gt)
 
