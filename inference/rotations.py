@@ -543,11 +543,13 @@ def quat_between_vectors(a: Array, b: Array) -> Array:
 
     Built as the normalised ``(1 + a.b, a x b)`` of the unit vectors, the half-way
     quaternion, which needs no trig. ``1 + a.b`` is taken as ``|a + b|^2 / 2`` and
-    ``a x b`` as ``a x (a + b)``: near-antiparallel vectors make both tiny, and the plain
-    forms lose them to cancellation (a 1e-6 rad gap came out as exactly antiparallel and
-    was mapped to -a). For antiparallel vectors every axis perpendicular to ``a`` is
-    minimal; we turn 180 degrees about a deterministic one instead of returning NaN. Note
-    the direction: this maps a to b (scipy's ``align_vectors(a, b)`` maps b to a).
+    ``a x b`` as ``a x (a + b)``, which keep their precision as the vectors near
+    antiparallel, where the plain forms cancel. Within ~1.4e-6 rad of antiparallel the
+    minimal axis is set by the inputs' rounding, so we turn 180 degrees about a
+    deterministic axis perpendicular to ``a`` instead (b is then met to within that
+    angle): the retargeter relies on it for rigs whose bones are antiparallel to ~1e-7.
+    A zero vector gives the identity. Note the direction: this maps a to b (scipy's
+    ``align_vectors(a, b)`` maps b to a).
     """
     xp, a, b = _ns(a, b)
     na, nb = _norm(xp, a, True), _norm(xp, b, True)
@@ -555,7 +557,7 @@ def quat_between_vectors(a: Array, b: Array) -> Array:
     half = ua + ub
     w = 0.5 * _dot(xp, half, half, True)
     v = xp.cross(ua, half)
-    anti = w <= 1e-30
+    anti = w <= 1e-12  # |a + b| < 1.4e-6
     zero = w * 0
     perp = xp.broadcast_to(_any_perpendicular(xp, a), v.shape)
     q = xp.where(anti, xp.stack([zero[..., 0], perp[..., 0], perp[..., 1], perp[..., 2]]),

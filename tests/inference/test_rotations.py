@@ -378,15 +378,18 @@ def test_geodesic_symmetric_sign_invariant_and_consistent(q1: np.ndarray, q2: np
 # ----------------------------------------------------------------------------- alignment
 @given(arrays(np.float64, (2, 3), elements=st.floats(-10, 10)).filter(
     lambda m: np.linalg.norm(m[0]) > 1e-3 and np.linalg.norm(m[1]) > 1e-3))
-# near-antiparallel (1.25e-6 rad off): the plain 1 + a.b cancelled to 0 and a was sent to -a
+# near-antiparallel: 1.25e-6 rad off (the fixed axis), 2e-6 rad off (the minimal one; 1 + a.b cancels there)
 @example(np.array([[1e-5, -8.0, 0.0], [0.0, 1.0, 0.0]]))
+@example(np.array([[1.6e-5, -8.0, 0.0], [0.0, 1.0, 0.0]]))
 def test_between_vectors_maps_a_to_b_minimally(m: np.ndarray) -> None:
     a, b = m
     q = rot.quat_between_vectors(a, b)
     ua, ub = a / np.linalg.norm(a), b / np.linalg.norm(b)
-    np.testing.assert_allclose(rot.quat_rotate(q, ua), ub, atol=1e-9)
     expected = np.arctan2(np.linalg.norm(np.cross(ua, ub)), ua @ ub)
-    np.testing.assert_allclose(rot.quat_angle_between([1.0, 0, 0, 0], q), expected, atol=1e-9)
+    # within 1.4e-6 rad of antiparallel the axis is a fixed choice (docstring): b is met to that angle
+    tol = 1e-9 if np.pi - expected > 1.5e-6 else 1.5e-6
+    np.testing.assert_allclose(rot.quat_rotate(q, ua), ub, atol=tol)
+    np.testing.assert_allclose(rot.quat_angle_between([1.0, 0, 0, 0], q), expected, atol=tol)
 
 
 def test_between_vectors_parallel_and_antiparallel() -> None:
