@@ -559,7 +559,7 @@ def quat_between_vectors(a: Array, b: Array) -> Array:
     v = xp.cross(ua, half)
     anti = w <= 1e-12  # |a + b| < 1.4e-6
     zero = w * 0
-    perp = xp.broadcast_to(_any_perpendicular(xp, a), v.shape)
+    perp = xp.broadcast_to(_any_perpendicular(xp, xp.where(na > 0, a, 1.0)), v.shape)  # no 0/0 warning
     q = xp.where(anti, xp.stack([zero[..., 0], perp[..., 0], perp[..., 1], perp[..., 2]]),
                  xp.stack([w[..., 0], v[..., 0], v[..., 1], v[..., 2]]))
     return quat_normalize(q)
