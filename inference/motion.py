@@ -111,5 +111,15 @@ class Motion:
             raise ValueError(f"speed factor must be positive, got {factor}")
         return replace(self, fps=self.fps * float(factor), meta={**self.meta, "speed": float(factor)})
 
+    def scaled(self, factor: float) -> Motion:
+        """The same joint angles and timing on a body ``factor`` times as large: bones, skin
+        sites and root path scale, orientations do not. Training augmentation: the data
+        has few body sizes, so a model conditioned on height can read the actor from it."""
+        if not factor > 0:
+            raise ValueError(f"scale factor must be positive, got {factor}")
+        body = Body.from_offsets(self.body.offsets * float(factor), self.body.height * float(factor))
+        return replace(self, root=self.root * float(factor), body=body,
+                       meta={**self.meta, "scale": float(factor) * self.meta.get("scale", 1.0)})
+
     def slice(self, start: int, stop: int) -> Motion:
         return replace(self, rot=self.rot[start:stop], root=self.root[start:stop])

@@ -141,6 +141,11 @@ class TrainConfig:
     # share of training windows mirrored left <-> right (``mirror_features``): the data has
     # few actors, each with their own handedness and habits; a mirrored actor is a new one
     augment_mirror: float = 0.0
+    # body-size augmentation: each window's body scaled by s, log-uniform in
+    # [1 / (1 + a), 1 + a] (``scale_features``). The data has one body size per actor, so
+    # without it the height token tells the model who is moving and it learns that
+    # actor's habits (NOTES.md "Session 8")
+    augment_scale: float = 0.0
     seed: int = 0
     T: int = 1000
     log_every: int = 50
@@ -387,6 +392,19 @@ def rotate_yaw(x: Tensor, angle: Tensor) -> Tensor:
     return out
 
 
+def scale_features(x: Tensor, scale: Tensor) -> Tensor:
+    """Windows (B, N, F) of unnormalised features of the same motion on a body ``scale``
+    (B,) times as large (``Motion.scaled``): site accelerations (gravity-free), root
+    displacement and root height scale, orientations do not. Contact labels are kept: a
+    planted foot of a larger body is still planted, though its 0.3 m/s label threshold
+    would move a few borderline frames."""
+    out = x.clone()
+    s = scale.to(x.dtype)[:, None, None]
+    for sl in (SL_ACC, SL_DP, SL_PZ):
+        out[..., sl] = x[..., sl] * s
+    return out
+
+
 def _swap_side(names: tuple[str, ...]) -> list[int]:
     """Index of each name's left/right counterpart (itself for midline names)."""
     flip = {"l_": "r_", "r_": "l_"}
@@ -583,6 +601,13 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
     if contact_np is None:
         contact_np = contact_offsets_for(np.asarray(batch["offsets"]), np.asarray(batch["height"]))
     contact_local = torch.as_tensor(contact_np, dtype=torch.float32)
+    if cfg.augment_scale > 0:
+        span = math.log1p(cfg.augment_scale)
+        scale = torch.exp((2 * torch.rand(B, generator=gen) - 1) * span)
+        x = scale_features(x, scale)
+        height = height * scale
+        offsets = offsets * scale[:, None, None]
+        contact_local = contact_local * scale[:, None, None]
     if cfg.augment_yaw:
         x = rotate_yaw(x, torch.rand(B, generator=gen) * (2 * math.pi))
     if cfg.augment_mirror > 0:

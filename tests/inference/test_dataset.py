@@ -184,6 +184,21 @@ def test_motion_at_speed_is_the_same_path_in_less_time():
         m.at_speed(0.0)
 
 
+def test_motion_scaled_is_the_same_pose_on_a_larger_body():
+    m = moving_motion(T=121, fps=60.0)
+    b = m.scaled(1.2)
+    np.testing.assert_array_equal(b.rot, m.rot)
+    np.testing.assert_allclose(b.root, 1.2 * m.root)
+    assert b.body.height == pytest.approx(1.2 * m.body.height) and b.meta["scale"] == 1.2
+    # every point of the body (joints, sensor sites, heel/toe) lies 1.2x as far from the origin
+    np.testing.assert_allclose(b.joints(), 1.2 * m.joints(), atol=1e-12)
+    np.testing.assert_allclose(b.sites(), 1.2 * m.sites(), atol=1e-12)
+    np.testing.assert_allclose(b.body.contact_offsets, 1.2 * m.body.contact_offsets, atol=1e-12)
+    assert b.scaled(0.5).meta["scale"] == pytest.approx(0.6)
+    with pytest.raises(ValueError):
+        m.scaled(-1.0)
+
+
 def test_concat_keeps_every_clip_and_reweights():
     a = FeatureDataset.from_motions([moving_motion(T=200, speed=0.5), still_motion()], names=["a0", "a1"])
     b = FeatureDataset.from_motions([moving_motion(T=150, speed=2.0)], names=["b0"])

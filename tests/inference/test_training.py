@@ -28,6 +28,7 @@ from inference.training import (
     mirror_points,
     motion_losses,
     rotate_yaw,
+    scale_features,
     synthetic_dataset,
     train,
 )
@@ -137,6 +138,54 @@ def test_mirror_augmentation_mirrors_the_window_and_its_body(tmp_path):
         assert mirrored[k] == pytest.approx(plain[k], rel=1e-4, abs=1e-7), k
     assert loss(batch, 1e-12)["fk"] != pytest.approx(plain["fk"], rel=1e-3)
     assert TrainConfig.from_dict(_cfg(augment_mirror=0.5).to_dict()).augment_mirror == 0.5
+
+
+def test_scale_features_equal_the_features_of_the_scaled_motion():
+    """Derive the features of a walk on a 1.15x body from scratch: orientations, gravity-free
+    accelerations, root displacement and height must be scale_features of the original's.
+    Contact labels are kept by design; the 0.3 m/s threshold moves only borderline frames."""
+    from inference.evaluation import synthetic_motion
+    from inference.feature_codec import features_from_motion
+
+    m = synthetic_motion(seconds=3.0)
+    x = features_from_motion(m)
+    xs = features_from_motion(m.scaled(1.15))
+    got = scale_features(torch.as_tensor(x)[None], torch.tensor([1.15]))[0].numpy()
+    keep = np.r_[SL_ROT.start:SL_PZ.stop]
+    np.testing.assert_allclose(got[:, keep], xs[:, keep], atol=1e-4)
+    assert np.abs(x[:, SL_ACC]).max() > 1.0 and not np.allclose(got[:, SL_ACC], x[:, SL_ACC], atol=1e-2)
+    assert np.mean(got[:, SL_CONTACT] == xs[:, SL_CONTACT]) > 0.9
+
+
+def test_scale_augmentation_scales_the_window_and_its_body():
+    """augment_scale on a batch must score what no scaling scores on the batch scaled by the
+    same draws: features, height (the model's input), bone offsets and heel/toe points."""
+    from inference.diffusion import Schedule
+
+    ds = synthetic_dataset(3, 70, seed=0)
+    batch = ds.sample(np.random.default_rng(0), 4, 61)
+    batch["contact_offsets"] = contact_offsets_for(batch["offsets"], batch["height"])
+    a = 0.2
+    s = torch.exp((2 * torch.rand(4, generator=torch.Generator().manual_seed(1)) - 1) * math.log1p(a))
+    assert float(s.min()) >= 1 / 1.2 - 1e-6 and float(s.max()) <= 1.2 + 1e-6 and float(s.std()) > 0.01
+    sn = s.numpy().astype(np.float64)
+    scaled = dict(batch, x=scale_features(torch.as_tensor(batch["x"]), s).numpy(),
+                  height=(batch["height"] * sn).astype(np.float32), offsets=batch["offsets"] * sn[:, None, None],
+                  contact_offsets=batch["contact_offsets"] * sn[:, None, None])
+    mean, std = (torch.as_tensor(v, dtype=torch.float32) for v in feature_stats(ds.clips))
+    torch.manual_seed(0)
+    model = build_model("diffusion", ModelConfig.from_dict(TINY)).eval()
+
+    def loss(b, aug):
+        cfg = _cfg(augment_yaw=False, augment_scale=aug)
+        ctx = StepContext(cfg=cfg, mean=mean, std=std, schedule=Schedule.cosine())
+        return batch_loss(model, b, ctx, np.random.default_rng(1), torch.Generator().manual_seed(1))[1]
+
+    augmented, plain = loss(batch, a), loss(scaled, 1e-9)  # same draws; the second scales by ~1
+    for k in augmented:
+        assert augmented[k] == pytest.approx(plain[k], rel=1e-4, abs=1e-7), k
+    assert loss(batch, 1e-9)["fk"] != pytest.approx(plain["fk"], rel=1e-3)
+    assert TrainConfig.from_dict(_cfg(augment_scale=0.15).to_dict()).augment_scale == 0.15
 
 
 def test_yaw_invariant_stats():
