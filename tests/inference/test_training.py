@@ -112,27 +112,36 @@ def test_mirror_features_equal_the_features_of_the_mirrored_motion():
     np.testing.assert_array_equal(mirror_features(mirror_features(torch.as_tensor(x))).numpy(), x)
 
 
-def test_mirror_augmentation_mirrors_the_window_and_its_body(tmp_path):
-    """augment_mirror = 1 on a batch must score exactly what no mirroring scores on the
-    mirrored batch (features, bone offsets and heel/toe points all mirrored)."""
+def _augmentation_batch_and_loss(option: str):
+    """A fixed batch (with heel/toe points) and ``loss(batch, value)``: the unweighted loss
+    terms of a tiny eval-mode model with ``option`` = value and no yaw turn, drawn from the
+    same generators every call, so an augmentation can be compared with its hand-made twin."""
     from inference.diffusion import Schedule
-    from inference.skeleton import CONTACTS, SEGMENTS
 
     ds = synthetic_dataset(3, 70, seed=0)
     batch = ds.sample(np.random.default_rng(0), 4, 61)
     batch["contact_offsets"] = contact_offsets_for(batch["offsets"], batch["height"])
-    flipped = dict(batch, x=mirror_features(torch.as_tensor(batch["x"])).numpy(),
-                   offsets=mirror_points(torch.as_tensor(batch["offsets"]), SEGMENTS).numpy(),
-                   contact_offsets=mirror_points(torch.as_tensor(batch["contact_offsets"]), CONTACTS).numpy())
     mean, std = (torch.as_tensor(a, dtype=torch.float32) for a in feature_stats(ds.clips))
     torch.manual_seed(0)
     model = build_model("diffusion", ModelConfig.from_dict(TINY)).eval()
 
-    def loss(b, p):
-        cfg = _cfg(augment_yaw=False, augment_mirror=p)
+    def loss(b, value):
+        cfg = _cfg(augment_yaw=False, **{option: value})
         ctx = StepContext(cfg=cfg, mean=mean, std=std, schedule=Schedule.cosine())
         return batch_loss(model, b, ctx, np.random.default_rng(1), torch.Generator().manual_seed(1))[1]
 
+    return batch, loss
+
+
+def test_mirror_augmentation_mirrors_the_window_and_its_body(tmp_path):
+    """augment_mirror = 1 on a batch must score exactly what no mirroring scores on the
+    mirrored batch (features, bone offsets and heel/toe points all mirrored)."""
+    from inference.skeleton import CONTACTS, SEGMENTS
+
+    batch, loss = _augmentation_batch_and_loss("augment_mirror")
+    flipped = dict(batch, x=mirror_features(torch.as_tensor(batch["x"])).numpy(),
+                   offsets=mirror_points(torch.as_tensor(batch["offsets"]), SEGMENTS).numpy(),
+                   contact_offsets=mirror_points(torch.as_tensor(batch["contact_offsets"]), CONTACTS).numpy())
     mirrored, plain = loss(batch, 1.0), loss(flipped, 1e-12)  # same draws; the second flips nothing
     for k in mirrored:
         assert mirrored[k] == pytest.approx(plain[k], rel=1e-4, abs=1e-7), k
@@ -160,11 +169,7 @@ def test_scale_features_equal_the_features_of_the_scaled_motion():
 def test_scale_augmentation_scales_the_window_and_its_body():
     """augment_scale on a batch must score what no scaling scores on the batch scaled by the
     same draws: features, height (the model's input), bone offsets and heel/toe points."""
-    from inference.diffusion import Schedule
-
-    ds = synthetic_dataset(3, 70, seed=0)
-    batch = ds.sample(np.random.default_rng(0), 4, 61)
-    batch["contact_offsets"] = contact_offsets_for(batch["offsets"], batch["height"])
+    batch, loss = _augmentation_batch_and_loss("augment_scale")
     a = 0.2
     s = torch.exp((2 * torch.rand(4, generator=torch.Generator().manual_seed(1)) - 1) * math.log1p(a))
     assert float(s.min()) >= 1 / 1.2 - 1e-6 and float(s.max()) <= 1.2 + 1e-6 and float(s.std()) > 0.01
@@ -172,15 +177,6 @@ def test_scale_augmentation_scales_the_window_and_its_body():
     scaled = dict(batch, x=scale_features(torch.as_tensor(batch["x"]), s).numpy(),
                   height=(batch["height"] * sn).astype(np.float32), offsets=batch["offsets"] * sn[:, None, None],
                   contact_offsets=batch["contact_offsets"] * sn[:, None, None])
-    mean, std = (torch.as_tensor(v, dtype=torch.float32) for v in feature_stats(ds.clips))
-    torch.manual_seed(0)
-    model = build_model("diffusion", ModelConfig.from_dict(TINY)).eval()
-
-    def loss(b, aug):
-        cfg = _cfg(augment_yaw=False, augment_scale=aug)
-        ctx = StepContext(cfg=cfg, mean=mean, std=std, schedule=Schedule.cosine())
-        return batch_loss(model, b, ctx, np.random.default_rng(1), torch.Generator().manual_seed(1))[1]
-
     augmented, plain = loss(batch, a), loss(scaled, 1e-9)  # same draws; the second scales by ~1
     for k in augmented:
         assert augmented[k] == pytest.approx(plain[k], rel=1e-4, abs=1e-7), k
