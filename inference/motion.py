@@ -119,7 +119,7 @@ class Motion:
             raise ValueError(f"scale factor must be positive, got {factor}")
         body = Body.from_offsets(self.body.offsets * float(factor), self.body.height * float(factor))
         return replace(self, root=self.root * float(factor), body=body,
-                       meta={**self.meta, "scale": float(factor) * self.meta.get("scale", 1.0)})
+                       meta={**self.meta, "body_scale": float(factor) * self.meta.get("body_scale", 1.0)})
 
     def slice(self, start: int, stop: int) -> Motion:
         return replace(self, rot=self.rot[start:stop], root=self.root[start:stop])

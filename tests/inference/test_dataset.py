@@ -189,12 +189,12 @@ def test_motion_scaled_is_the_same_pose_on_a_larger_body():
     b = m.scaled(1.2)
     np.testing.assert_array_equal(b.rot, m.rot)
     np.testing.assert_allclose(b.root, 1.2 * m.root)
-    assert b.body.height == pytest.approx(1.2 * m.body.height) and b.meta["scale"] == 1.2
+    assert b.body.height == pytest.approx(1.2 * m.body.height) and b.meta["body_scale"] == 1.2
     # every point of the body (joints, sensor sites, heel/toe) lies 1.2x as far from the origin
     np.testing.assert_allclose(b.joints(), 1.2 * m.joints(), atol=1e-12)
     np.testing.assert_allclose(b.sites(), 1.2 * m.sites(), atol=1e-12)
     np.testing.assert_allclose(b.body.contact_offsets, 1.2 * m.body.contact_offsets, atol=1e-12)
-    assert b.scaled(0.5).meta["scale"] == pytest.approx(0.6)
+    assert b.scaled(0.5).meta["body_scale"] == pytest.approx(0.6)
     with pytest.raises(ValueError):
         m.scaled(-1.0)
 
