@@ -2,7 +2,7 @@
 live poser and score the result against the truth (GA, LA, JPE, jitter, RE2/5/10).
 
     imucap evaluate --data PATH... --sensors pelvis,head,l_wrist,r_wrist,l_shank,r_shank
-                    [--insoles] [--steps K] [--model diffusion|regressor|floor|PATH.pt]
+                    [--insoles] [--steps K] [--model diffusion|regressor|floor|PATH.pt] [--against SPEC]
                     [--noise/--no-noise] [--inpaint-noise fresh|fixed|mean] [--limit N] [--seed S]
                     [--threads N] --json
                     [--report FILE.md] [--export-dir DIR]
@@ -13,9 +13,15 @@ JSON object (clips, frames, ga_deg, la_deg, jpe_cm, jitter_ratio, re2_m, re5_m, 
 model, sensors, insoles, steps, ...); progress goes to stderr. A metric that needs a
 longer clip than any given is null.
 
+--against SPEC scores a second model on the same clips, sensors and noise, and adds
+``against``: its figures and, for GA, LA and JPE, --model minus it with a percentile
+bootstrap interval over clips (a lead whose interval holds 0 is not settled by the clips).
+
 --report FILE.md also evaluates the standard table (6 sites, 6 sites + insoles, 3 sites
 pelvis+wrists, 2 sites shanks) x (diffusion, regressor, floor) and writes it as markdown;
 a model whose weights are missing gets a row saying so instead of stopping the table.
+Below it, the diffusion model's GA minus each baseline's on the same clips, with a bootstrap
+interval over clips, says which leads the clip sample settles (``comparisons`` in the JSON).
 --export-dir DIR writes <clip>.recon.bvh and <clip>.truth.bvh (20 Hz, metres, Y up; see
 app/export_bvh.py) for the main evaluation.
 """
@@ -55,6 +61,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--contact-detector", action=argparse.BooleanOptionalAction, default=True,
                    help="contacts for the root correction from the shank contact detector when both shanks are "
                         "measured (default); --no-contact-detector uses the model's own contact outputs")
+    p.add_argument("--against", default=None, metavar="SPEC",
+                   help="also score this model (same forms as --model) on the same clips and sensors, and "
+                        "report --model minus it per metric with a bootstrap interval over clips")
     p.add_argument("--limit", type=int, default=None, help="only the first N motion files (sorted)")
     p.add_argument("--seed", type=int, default=0, help="seed of sensor noise and inpainting noise")
     # default 1: the live loop is one small model call per step, and with more threads two
@@ -87,12 +96,15 @@ def run(args: argparse.Namespace) -> int:
     from inference.evaluation import (
         REPORT_MODELS,
         REPORT_SETS,
+        compare_rows,
+        comparison_markdown,
         evaluate_motions,
         evaluation_noise,
         load_motions,
         report_markdown,
     )
     from inference.features import FPS_MODEL
+    from inference.metrics import paired_difference
     from inference.poser import default_steps, noise_mode_for, resolve_model
     from inference.skeleton import parse_sites
 
@@ -137,6 +149,17 @@ def run(args: argparse.Namespace) -> int:
     result, clips = one(args.model, sites, args.insoles, keep=keep, label=f"{args.model} {','.join(sites)}")
     result["per_clip"] = [{"name": c.name, **c.metrics.summary()} for c in clips]
 
+    if args.against is not None:
+        other, other_clips = one(args.against, sites, args.insoles, label=f"{args.against} {','.join(sites)}")
+        mine, theirs = [c.metrics for c in clips], [c.metrics for c in other_clips]
+        diffs = {m: paired_difference(mine, theirs, m, seed=args.seed) for m in ("ga_deg", "la_deg", "jpe_cm")}
+        result["against"] = {
+            **{k: other[k] for k in ("model", "kind", "steps", "ga_deg", "la_deg", "jpe_cm", "jitter_ratio",
+                                     "re2_m", "re5_m", "re10_m")},
+            "differences": {m: d.as_dict() for m, d in diffs.items()},
+            "per_clip": [{"name": c.name, **c.metrics.summary()} for c in other_clips],
+        }
+
     if args.export_dir is not None:
         from app.export_bvh import write_bvh
 
@@ -150,10 +173,11 @@ def run(args: argparse.Namespace) -> int:
 
     if args.report is not None:
         rows = []
+        per_clip: dict[tuple[str, str], list] = {}
         for label, set_sites, insoles in REPORT_SETS:
             for spec in REPORT_MODELS:
                 try:
-                    s, _ = one(spec, list(set_sites), insoles, label=f"{spec} {label}")
+                    s, set_clips = one(spec, list(set_sites), insoles, label=f"{spec} {label}")
                 except FileNotFoundError as exc:
                     print(f"evaluate: report row {label} / {spec} skipped: {exc}", file=sys.stderr)
                     rows.append({"label": label, "model": f"{spec} (weights missing)", "steps": "-", "clips": 0,
@@ -161,8 +185,10 @@ def run(args: argparse.Namespace) -> int:
                                                                     "re2_m", "re5_m", "re10_m")}})
                     continue
                 rows.append({"label": label, **s})
+                per_clip[label, spec] = [c.metrics for c in set_clips]
+        comparisons = compare_rows(per_clip, seed=args.seed)
         noise_txt = "with the sensor noise model" if noise is not None else "without sensor noise"
-        text = report_markdown(rows) + (
+        text = report_markdown(rows) + ("\n" + comparison_markdown(comparisons) if comparisons else "") + (
             f"\n{len(motions)} clip(s) from {', '.join(map(str, args.data))}; signals synthesized {noise_txt}; "
             f"seed {args.seed}; live poser frame by frame at 20 Hz.\n\n"
             f"Reproduce: `imucap evaluate --data {' '.join(map(str, args.data))}"
@@ -170,7 +196,7 @@ def run(args: argparse.Namespace) -> int:
         )
         args.report.parent.mkdir(parents=True, exist_ok=True)
         args.report.write_text(text)
-        result["report"] = {"path": str(args.report), "rows": rows}
+        result["report"] = {"path": str(args.report), "rows": rows, "comparisons": comparisons}
 
     result["seconds"] = round(time.time() - t0, 2)
     if args.json:
@@ -184,6 +210,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"GA {f(result['ga_deg'], 1)} deg  LA {f(result['la_deg'], 1)} deg  JPE {f(result['jpe_cm'], 1)} cm  "
               f"jitter {f(result['jitter_ratio'])}  RE2 {f(result['re2_m'])} m  RE5 {f(result['re5_m'])} m  "
               f"RE10 {f(result['re10_m'])} m")
+        if args.against is not None:
+            a = result["against"]
+            for m, d in a["differences"].items():
+                print(f"{m} minus {a['model']}: {d['difference']:+.2f} "
+                      f"[{d['low']:+.2f}, {d['high']:+.2f}] ({round(100 * d['confidence'])} % over clips; "
+                      f"lower on {d['model_lower']} of {result['clips']} clips)")
     return 0
 
 

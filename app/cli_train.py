@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -108,7 +109,23 @@ def run(args: argparse.Namespace) -> int:
         if res.val:
             summary.update(res.val)
         print(json.dumps(summary), file=sys.stdout)
-    return 130 if res.stopped_early else 0
+    rc = 130 if res.stopped_early else 0
+    if int(os.environ.get("WORLD_SIZE", "1")) > 1:
+        _leave_distributed_run(rc)
+    return rc
+
+
+def _leave_distributed_run(rc: int) -> None:
+    """End a torchrun worker without interpreter teardown. DistributedDataParallel's reducer
+    keeps the gloo process group alive after `destroy_process_group` (its worker threads
+    are still running then: 4 OS threads before and after, 1 without DDP), so the group
+    is torn down during interpreter finalization, where a gloo thread can abort the
+    process ("terminate called without an active exception", SIGABRT; seen once in CI).
+    Training has finished and its files are closed by now, so the worker flushes what it
+    printed and exits at once with its own code."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(rc)
 
 
 def run_contact_detector(args: argparse.Namespace) -> int:
@@ -142,6 +159,4 @@ def run_contact_detector(args: argparse.Namespace) -> int:
 
 
 def _is_main() -> bool:
-    import os
-
     return int(os.environ.get("RANK", "0")) == 0

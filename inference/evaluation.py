@@ -29,7 +29,7 @@ import numpy as np
 from .body import Body, global_from_local, npose_rotations
 from .denoiser import LoadedModel
 from .features import FPS_MODEL, N_FEATURES, SL_ACC, SL_CONTACT, SL_ROT, observation_mask
-from .metrics import ClipMetrics, evaluate_clip, summarize
+from .metrics import ClipMetrics, evaluate_clip, paired_difference, summarize
 from .motion import Motion
 from .poser import Poser, Reconstruction, reconstruct_offline, resolve_model
 from .resample import STEP, downsample
@@ -221,6 +221,50 @@ def report_markdown(rows: list[dict], title: str = "Reconstruction accuracy") ->
     return "\n".join(lines) + "\n"
 
 
+def compare_rows(per_clip: dict[tuple[str, str], list[ClipMetrics]], model: str = "diffusion",
+                 baselines: Sequence[str] = ("regressor", "floor"), metric: str = "ga_deg",
+                 seed: int = 0) -> list[dict]:
+    """``model`` against each baseline on every sensor set both were scored on: the paired
+    difference of ``metric`` over the same clips (``metrics.paired_difference``).
+    per_clip: (set label, model spec) -> that evaluation's clip metrics."""
+    rows = []
+    for (label, spec), clips in per_clip.items():
+        if spec != model:
+            continue
+        for base in baselines:
+            other = per_clip.get((label, base))
+            if other is None:
+                continue
+            d = paired_difference(clips, other, metric, seed=seed)
+            rows.append({"label": label, "model": model, "baseline": base, "metric": metric, **d.as_dict()})
+    return rows
+
+
+def comparison_markdown(rows: list[dict]) -> str:
+    """The side-by-side table: model minus baseline, with its interval over clips."""
+    if not rows:
+        return ""
+    conf = round(100 * rows[0]["confidence"])
+    lines = [
+        "## Side by side, paired over clips", "",
+        f"Model minus baseline on the same clips; {conf} % percentile bootstrap interval over clips (both "
+        "models resampled together, frames pooled as in the table above). An interval that holds 0 means the "
+        "clip sample does not settle which model is ahead. It covers the choice of clips only: two checkpoints of "
+        "one training run can differ by more than it.", "",
+        "| sensors | model | baseline | metric | difference | interval | clips where model lower |",
+        "|---|---|---|---|---|---|---|",
+    ]
+
+    def f(v: float) -> str:
+        return f"{round(v, 2) + 0.0:+.2f}"  # + 0.0: no "-0.00" for a difference that rounds to zero
+
+    for r in rows:
+        verdict = "" if r["decided"] else " (not settled)"
+        lines.append(f"| {r['label']} | {r['model']} | {r['baseline']} | {r['metric']} | {f(r['difference'])} | "
+                     f"[{f(r['low'])}, {f(r['high'])}]{verdict} | {r['model_lower']} of {r['clips']} |")
+    return "\n".join(lines) + "\n"
+
+
 # --------------------------------------------------------------------------- synthetic motion
 
 def synthetic_motion(seconds: float = 4.0, fps: float = 60.0, height: float = 1.75, speed: float = 1.0,
@@ -277,5 +321,5 @@ def resolve_models(specs: Sequence[str]) -> dict[str, LoadedModel | None]:
 __all__ = [
     "SIX", "REPORT_SETS", "REPORT_MODELS", "evaluation_noise", "face_forward", "ClipInput", "clip_input", "clip_seed",
     "ClipResult", "reconstruct_clip", "evaluate_motions", "load_motions", "model_label", "report_markdown",
-    "synthetic_motion", "resolve_models"
+    "compare_rows", "comparison_markdown", "synthetic_motion", "resolve_models"
 ]

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .dataset import FeatureDataset, build_dataset
+from .dataset import FeatureDataset, build_dataset, clip_weights
 from .loaders import find_motion_files
 from .training import cache_root, data_root
 
@@ -79,7 +79,8 @@ def balance_sources(ds: FeatureDataset, hdm05_share: float = HDM05_SHARE) -> Fea
 
 
 def train_set(
-    progress: bool = True, hdm05_share: float = HDM05_SHARE, hdm05_speeds: Sequence[float] = ()
+    progress: bool = True, hdm05_share: float = HDM05_SHARE, hdm05_speeds: Sequence[float] = (),
+    energy_per: str = "trial",
 ) -> FeatureDataset:
     """The training split. ``hdm05_speeds``: extra copies of the HDM05 clips performed at
     these speed factors (``Motion.at_speed``), sharing the HDM05 half of the draws. Two
@@ -88,12 +89,20 @@ def train_set(
     it came out level with a control run; re-scored with the mean start (session 6) it beat
     the control by 0.5-0.7 deg with only the shanks worn (NOTES.md). The model shipped since
     session 7 is trained with 0.8, 0.9, 1.1 and 1.25 (configs/shipped_diffusion.json).
-    Bandai (many actors and styles) is left at its own speed."""
+    Bandai (many actors and styles) is left at its own speed.
+
+    ``energy_per``: "trial" draws clips by their mean kinetic energy (the paper's words,
+    sec. 3.3); "window" also weighs each clip by its length, so each window is drawn by its
+    clip's energy whatever the clip's length (``dataset.clip_weights``)."""
+    if energy_per not in ("trial", "window"):
+        raise ValueError(f"energy_per must be 'trial' or 'window', not {energy_per!r}")
     files = train_files()
     base = _build(files, progress)
     if hdm05_speeds:
         hdm = [f for f in files if _is_hdm05(str(f))]
         base = FeatureDataset.concat([base, *(_build(hdm, progress, float(s)) for s in hdm05_speeds)])
+    if energy_per == "window":
+        base.weights = clip_weights(base.energy, [len(c) for c in base.clips])
     return balance_sources(base, hdm05_share)
 
 

@@ -129,6 +129,40 @@ def test_report_over_sensor_sets_and_models(capsys, data_dir, tiny_models, tmp_p
     for label in ("6 sites", "6 sites + insoles", "3 sites (pelvis, wrists)", "2 sites (shanks)"):
         for model in ("diffusion", "regressor", "floor"):
             assert f"| {label} | {model} |" in text
+    # the side-by-side table: diffusion minus each baseline on the same clip, set by set
+    comps = res["report"]["comparisons"]
+    assert [(c["label"], c["baseline"]) for c in comps] == [
+        (label, base) for label in ("6 sites", "6 sites + insoles", "3 sites (pelvis, wrists)", "2 sites (shanks)")
+        for base in ("regressor", "floor")]
+    ga = {(r["label"], r["model"]): r["ga_deg"] for r in res["report"]["rows"]}
+    for c in comps:
+        assert c["difference"] == pytest.approx(ga[c["label"], "diffusion"] - ga[c["label"], c["baseline"]])
+        assert c["clips"] == 1 and c["low"] == c["high"] == c["difference"]  # one clip: nothing to resample
+        assert f"| {c['label']} | diffusion | {c['baseline']} | ga_deg | {c['difference']:+.2f} |" in text
+    assert "## Side by side, paired over clips" in text
+
+
+def test_against_scores_a_second_model_on_the_same_clips(capsys, data_dir, tiny_models):
+    common = ("--data", str(data_dir), "--sensors", "pelvis,l_shank,r_shank", "--steps", "2")
+    code, out, _ = _run(capsys, *common, "--model", str(tiny_models["diffusion"]), "--against", "floor", "--json")
+    assert code == 0
+    res = json.loads(out)
+    a = res["against"]
+    assert a["model"] == "floor" and a["kind"] == "floor" and a["steps"] == 0
+    for m in ("ga_deg", "la_deg", "jpe_cm"):
+        d = a["differences"][m]
+        assert d["difference"] == pytest.approx(res[m] - a[m])
+        assert d["low"] <= d["difference"] <= d["high"] and 0 <= d["model_lower"] <= res["clips"] == 2
+    assert [c["name"] for c in a["per_clip"]] == [c["name"] for c in res["per_clip"]]
+    code, floor_out, _ = _run(capsys, *common, "--model", "floor", "--json")
+    assert json.loads(floor_out)["ga_deg"] == pytest.approx(a["ga_deg"])  # the same clips, noise and seed
+    # a model against itself: the same reconstruction, so no difference at all
+    code, out, _ = _run(capsys, *common, "--model", str(tiny_models["diffusion"]),
+                        "--against", str(tiny_models["diffusion"]), "--json")
+    same = json.loads(out)["against"]["differences"]["ga_deg"]
+    assert same["difference"] == 0.0 and not same["decided"]
+    code, out, _ = _run(capsys, *common, "--model", "floor", "--against", "floor")
+    assert code == 0 and "ga_deg minus floor: +0.00 [+0.00, +0.00]" in out
 
 
 def test_missing_weights_is_a_clear_error(capsys, data_dir, tmp_path, monkeypatch):

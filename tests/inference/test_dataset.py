@@ -13,6 +13,7 @@ from inference.dataset import (
     FeatureDataset,
     Normalizer,
     build_dataset,
+    clip_weights,
     decode_features,
     motion_to_features,
 )
@@ -108,6 +109,28 @@ def test_windows_end_at_every_frame_of_a_clip():
     w = ds.window(0, 5 - WINDOW)
     np.testing.assert_array_equal(w[-5:], clip[:5])
     assert (w[:-5, SL_DP] == 0).all() and np.array_equal(w[0, SL_ROT], clip[0, SL_ROT])
+
+
+def test_energy_per_window_draws_every_window_by_its_clip_energy():
+    """Per-trial weights give a clip its draws whatever its length; per-window weights make
+    a frame of a clip 3x as long as another, at the same energy, as likely to end a window."""
+    energy = np.array([2.0, 2.0, 6.0])
+    lengths = np.array([100, 300, 100])
+    np.testing.assert_allclose(clip_weights(energy), [0.2, 0.2, 0.6])
+    w = clip_weights(energy, lengths)
+    np.testing.assert_allclose(w, np.array([200, 600, 600]) / 1400)
+    per_frame = w / lengths  # window ends are uniform within a clip
+    assert per_frame[0] == pytest.approx(per_frame[1]) and per_frame[2] == pytest.approx(3 * per_frame[0])
+    # the floor for still clips applies before the length
+    still = clip_weights(np.array([0.0, 10.0, 10.0]), np.array([50, 50, 50]))
+    assert still[0] == pytest.approx(0.05 * 10 / (0.5 + 20))
+
+
+def test_train_set_refuses_an_unknown_energy_weighting():
+    from inference.splits import train_set
+
+    with pytest.raises(ValueError, match="energy_per"):
+        train_set(progress=False, energy_per="frame")  # refused before any data is read
 
 
 def _write_clips(root: Path, n: int) -> list[Path]:

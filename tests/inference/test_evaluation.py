@@ -4,10 +4,13 @@ through one harness, metrics come back with the contract's keys."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from inference.evaluation import (
     SIX,
     clip_input,
+    compare_rows,
+    comparison_markdown,
     evaluate_motions,
     evaluation_noise,
     report_markdown,
@@ -15,6 +18,7 @@ from inference.evaluation import (
 )
 from inference.feature_codec import features_from_motion
 from inference.features import SL_CONTACT, observation_mask
+from inference.metrics import ClipMetrics
 
 KEYS = {"clips", "frames", "ga_deg", "la_deg", "jpe_cm", "jitter_ratio", "re2_m", "re5_m", "re10_m"}
 
@@ -70,3 +74,26 @@ def test_face_forward_turns_the_start_to_plus_x():
     assert abs(np.arctan2(fwd[1], fwd[0])) < 1e-9
     np.testing.assert_allclose(back.root[0, :2], 0.0, atol=1e-12)
     np.testing.assert_allclose(back.joints(), face_forward(m).joints(), atol=1e-9)
+
+
+def test_comparisons_pair_the_model_with_each_baseline_scored_on_the_same_set():
+    def clips(ga):
+        return [ClipMetrics(f"c{k}", 40, g * 40, 0.0, 0.0, 0.0, 0.0, 0) for k, g in enumerate(ga)]
+
+    rng = np.random.default_rng(1)
+    hard = rng.uniform(10, 40, 30)
+    per_clip = {
+        ("6 sites", "diffusion"): clips(hard), ("6 sites", "regressor"): clips(hard + 1 + rng.normal(0, 0.2, 30)),
+        ("6 sites", "floor"): clips(hard + 20),
+        ("2 sites", "diffusion"): clips(hard + 5), ("2 sites", "floor"): clips(hard + 5 + rng.normal(0, 3, 30)),
+    }  # the regressor's 2-site weights are missing: no row for it
+    rows = compare_rows(per_clip)
+    assert [(r["label"], r["baseline"]) for r in rows] == [("6 sites", "regressor"), ("6 sites", "floor"),
+                                                           ("2 sites", "floor")]
+    assert rows[0]["decided"] and rows[0]["high"] < 0 and rows[0]["model_lower"] == 30
+    assert rows[1]["difference"] == pytest.approx(-20.0)
+    assert rows[2]["low"] < rows[2]["difference"] < rows[2]["high"]
+    text = comparison_markdown(rows)
+    assert "| 6 sites | diffusion | floor | ga_deg | -20.00 | [-20.00, -20.00] | 30 of 30 |" in text
+    assert ("(not settled)" in text) == (not rows[2]["decided"])
+    assert comparison_markdown([]) == ""

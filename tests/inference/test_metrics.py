@@ -8,11 +8,13 @@ import pytest
 from inference.body import Body, forward_kinematics
 from inference.metrics import (
     EVAL_SEGMENTS,
+    ClipMetrics,
     evaluate_clip,
     global_angle_error,
     jitter,
     joint_position_error,
     local_angle_error,
+    paired_difference,
     root_error,
     summarize,
 )
@@ -111,3 +113,59 @@ def test_summary_pools_frames_and_reports_none():
     assert 1.0 < s["jitter_ratio"] < 2.0
     empty = summarize([])
     assert empty["ga_deg"] is None and empty["jitter_ratio"] is None and empty["frames"] == 0
+
+
+def _clips(ga_per_frame, frames, prefix="c") -> list[ClipMetrics]:
+    """Clip metrics with the given per-clip mean GA (deg) and lengths; other sums zero."""
+    return [ClipMetrics(f"{prefix}{k}", int(n), float(g) * int(n), 0.0, 0.0, 0.0, 0.0, 0)
+            for k, (g, n) in enumerate(zip(ga_per_frame, frames, strict=True))]
+
+
+def test_paired_difference_of_a_constant_offset_is_exact():
+    frames = np.arange(20, 80)
+    ga = np.linspace(10.0, 40.0, len(frames))
+    a, b = _clips(ga, frames), _clips(ga + 2.0, frames)
+    d = paired_difference(a, b)
+    assert d.difference == pytest.approx(-2.0)
+    assert (d.low, d.high) == pytest.approx((-2.0, -2.0))
+    assert d.decided and d.a_lower == len(frames) and d.clips == len(frames)
+    same = paired_difference(a, a)
+    assert same.difference == 0.0 and not same.decided and same.a_lower == 0
+
+
+def test_paired_interval_covers_the_lead_with_the_width_the_clip_sample_allows():
+    rng = np.random.default_rng(3)
+    widths = {}
+    for n in (60, 240):
+        frames = rng.integers(20, 60, n)
+        hard = rng.uniform(10.0, 50.0, n)  # clip difficulty, shared by both models
+        lead = 1.0 + rng.normal(0.0, 3.0, n)  # B worse than A by 1 deg on average, clip to clip sd 3
+        d = paired_difference(_clips(hard, frames), _clips(hard + lead, frames))
+        pooled = -np.sum(lead * frames) / np.sum(frames)
+        assert d.difference == pytest.approx(pooled)
+        assert d.low < pooled < d.high
+        widths[n] = d.high - d.low
+    # a mean over n clips: the interval is about 2 x 1.96 x 3 / sqrt(n) wide, and halves with 4x the clips
+    assert 0.9 < widths[60] < 2.4
+    assert 1.5 < widths[60] / widths[240] < 2.7
+
+
+def test_pairing_removes_the_clip_difficulty_from_the_interval():
+    """Two models 0.5 deg apart on every clip, on clips from 5 to 60 deg: paired, the lead is
+    certain; resampling the models' clips independently would bury it in the spread."""
+    rng = np.random.default_rng(0)
+    n = 60
+    frames = rng.integers(20, 60, n)
+    hard = rng.uniform(5.0, 60.0, n)
+    d = paired_difference(_clips(hard, frames), _clips(hard + 0.5 + rng.normal(0, 0.1, n), frames))
+    assert d.decided and d.high < -0.4 and d.low > -0.6
+
+
+def test_paired_difference_rejects_unpaired_clips_and_pooled_ratios():
+    a = _clips([10.0, 12.0], [30, 40])
+    with pytest.raises(ValueError, match="same clips"):
+        paired_difference(a, _clips([10.0, 12.0], [30, 41]))
+    with pytest.raises(ValueError, match="same clips"):
+        paired_difference(a, _clips([10.0, 12.0], [30, 40], prefix="x"))
+    with pytest.raises(ValueError, match="per-frame"):
+        paired_difference(a, a, metric="jitter_ratio")
