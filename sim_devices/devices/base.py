@@ -137,7 +137,7 @@ class SimDevice(ABC):
         self.name = name or getattr(source, "site", self.protocol)
         self.rng = np.random.default_rng(self.faults.seed)
         self.counter = 0
-        self.stats = {"packets": 0, "sent": 0, "dropped": 0, "corrupted": 0, "disconnects": 0, "overruns": 0}
+        self.stats = {"packets": 0, "sent": 0, "dropped": 0, "corrupted": 0, "disconnects": 0, "overruns": 0, "skipped": 0}
         self._in_burst = False
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -211,8 +211,20 @@ class SimDevice(ABC):
                 self._tick(t)
                 next_tick += period
                 if next_tick < now - 10 * period:  # fell far behind (machine busy): skip, do not burst
-                    next_tick = now + period
+                    missed = int((now - next_tick) / period)
+                    self._skip_ticks(missed)
+                    next_tick += missed * period
             self._service(max(0.0, min(next_tick - time.monotonic(), 0.05)))
+
+    def _skip_ticks(self, n: int) -> None:
+        """Ticks this process was too busy to send. A real sensor's oscillator does
+        not wait for the host: its counter (the only clock a BNO08x RVC stream has)
+        runs on, and the host sees the missed packets as a counter gap. Holding the
+        counter instead made the device clock run slow by the stall, and the hub's
+        clock fit then placed every later sample that much too early (seen once in
+        CI: a head stream judged stale for a whole test)."""
+        self.counter += n
+        self.stats["skipped"] += n
 
     def _tick(self, t: float) -> None:
         counter = self.counter

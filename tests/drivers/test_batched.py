@@ -230,3 +230,33 @@ def test_hub_selector_survives_an_unplugged_xbus_and_forwards_events():
     finally:
         for sim in sims.values():
             sim.stop()
+
+
+def test_a_stalled_rvc_twin_keeps_its_clock_so_the_hub_keeps_the_stream():
+    """A twin whose thread the machine does not run for 0.3 s (a busy CI worker) skips
+    the ticks it missed, as a real sensor's packets would be missed: its counter, the
+    only clock an RVC stream has, keeps pace with the wall. Holding the counter made the
+    hub's clock fit place every later sample 0.3 s early, so the stream was judged
+    stale for many seconds after (the CI failure of the unplugged-Xbus test)."""
+    sig = spinning_signals(("head",), seconds=20)
+    sim = make_sim_device("bno08x-rvc", sig, "head", name="head").start()
+    stall = {"pending": False}
+    service = sim._service  # noqa: SLF001
+
+    def stalling_service(timeout: float) -> None:
+        if stall["pending"]:
+            stall["pending"] = False
+            time.sleep(0.3)
+        service(timeout)
+
+    sim._service = stalling_service  # noqa: SLF001 - the twin's own loop, descheduled once
+    try:
+        with Hub({"head": drivers.make_device(sim.url)}, latency=0.05) as hub:
+            list(hub.frames(duration=1.0))  # the clock fit settles
+            stall["pending"] = True
+            list(hub.frames(duration=0.5))
+            assert sim.stats["skipped"] >= 20
+            present = np.array([f.present[0] for f in hub.frames(duration=1.5)])
+            assert present.mean() > 0.9, sim.stats
+    finally:
+        sim.stop()

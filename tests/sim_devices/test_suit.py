@@ -36,10 +36,12 @@ def test_suit_through_hub_mixed_protocols():
     print("present", present.mean(axis=0), "tracks", why)  # shown by pytest when the assertion fails
     assert present.mean(axis=0).min() > 0.9, present.mean(axis=0)
     assert np.mean([f.insole_present for f in late]) > 0.9
-    # every device ran its own clock (offsets of 100 s and more); the hub mapped them all onto one
-    for tr in hub.tracks.values():
-        if tr.name != "insoles":
-            assert tr.clock.offset is not None and abs(tr.clock.offset) > 50
+    # every device ran its own clock (100 s apart); the hub mapped them all onto one. The
+    # offsets are host-clock minus device-clock, so only their spread is fixed: their size
+    # follows the host's uptime (an absolute bound failed on a freshly booted machine)
+    offsets = [tr.clock.offset for tr in hub.tracks.values() if tr.name != "insoles"]
+    assert None not in offsets
+    assert np.diff(sorted(offsets)).min() > 50, offsets
     # two MTi on one CAN bus stay apart
     assert not np.allclose(late[-1].gyro[1], late[-1].gyro[2])
 
