@@ -137,7 +137,7 @@ class SimDevice(ABC):
         self.name = name or getattr(source, "site", self.protocol)
         self.rng = np.random.default_rng(self.faults.seed)
         self.counter = 0
-        self.stats = {"packets": 0, "sent": 0, "dropped": 0, "corrupted": 0, "disconnects": 0, "overruns": 0, "skipped": 0}
+        self.stats = dict.fromkeys(("packets", "sent", "dropped", "corrupted", "disconnects", "overruns", "skipped"), 0)
         self._in_burst = False
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
