@@ -88,12 +88,14 @@ def train_set(
     could be learnt as part of the movement; tried in session 5 against the unseen actor,
     it came out level with a control run; re-scored with the mean start (session 6) it beat
     the control by 0.5-0.7 deg with only the shanks worn (NOTES.md). The model shipped since
-    session 7 is trained with 0.8, 0.9, 1.1 and 1.25 (configs/shipped_diffusion.json).
+    session 7 is trained with 0.8, 0.9, 1.1 and 1.25 (configs/shipped_diffusion.json; session 7 and 10:
+    configs/s7_diffusion.json, configs/s10_diffusion_ft1_energy_per_window.json).
     Bandai (many actors and styles) is left at its own speed.
 
     ``energy_per``: "trial" draws clips by their mean kinetic energy (the paper's words,
     sec. 3.3); "window" also weighs each clip by its length, so each window is drawn by its
-    clip's energy whatever the clip's length (``dataset.clip_weights``)."""
+    clip's energy whatever the clip's length (``dataset.clip_weights``). The shipped
+    diffusion model (session 11) is trained with "window" from its first step."""
     if energy_per not in ("trial", "window"):
         raise ValueError(f"energy_per must be 'trial' or 'window', not {energy_per!r}")
     files = train_files()
