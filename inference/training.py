@@ -97,6 +97,12 @@ class LossWeights:
     # model's capacity there (0 = the paper's uniform weighting over the window)
     last: float = 0.0
     fk_last: float = 0.0
+    # swing amplitude of the legs: per window, the spread over time of each knee, ankle and
+    # toe position relative to the pelvis, predicted vs. true (metres). The pointwise terms
+    # above are all minimised by the conditional mean, which under-flexes an unmeasured
+    # thigh and shortens the stride the root correction walks (NOTES.md, session 11);
+    # this term compares amplitudes, not positions, so it pulls the other way
+    swing: float = 0.0
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -128,6 +134,13 @@ class TrainConfig:
     # model at its first call (``inpaint(start="mean")``). 1 = the top level is trained only
     # that way, so its answer becomes the mean estimate of the unknown features
     mean_start: float = 0.0
+    # sites whose orientations must be known for a window's swing loss term to count (by the
+    # share of its frames, ``sites_known_share``); empty = every window alike. The swing term
+    # asks for the true leg amplitude, which only the measurements can place: with the
+    # shanks unseen (pelvis and wrists) the step's phase is a guess, and an amplitude forced
+    # onto a guessed phase costs angle; with the pelvis unseen (shanks only) its sway is a
+    # guess too, and the pushed stride overshoots (NOTES.md, session 12)
+    swing_gate: list[str] = field(default_factory=list)
     steps: int = 100_000  # total optimiser steps (also the horizon of the LR decay)
     batch: int = 64  # global batch (split over ranks)
     window: int = WINDOW
@@ -465,12 +478,26 @@ def contact_offsets_for(offsets: np.ndarray, heights: np.ndarray) -> np.ndarray:
     return np.stack([Body.from_offsets(o, float(h)).contact_offsets for o, h in zip(offsets, heights)])
 
 
+def sites_known_share(known: Tensor, sites: list[str] | tuple[str, ...]) -> Tensor:
+    """(B,) share of each window's frames in which every one of `sites` has its orientation
+    known, from a (B, N, F) known-entry mask: the swing term's per-window weight
+    (``TrainConfig.swing_gate``)."""
+    cols = observation_mask(list(sites))
+    cols[SL_ROT.stop:] = False  # their orientations; the accelerations come with them
+    return known[..., torch.as_tensor(cols)].all(-1).float().mean(-1)
+
+
+# knees, ankles and toes: the origins of the shank, foot and toe segments
+_LEG_JOINTS = [SEGMENT_INDEX[n] for n in ("l_shank", "r_shank", "l_foot", "r_foot", "l_toes", "r_toes")]
+
+
 def motion_losses(pred_n: Tensor, true_n: Tensor, mean: Tensor, std: Tensor, offsets: Tensor,
-                  contact_local: Tensor) -> dict[str, Tensor]:
+                  contact_local: Tensor, swing_weight: Tensor | None = None) -> dict[str, Tensor]:
     """Unweighted loss terms (scalars) for predicted vs. true normalised windows (B, N, F).
 
     offsets (B, 24, 3) rest bone offsets; contact_local (B, 4, 3) heel/toe points on their
-    segments. See ``LossWeights`` for the units.
+    segments. swing_weight (B,) weighs each window's swing term (``sites_known_share``; None =
+    1 for all). See ``LossWeights`` for the units.
     """
     B, N, _ = pred_n.shape
     pred = pred_n * std + mean
@@ -492,6 +519,12 @@ def motion_losses(pred_n: Tensor, true_n: Tensor, mean: Tensor, std: Tensor, off
     terms["fk"] = fk_err.mean()
     terms["last"] = F.mse_loss(pred_n[:, -1], true_n[:, -1])
     terms["fk_last"] = fk_err[:, -1].mean()
+
+    lp, lt = jp[:, :, _LEG_JOINTS], jt[:, :, _LEG_JOINTS]
+    spread_p = (lp.var(dim=1, unbiased=False) + 1e-8).sqrt()  # eps: no inf gradient at rest
+    spread_t = (lt.var(dim=1, unbiased=False) + 1e-8).sqrt()
+    swing = (spread_p - spread_t).square().sum(-1).mean(-1)  # (B,)
+    terms["swing"] = swing.mean() if swing_weight is None else (swing_weight * swing).mean()
 
     pp = torch.cumsum(pred[..., SL_DP], dim=1)
     pt = torch.cumsum(true[..., SL_DP], dim=1)
@@ -616,6 +649,7 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
         offsets = torch.where(flip[:, None, None], mirror_points(offsets, SEGMENTS), offsets)
         contact_local = torch.where(flip[:, None, None], mirror_points(contact_local, CONTACTS), contact_local)
     xn = (x - ctx.mean) / ctx.std
+    m = None  # known entries, where the model is told them
     if cfg.kind == "diffusion":
         t = training_levels(cfg, B, gen, ctx.schedule.T)
         noise = torch.randn(xn.shape, generator=gen)
@@ -636,7 +670,8 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
     else:
         m = torch.as_tensor(random_observation_mask(rng, B, x.shape[1], cfg.mask))
         pred = model(torch.where(m, xn, torch.zeros(())), m, height)
-    terms = motion_losses(pred, xn, ctx.mean, ctx.std, offsets, contact_local)
+    gate = sites_known_share(m, cfg.swing_gate) if cfg.swing_gate and m is not None else None
+    terms = motion_losses(pred, xn, ctx.mean, ctx.std, offsets, contact_local, gate)
     loss = total_loss(terms, cfg.loss)
     return loss, {k: float(v.detach()) for k, v in terms.items()}
 

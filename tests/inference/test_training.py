@@ -51,7 +51,7 @@ def _batch(contacts: float | None = None):
 def test_losses_zero_for_perfect_prediction_positive_otherwise():
     xn, mean, std, off, cl = _batch(contacts=0.0)
     terms = motion_losses(xn.clone(), xn, mean, std, off, cl)
-    assert set(terms) == {"simple", "vel", "fk", "drift", "slide", "last", "fk_last"}
+    assert set(terms) == {"simple", "vel", "fk", "drift", "slide", "last", "fk_last", "swing"}
     for k, v in terms.items():
         assert float(v) == pytest.approx(0.0, abs=1e-9), k
     # perturb orientations, root motion and contacts: every term turns positive
@@ -64,6 +64,44 @@ def test_losses_zero_for_perfect_prediction_positive_otherwise():
     # slide vanishes where feet are predicted off the ground even if they move
     pert[..., SL_CONTACT] = (0.0 - mean[SL_CONTACT]) / std[SL_CONTACT]
     assert float(motion_losses(pert, xn, mean, std, off, cl)["slide"]) == 0.0
+
+
+def test_swing_compares_the_legs_amplitude_not_their_positions():
+    """The swing term is blind to when the legs are where (a window played backwards keeps
+    every frame's spread) and sees how far they move (a damped copy, as a conditional-mean
+    prediction of an unmeasured thigh would be, under-swings)."""
+    xn, mean, std, off, cl = _batch(contacts=0.0)
+    backwards = motion_losses(xn.flip(1), xn, mean, std, off, cl)
+    assert float(backwards["fk"]) > 1e-4
+    assert float(backwards["swing"]) == pytest.approx(0.0, abs=1e-9)
+    x = xn * std + mean
+    still = x.clone()
+    still[..., SL_ROT] = x[:, :1, SL_ROT]  # every frame's pose = the window's first
+    damped = motion_losses((still - mean) / std, xn, mean, std, off, cl)
+    assert float(damped["swing"]) > 1e-4
+
+
+def test_swing_is_asked_for_only_where_pelvis_and_shanks_are_known():
+    from inference.features import observation_mask
+    from inference.training import sites_known_share
+
+    n = 10
+    legs = torch.as_tensor(observation_mask(["pelvis", "l_shank", "r_shank", "head"]))
+    known = torch.zeros(4, n, legs.numel(), dtype=torch.bool)
+    known[0] = legs
+    known[1, n // 2:] = legs  # seen in the second half of the window
+    known[2] = torch.as_tensor(observation_mask(["pelvis", "l_wrist", "r_wrist"]))
+    known[3] = torch.as_tensor(observation_mask(["l_shank", "r_shank"]))  # thighs' upper end unseen
+    assert sites_known_share(known, ["pelvis", "l_shank", "r_shank"]).tolist() == [1.0, 0.5, 0.0, 0.0]
+    xn, mean, std, off, cl = _batch(contacts=0.0)
+    x = xn * std + mean
+    still = x.clone()
+    still[..., SL_ROT] = x[:, :1, SL_ROT]
+    pred = (still - mean) / std
+    gate = torch.tensor([1.0, 0.0, 0.0, 0.0])
+    full = motion_losses(pred, xn, mean, std, off, cl)["swing"]
+    gated = motion_losses(pred, xn, mean, std, off, cl, gate)["swing"]
+    assert 0 < float(gated) < float(full)
 
 
 def test_losses_differentiable():
