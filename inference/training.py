@@ -61,7 +61,7 @@ from .features import (
 )
 from .regressor import MaskConfig, random_observation_mask
 from .rotations import axis_angle_to_matrix, matrix_angle_between, matrix_to_rot6d, rot6d_to_matrix
-from .skeleton import CONTACTS, METRIC_EXCLUDED, N_SEGMENTS, SEGMENT_INDEX, SEGMENTS, SITES
+from .skeleton import CONTACTS, METRIC_EXCLUDED, N_SEGMENTS, SEGMENT_INDEX, SEGMENTS, SITES, parse_sites
 
 CHECKPOINT_FORMAT = "imucap-train-v1"
 LAST = "last.pt"
@@ -194,6 +194,8 @@ class TrainConfig:
         cfg = cls(**d)
         if cfg.kind not in ("diffusion", "regressor"):
             raise ValueError(f"unknown model kind {cfg.kind!r}")
+        # a misspelt site would otherwise surface as a KeyError at the first batch
+        cfg.swing_gate = parse_sites(cfg.swing_gate)
         return cfg
 
     @classmethod

@@ -389,6 +389,18 @@ def test_loss_weights_from_config():
     assert cfg.loss == LossWeights(fk=3.0) and cfg.model.layers == 2 and cfg.model.d_model == ModelConfig().d_model
     with pytest.raises(ValueError):
         TrainConfig.from_dict({"nonsense": 1})
+    with pytest.raises(ValueError, match="pelvs"):
+        TrainConfig.from_dict({"swing_gate": ["pelvs", "l_shank"]})
+
+
+@pytest.mark.parametrize("kind", ["diffusion", "regressor"])
+def test_a_gated_swing_term_trains_and_is_logged(tmp_path, kind):
+    cfg = _cfg(kind, steps=2, cond_prob=1.0, loss={"swing": 50.0},
+               mask={"p_common_set": 1.0}, swing_gate=["pelvis", "l_shank", "r_shank"])
+    train(cfg, tmp_path / "run", progress=False)
+    logged = [json.loads(line) for line in (tmp_path / "run" / "train.jsonl").read_text().splitlines()]
+    swing = [e["swing"] for e in logged if e.get("event") == "train"]
+    assert len(swing) == 2 and all(math.isfinite(v) and v >= 0 for v in swing)
 
 
 def test_init_from_starts_a_new_run_from_another_runs_weights(tmp_path):
