@@ -100,7 +100,7 @@ class LossWeights:
     # swing amplitude of the legs: per window, the spread over time of each knee, ankle and
     # toe position relative to the pelvis, predicted vs. true (metres). The pointwise terms
     # above are all minimised by the conditional mean, which under-flexes an unmeasured
-    # thigh and shortens the stride the root correction walks (NOTES.md, session 11);
+    # thigh and shortens the stride the root correction walks (NOTES.md, sessions 11-12);
     # this term compares amplitudes, not positions, so it pulls the other way
     swing: float = 0.0
 
@@ -138,8 +138,9 @@ class TrainConfig:
     # share of its frames, ``sites_known_share``); empty = every window alike. The swing term
     # asks for the true leg amplitude, which only the measurements can place: with the
     # shanks unseen (pelvis and wrists) the step's phase is a guess, and an amplitude forced
-    # onto a guessed phase costs angle; with the pelvis unseen (shanks only) its sway is a
-    # guess too, and the pushed stride overshoots (NOTES.md, session 12)
+    # onto a guessed phase costs angle. With the pelvis unseen (shanks only) a short-step
+    # walker already gets the typical stride, and the push adds to it; gating on the pelvis
+    # too softened that only a little (NOTES.md, session 12)
     swing_gate: list[str] = field(default_factory=list)
     steps: int = 100_000  # total optimiser steps (also the horizon of the LR decay)
     batch: int = 64  # global batch (split over ranks)
