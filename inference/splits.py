@@ -8,6 +8,7 @@ as a second validation set for the root-error figures. Everything else is traine
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -15,6 +16,7 @@ import numpy as np
 
 from .dataset import FeatureDataset, build_dataset, clip_weights
 from .loaders import find_motion_files
+from .plausibility import implausible_feature_frames
 from .training import cache_root, data_root
 
 HELD_OUT_BANDAI_STYLE = "_sad_"
@@ -78,9 +80,25 @@ def balance_sources(ds: FeatureDataset, hdm05_share: float = HDM05_SHARE) -> Fea
     return ds
 
 
+def drop_implausible_clips(ds: FeatureDataset) -> list[str]:
+    """Never draw a clip with a frame no body makes (``plausibility``): its sampling weight
+    becomes 0. Whole clips, not frames, because a window is 3 s of one clip and cutting
+    frames out of it would join motions that never met. Returns the dropped clips' names."""
+    dropped = []
+    w = ds.weights.astype(np.float64).copy()
+    for i, clip in enumerate(ds.clips):
+        if implausible_feature_frames(clip).any():
+            w[i] = 0.0
+            dropped.append(str(ds.names[i]))
+    if w.sum() <= 0:
+        raise ValueError("every clip holds an implausible frame; nothing left to train on")
+    ds.weights = w / w.sum()
+    return dropped
+
+
 def train_set(
     progress: bool = True, hdm05_share: float = HDM05_SHARE, hdm05_speeds: Sequence[float] = (),
-    energy_per: str = "trial",
+    energy_per: str = "trial", drop_implausible: bool = False,
 ) -> FeatureDataset:
     """The training split. ``hdm05_speeds``: extra copies of the HDM05 clips performed at
     these speed factors (``Motion.at_speed``), sharing the HDM05 half of the draws. Two
@@ -95,7 +113,10 @@ def train_set(
     ``energy_per``: "trial" draws clips by their mean kinetic energy (the paper's words,
     sec. 3.3); "window" also weighs each clip by its length, so each window is drawn by its
     clip's energy whatever the clip's length (``dataset.clip_weights``). The shipped
-    diffusion model (session 11) is trained with "window" from its first step."""
+    diffusion model (session 11) is trained with "window" from its first step.
+
+    ``drop_implausible``: clips with a frame no body makes are never drawn
+    (``drop_implausible_clips``); their names go to stderr when ``progress``."""
     if energy_per not in ("trial", "window"):
         raise ValueError(f"energy_per must be 'trial' or 'window', not {energy_per!r}")
     files = train_files()
@@ -105,6 +126,11 @@ def train_set(
         base = FeatureDataset.concat([base, *(_build(hdm, progress, float(s)) for s in hdm05_speeds)])
     if energy_per == "window":
         base.weights = clip_weights(base.energy, [len(c) for c in base.clips])
+    if drop_implausible:
+        dropped = drop_implausible_clips(base)
+        if progress:
+            print(f"train_set: {len(dropped)} clip(s) with implausible frames never drawn: {', '.join(dropped)}",
+                  file=sys.stderr)
     return balance_sources(base, hdm05_share)
 
 

@@ -169,3 +169,21 @@ def test_paired_difference_rejects_unpaired_clips_and_pooled_ratios():
         paired_difference(a, _clips([10.0, 12.0], [30, 40], prefix="x"))
     with pytest.raises(ValueError, match="per-frame"):
         paired_difference(a, a, metric="jitter_ratio")
+
+
+def test_ga_is_also_given_over_the_frames_whose_truth_a_body_can_make():
+    from inference.body import tpose
+    from inference.rotations import axis_angle_to_matrix
+    from inference.skeleton import SEGMENT_INDEX
+
+    T = 10
+    R_true = tpose(T)
+    R_true[6:, SEGMENT_INDEX["r_foot"]] = axis_angle_to_matrix(np.array([0.0, np.pi, 0.0]))  # solver's flip
+    R_pred = tpose(T)  # a model that keeps the foot where a foot can be
+    z = np.zeros((T, 3))
+    j = np.zeros((T, 24, 3))
+    cm = evaluate_clip("c", R_pred, z, j, R_true, z, j, fps=20.0)
+    s = summarize([cm])
+    assert cm.implausible == 4 and s["implausible_truth_share"] == pytest.approx(0.4)
+    assert s["ga_deg"] == pytest.approx(0.4 * 180.0 / len(EVAL_SEGMENTS))
+    assert s["ga_deg_plausible_truth"] == pytest.approx(0.0, abs=1e-6)
