@@ -485,9 +485,16 @@ def sites_known_share(known: Tensor, sites: list[str] | tuple[str, ...]) -> Tens
     """(B,) share of each window's frames in which every one of `sites` has its orientation
     known, from a (B, N, F) known-entry mask: the swing term's per-window weight
     (``TrainConfig.swing_gate``)."""
+    return known[..., _orientation_columns(tuple(sites))].all(-1).float().mean(-1)
+
+
+@functools.lru_cache(maxsize=8)
+def _orientation_columns(sites: tuple[str, ...]) -> Tensor:
+    """Feature columns of the sites' orientations, built once: the gate runs on every
+    training step (the accelerations come with the orientations, so they need no check)."""
     cols = observation_mask(list(sites))
-    cols[SL_ROT.stop:] = False  # their orientations; the accelerations come with them
-    return known[..., torch.as_tensor(cols)].all(-1).float().mean(-1)
+    cols[SL_ROT.stop:] = False
+    return torch.as_tensor(cols)
 
 
 # knees, ankles and toes: the origins of the shank, foot and toe segments

@@ -66,6 +66,15 @@ def test_losses_zero_for_perfect_prediction_positive_otherwise():
     assert float(motion_losses(pert, xn, mean, std, off, cl)["slide"]) == 0.0
 
 
+def _frozen_pose(xn, mean, std):
+    """The windows (normalised) with every frame's pose set to the window's first: legs that
+    do not swing at all."""
+    x = xn * std + mean
+    still = x.clone()
+    still[..., SL_ROT] = x[:, :1, SL_ROT]
+    return (still - mean) / std
+
+
 def test_swing_compares_the_legs_amplitude_not_their_positions():
     """The swing term is blind to when the legs are where (a window played backwards keeps
     every frame's spread) and sees how far they move (a damped copy, as a conditional-mean
@@ -74,10 +83,7 @@ def test_swing_compares_the_legs_amplitude_not_their_positions():
     backwards = motion_losses(xn.flip(1), xn, mean, std, off, cl)
     assert float(backwards["fk"]) > 1e-4
     assert float(backwards["swing"]) == pytest.approx(0.0, abs=1e-9)
-    x = xn * std + mean
-    still = x.clone()
-    still[..., SL_ROT] = x[:, :1, SL_ROT]  # every frame's pose = the window's first
-    damped = motion_losses((still - mean) / std, xn, mean, std, off, cl)
+    damped = motion_losses(_frozen_pose(xn, mean, std), xn, mean, std, off, cl)
     assert float(damped["swing"]) > 1e-4
 
 
@@ -94,10 +100,7 @@ def test_swing_is_asked_for_only_where_pelvis_and_shanks_are_known():
     known[3] = torch.as_tensor(observation_mask(["l_shank", "r_shank"]))  # thighs' upper end unseen
     assert sites_known_share(known, ["pelvis", "l_shank", "r_shank"]).tolist() == [1.0, 0.5, 0.0, 0.0]
     xn, mean, std, off, cl = _batch(contacts=0.0)
-    x = xn * std + mean
-    still = x.clone()
-    still[..., SL_ROT] = x[:, :1, SL_ROT]
-    pred = (still - mean) / std
+    pred = _frozen_pose(xn, mean, std)
     gate = torch.tensor([1.0, 0.0, 0.0, 0.0])
     full = motion_losses(pred, xn, mean, std, off, cl)["swing"]
     gated = motion_losses(pred, xn, mean, std, off, cl, gate)["swing"]
