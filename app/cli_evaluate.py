@@ -64,6 +64,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--against", default=None, metavar="SPEC",
                    help="also score this model (same forms as --model) on the same clips and sensors, and "
                         "report --model minus it per metric with a bootstrap interval over clips")
+    p.add_argument("--repair-truth", action="store_true",
+                   help="put back feet the motion-capture solver broke (ankle past 90 deg) before synthesizing and "
+                        "scoring (inference.plausibility.repair_feet); off by default so figures stay comparable")
     p.add_argument("--limit", type=int, default=None, help="only the first N motion files (sorted)")
     p.add_argument("--seed", type=int, default=0, help="seed of sensor noise and inpainting noise")
     # default 1: the live loop is one small model call per step, and with more threads two
@@ -119,6 +122,17 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.time()
     motions = load_motions(args.data, args.limit)
     print(f"evaluate: {len(motions)} clip(s) loaded", file=sys.stderr)
+    repaired = None
+    if args.repair_truth:
+        from inference.plausibility import repair_feet
+
+        fixes = [repair_feet(m) for m in motions]
+        motions = [m for m, _ in fixes]
+        repaired = {"clips": sum(r.changed > 0 for _, r in fixes), "twisted_frames": sum(r.twisted for _, r in fixes),
+                    "interpolated_frames": sum(r.interpolated for _, r in fixes),
+                    "left_broken_frames": sum(r.left_broken for _, r in fixes),
+                    "source_frames": sum(m.n_frames for m in motions)}
+        print(f"evaluate: feet repaired in {repaired['clips']} clip(s)", file=sys.stderr)
 
     models: dict[str, object] = {}
 
@@ -148,6 +162,7 @@ def run(args: argparse.Namespace) -> int:
     keep = args.export_dir is not None
     result, clips = one(args.model, sites, args.insoles, keep=keep, label=f"{args.model} {','.join(sites)}")
     result["per_clip"] = [{"name": c.name, **c.metrics.summary()} for c in clips]
+    result["truth_repaired"] = repaired
 
     if args.against is not None:
         other, other_clips = one(args.against, sites, args.insoles, label=f"{args.against} {','.join(sites)}")
@@ -190,9 +205,11 @@ def run(args: argparse.Namespace) -> int:
         noise_txt = "with the sensor noise model" if noise is not None else "without sensor noise"
         text = report_markdown(rows) + ("\n" + comparison_markdown(comparisons) if comparisons else "") + (
             f"\n{len(motions)} clip(s) from {', '.join(map(str, args.data))}; signals synthesized {noise_txt}; "
-            f"seed {args.seed}; live poser frame by frame at 20 Hz.\n\n"
+            f"seed {args.seed}; live poser frame by frame at 20 Hz"
+            f"{'; broken feet in the truth repaired (--repair-truth)' if repaired else ''}.\n\n"
             f"Reproduce: `imucap evaluate --data {' '.join(map(str, args.data))}"
-            f"{' --limit ' + str(args.limit) if args.limit else ''} --json --report {args.report}`\n"
+            f"{' --limit ' + str(args.limit) if args.limit else ''}{' --repair-truth' if repaired else ''}"
+            f" --json --report {args.report}`\n"
         )
         args.report.parent.mkdir(parents=True, exist_ok=True)
         args.report.write_text(text)

@@ -16,7 +16,7 @@ import numpy as np
 
 from .dataset import FeatureDataset, build_dataset, clip_weights
 from .loaders import find_motion_files
-from .plausibility import implausible_feature_frames
+from .plausibility import implausible_feature_frames, repair_feet
 from .training import cache_root, data_root
 
 HELD_OUT_BANDAI_STYLE = "_sad_"
@@ -42,18 +42,23 @@ def root_val_files(root: Path | None = None) -> list[Path]:
     return [f for f in find_motion_files((root or data_root()) / "bandai" / "d1") if HELD_OUT_BANDAI_STYLE in f.name]
 
 
-def _build(files: list[Path], progress: bool = True, speed: float = 1.0) -> FeatureDataset:
+def _build(files: list[Path], progress: bool = True, speed: float = 1.0, repair: bool = False) -> FeatureDataset:
     """The cached feature dataset of ``files``, performed at ``speed`` (copies at another
-    speed get their own cache and names ``<file>@x<speed>``, so a clip and its copies stay apart)."""
+    speed get their own cache and names ``<file>@x<speed>``, so a clip and its copies stay apart),
+    with broken feet repaired (``plausibility.repair_feet``) when ``repair``."""
     loader = None
-    if speed != 1.0:
+    if speed != 1.0 or repair:
         from .loaders import load_motion
 
         def loader(f: Path):
-            return load_motion(f).at_speed(speed)
+            m = load_motion(f)
+            if repair:
+                m = repair_feet(m)[0]
+            return m.at_speed(speed) if speed != 1.0 else m
 
+    variant = ",".join(v for v in ("" if speed == 1.0 else f"speed={speed:g}", "repair_feet" if repair else "") if v)
     ds = build_dataset(files, cache_root(), loader=loader, finder=lambda paths: [Path(p) for p in paths],
-                       progress=progress, variant="" if speed == 1.0 else f"speed={speed:g}")
+                       progress=progress, variant=variant)
     if speed != 1.0:
         ds.names = [f"{n}@x{speed:g}" for n in ds.names]
     return ds
@@ -98,7 +103,7 @@ def drop_implausible_clips(ds: FeatureDataset) -> list[str]:
 
 def train_set(
     progress: bool = True, hdm05_share: float = HDM05_SHARE, hdm05_speeds: Sequence[float] = (),
-    energy_per: str = "trial", drop_implausible: bool = False,
+    energy_per: str = "trial", drop_implausible: bool = False, repair_implausible: bool = False,
 ) -> FeatureDataset:
     """The training split. ``hdm05_speeds``: extra copies of the HDM05 clips performed at
     these speed factors (``Motion.at_speed``), sharing the HDM05 half of the draws. Two
@@ -116,14 +121,17 @@ def train_set(
     diffusion model (session 11) is trained with "window" from its first step.
 
     ``drop_implausible``: clips with a frame no body makes are never drawn
-    (``drop_implausible_clips``); their names go to stderr when ``progress``."""
+    (``drop_implausible_clips``); their names go to stderr when ``progress``.
+    ``repair_implausible``: every clip is loaded through ``plausibility.repair_feet``, so a
+    clip keeps its squat or kick and loses only the solver's broken foot."""
     if energy_per not in ("trial", "window"):
         raise ValueError(f"energy_per must be 'trial' or 'window', not {energy_per!r}")
     files = train_files()
-    base = _build(files, progress)
+    base = _build(files, progress, repair=repair_implausible)
     if hdm05_speeds:
         hdm = [f for f in files if _is_hdm05(str(f))]
-        base = FeatureDataset.concat([base, *(_build(hdm, progress, float(s)) for s in hdm05_speeds)])
+        base = FeatureDataset.concat([base, *(_build(hdm, progress, float(s), repair_implausible)
+                                              for s in hdm05_speeds)])
     if energy_per == "window":
         base.weights = clip_weights(base.energy, [len(c) for c in base.clips])
     if drop_implausible:

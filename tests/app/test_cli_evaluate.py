@@ -175,3 +175,27 @@ def test_missing_weights_is_a_clear_error(capsys, data_dir, tmp_path, monkeypatc
 def test_unknown_site_is_rejected(capsys, data_dir):
     code, out, err = _run(capsys, "--data", str(data_dir), "--sensors", "pelvis,tail", "--model", "floor", "--json")
     assert code == 2 and out == "" and "tail" in err
+
+
+def test_repair_truth_puts_back_a_broken_foot_before_scoring(capsys, tmp_path):
+    from inference.rotations import axis_angle_to_matrix
+    from inference.skeleton import SEGMENT_INDEX
+
+    m = synthetic_motion(seconds=2.6, seed=1)
+    n = m.n_frames
+    flip = axis_angle_to_matrix(np.array([0.0, np.pi, 0.0]))  # the solver lost the right foot for 0.3 s
+    for seg in ("r_foot", "r_toes"):
+        m.rot[n // 2:n // 2 + int(0.3 * m.fps), SEGMENT_INDEX[seg]] = flip
+    write_motion_bvh(tmp_path / "broken.bvh", m)
+
+    args = ("--data", str(tmp_path), "--model", "floor", "--no-noise", "--json")
+    code, out, _ = _run(capsys, *args)
+    raw = json.loads(out)
+    code2, out2, err2 = _run(capsys, *args, "--repair-truth")
+    fixed = json.loads(out2)
+    assert code == code2 == 0
+    assert raw["truth_repaired"] is None and raw["implausible_truth_share"] > 0.05
+    assert fixed["truth_repaired"]["clips"] == 1 and fixed["truth_repaired"]["interpolated_frames"] > 0.3 * m.fps
+    assert fixed["implausible_truth_share"] == 0.0 and "repaired in 1 clip" in err2
+    # the standing floor's feet are flat: against the repaired truth they are nearer
+    assert fixed["ga_deg"] < raw["ga_deg"] - 0.5

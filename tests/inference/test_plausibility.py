@@ -6,8 +6,14 @@ import pytest
 from inference.body import Body, tpose
 from inference.dataset import FeatureDataset, motion_to_features
 from inference.motion import Motion
-from inference.plausibility import ankle_angles, implausible_feature_frames, implausible_frames
-from inference.rotations import axis_angle_to_matrix
+from inference.plausibility import (
+    REPAIR_MARGIN_S,
+    ankle_angles,
+    implausible_feature_frames,
+    implausible_frames,
+    repair_feet,
+)
+from inference.rotations import axis_angle_to_matrix, matrix_about_axis
 from inference.skeleton import SEGMENT_INDEX
 from inference.splits import drop_implausible_clips
 
@@ -53,3 +59,71 @@ def test_training_split_never_draws_a_clip_with_an_implausible_frame():
     assert set(drawn.tolist()) == {0, 2}
     with pytest.raises(ValueError, match="nothing left"):
         drop_implausible_clips(FeatureDataset.from_motions([squat_then_flipped_foot()], names=["flip"]))
+
+
+def squat(T: int = 120) -> Motion:
+    m = squat_then_flipped_foot(T, flip_from=T)
+    # the toes bent up 20 deg against the foot, so keeping their own rotation shows
+    m.rot[:, SEGMENT_INDEX["r_toes"]] = m.rot[:, SEGMENT_INDEX["r_foot"]] @ axis_angle_to_matrix(
+        np.array([0.0, -np.radians(20.0), 0.0]))
+    return m
+
+
+def test_a_foot_turned_half_a_turn_about_its_own_bone_is_turned_back():
+    good = squat()
+    bad = squat()
+    toes = SEGMENT_INDEX["r_toes"]
+    bone = good.body.offsets[toes] / np.linalg.norm(good.body.offsets[toes])
+    half = matrix_about_axis(bone, np.pi)
+    for seg in ("r_foot", "r_toes"):  # the toes ride along, as the solver wrote them
+        i = SEGMENT_INDEX[seg]
+        bad.rot[:, i] = good.rot[:, SEGMENT_INDEX["r_foot"]] @ half @ good.rot[:, SEGMENT_INDEX["r_foot"]].swapaxes(
+            -1, -2) @ good.rot[:, i]
+    assert implausible_frames(bad.rot).all()
+    np.testing.assert_allclose(bad.joints(), good.joints(), atol=1e-9)  # invisible in joint positions
+
+    fixed, report = repair_feet(bad)
+    assert report.twisted == len(bad.rot) and report.interpolated == 0 and report.left_broken == 0
+    np.testing.assert_allclose(fixed.rot, good.rot, atol=1e-9)
+
+
+def test_a_brief_failure_is_interpolated_from_the_plausible_frames_around_it():
+    good = squat()
+    bad = squat()
+    foot = SEGMENT_INDEX["r_foot"]
+    flip = axis_angle_to_matrix(np.array([0.0, np.pi, 0.0]))  # no twist about the bone undoes this
+    bend = good.rot[0, foot].T @ good.rot[0, SEGMENT_INDEX["r_toes"]]
+    bad.rot[50:60, foot] = flip
+    bad.rot[50:60, SEGMENT_INDEX["r_toes"]] = flip @ bend
+    assert implausible_frames(bad.rot)[50:60].all()
+
+    fixed, report = repair_feet(bad)
+    margin = round(REPAIR_MARGIN_S * bad.fps)
+    lo, hi = 50 - margin, 60 + margin
+    assert report.interpolated == hi - lo and report.twisted == 0
+    assert not implausible_frames(fixed.rot).any()
+    # everything outside the stretch and its margin, and every other segment, is untouched
+    keep = np.ones(len(bad.rot), dtype=bool)
+    keep[lo:hi] = False
+    np.testing.assert_array_equal(fixed.rot[keep], bad.rot[keep])
+    others = [i for i in range(fixed.rot.shape[1]) if i not in (foot, SEGMENT_INDEX["r_toes"])]
+    np.testing.assert_array_equal(fixed.rot[:, others], bad.rot[:, others])
+    # the ankle inside moves smoothly between its neighbours' values: the squat's own ankle
+    # is within a few degrees of the repair
+    ang = ankle_angles(fixed.rot)[:, 1]
+    assert np.abs(np.diff(ang[lo - 1:hi + 1])).max() < 2.0
+    np.testing.assert_allclose(ang[lo:hi], ankle_angles(good.rot)[lo:hi, 1], atol=2.5)  # linear in a curve
+    # the toes keep their bend against the foot
+    rel = fixed.rot[:, foot].swapaxes(-1, -2) @ fixed.rot[:, SEGMENT_INDEX["r_toes"]]
+    np.testing.assert_allclose(rel[lo:hi], np.broadcast_to(rel[0], rel[lo:hi].shape), atol=1e-9)
+
+
+def test_a_clip_broken_throughout_is_reported_and_left_as_it_is():
+    bad = squat_then_flipped_foot(60, flip_from=0)
+    fixed, report = repair_feet(bad)
+    assert report.left_broken == 60 and report.changed == 0
+    np.testing.assert_array_equal(fixed.rot, bad.rot)
+    plain = squat()
+    same, none = repair_feet(plain)
+    assert none.changed == 0 and none.left_broken == 0
+    np.testing.assert_array_equal(same.rot, plain.rot)
