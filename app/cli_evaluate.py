@@ -58,6 +58,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--smoothing", action=argparse.BooleanOptionalAction, default=True,
                    help="the poser's 1-Euro output filters (root, unmeasured orientations); --no-smoothing "
                         "scores the raw per-frame reconstructions")
+    p.add_argument("--mirror", action=argparse.BooleanOptionalAction, default=None,
+                   help="average each denoiser answer with the answer for the mirror-image window "
+                        "(default: what the model file says)")
     p.add_argument("--contact-detector", action=argparse.BooleanOptionalAction, default=True,
                    help="contacts for the root correction from the shank contact detector when both shanks are "
                         "measured (default); --no-contact-detector uses the model's own contact outputs")
@@ -149,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
                                           progress=progress, keep=keep, desc=f"{label or spec}",
                                           smoothing=args.smoothing,
                                           contact_detector="default" if args.contact_detector else None,
-                                          inpaint_noise=args.inpaint_noise)
+                                          inpaint_noise=args.inpaint_noise, mirror=args.mirror)
         summary.update({
             "model": str(spec), "kind": kind, "sensors": list(set_sites),
             "insoles": insoles, "steps": _steps_label(st, kind), "step_list": st if kind == "diffusion" else None,

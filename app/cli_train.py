@@ -59,6 +59,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--contact-threshold", type=float,
                    help="with --export: predicted contact value above which the root correction counts a foot "
                         "point as planted (default 0.5)")
+    p.add_argument("--mirror", action=argparse.BooleanOptionalAction, default=None,
+                   help="with --export: the poser averages each model answer with the answer for the mirror-image "
+                        "window (inference.mirror; twice the batch per call)")
     p.add_argument("--contact-detector", action="store_true",
                    help="train the shank contact detector (writes OUT/contact_detector.pt)")
     p.add_argument("--data", nargs="+", type=Path, metavar="PATH",
@@ -81,7 +84,8 @@ def run(args: argparse.Namespace) -> int:
 
             parse_steps(args.default_steps)  # reject a bad list now, not in the poser
         poser = {k: v for k, v in (("inpaint_mode", args.inpaint_mode), ("history", args.history),
-                                   ("noise", args.noise), ("contact_threshold", args.contact_threshold))
+                                   ("noise", args.noise), ("contact_threshold", args.contact_threshold),
+                                   ("mirror", args.mirror))
                  if v is not None}
         export_model(args.out / LAST, args.export, fp16=args.fp16, default_steps=args.default_steps, poser=poser)
         print(json.dumps({"exported": str(args.export), "fp16": args.fp16}))

@@ -115,7 +115,7 @@ class DetectorTraining:
 
 def clip_windows(clips: Sequence[np.ndarray], context: int = CONTEXT, mirror: bool = False) -> tuple[Tensor, Tensor]:
     """Inputs (n, context * 18) and contact labels (n, 4) of every frame of every clip."""
-    from .training import mirror_features
+    from .mirror import mirror_features
 
     X, Y = [], []
     for x in clips:

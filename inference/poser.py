@@ -56,6 +56,7 @@ from .denoiser import Denoiser, LoadedModel, freeze_for_cpu, load_model
 from .diffusion import Schedule, inpaint, paper_steps, parse_steps
 from .features import FPS_MODEL, N_FEATURES, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
 from .joint_constraints import constrain_knees
+from .mirror import MirrorAveraged
 from .regressor import regress
 from .rotations import matrix_to_rot6d, rot6d_to_matrix
 from .skeleton import N_CONTACTS, N_SEGMENTS
@@ -233,6 +234,7 @@ class Poser:
         knee_hinge: bool = True,
         contact_threshold: float | None = None,
         contact_detector: ContactDetector | str | os.PathLike | None = "default",
+        mirror: bool | None = None,
     ) -> None:
         self.model = model
         self.kind = "floor" if model is None else model.kind
@@ -272,10 +274,16 @@ class Poser:
         self.schedule = Schedule.cosine()
         # the live loop always calls the denoiser with one (1, N, 190) window: a frozen
         # TorchScript trace of it is ~25-30% faster per call on CPU (bench_model.py)
+        # mirror averaging (mirror.MirrorAveraged): each denoiser call also answers for the
+        # mirror image of the window, in the same batch; None = what the model file says
+        self.mirror = bool(meta.get("mirror", False) if mirror is None else mirror) and self.kind != "floor"
         self._net = None
         if model is not None:
             frozen = freeze and isinstance(model.model, Denoiser)
-            self._net = freeze_for_cpu(model.model, window=self.window) if frozen else model.model
+            batch = 2 if self.mirror else 1
+            self._net = freeze_for_cpu(model.model, batch=batch, window=self.window) if frozen else model.model
+            if self.mirror:
+                self._net = MirrorAveraged(self._net, model.norm_mean, model.norm_std)
         if model is not None:
             self._mean = torch.as_tensor(model.norm_mean, dtype=torch.float32)
             self._std = torch.as_tensor(model.norm_std, dtype=torch.float32)

@@ -59,9 +59,10 @@ from .features import (
     WINDOW,
     observation_mask,
 )
+from .mirror import mirror_features, mirror_points, mirror_tables, swap_sides  # noqa: F401 (re-exported)
 from .regressor import MaskConfig, random_observation_mask
 from .rotations import axis_angle_to_matrix, matrix_angle_between, matrix_to_rot6d, rot6d_to_matrix
-from .skeleton import CONTACTS, METRIC_EXCLUDED, N_SEGMENTS, SEGMENT_INDEX, SEGMENTS, SITES, parse_sites
+from .skeleton import CONTACTS, METRIC_EXCLUDED, N_SEGMENTS, SEGMENT_INDEX, SEGMENTS, parse_sites
 
 CHECKPOINT_FORMAT = "imucap-train-v1"
 LAST = "last.pt"
@@ -418,59 +419,6 @@ def scale_features(x: Tensor, scale: Tensor) -> Tensor:
     s = scale.to(x.dtype)[:, None, None]
     for sl in (SL_ACC, SL_DP, SL_PZ):
         out[..., sl] = x[..., sl] * s
-    return out
-
-
-def _swap_side(names: tuple[str, ...]) -> list[int]:
-    """Index of each name's left/right counterpart (itself for midline names)."""
-    flip = {"l_": "r_", "r_": "l_"}
-    return [names.index(flip[n[:2]] + n[2:]) if n[:2] in flip else i for i, n in enumerate(names)]
-
-
-@functools.lru_cache(maxsize=1)
-def mirror_tables() -> tuple[np.ndarray, np.ndarray]:
-    """(source index, sign) per feature such that ``x[..., index] * sign`` is the frame of
-    the same motion reflected in the sagittal plane (world y -> -y, M = diag(1, -1, 1)),
-    left and right swapped.
-
-    The body's rest pose is the identity for every segment and its offsets are mirror
-    images of each other, so the mirrored orientation of a segment is M R M of its
-    counterpart: its first 6D column (R e_x) maps to M c0, the second (R e_y) to -M c1.
-    Site accelerations map to M a, dp to (x, -y); contacts swap sides.
-    """
-    idx = np.arange(N_FEATURES)
-    sign = np.ones(N_FEATURES, dtype=np.float32)
-    seg, site, con = _swap_side(SEGMENTS), _swap_side(SITES), _swap_side(CONTACTS)
-    for i, j in enumerate(seg):
-        idx[SL_ROT.start + 6 * i: SL_ROT.start + 6 * i + 6] = SL_ROT.start + 6 * j + np.arange(6)
-        sign[SL_ROT.start + 6 * i: SL_ROT.start + 6 * i + 6] = (1, -1, 1, -1, 1, -1)
-    for i, j in enumerate(site):
-        idx[SL_ACC.start + 3 * i: SL_ACC.start + 3 * i + 3] = SL_ACC.start + 3 * j + np.arange(3)
-        sign[SL_ACC.start + 3 * i: SL_ACC.start + 3 * i + 3] = (1, -1, 1)
-    sign[SL_DP.start + 1] = -1
-    for i, j in enumerate(con):
-        idx[SL_CONTACT.start + i] = SL_CONTACT.start + j
-    return idx, sign
-
-
-def mirror_features(x: Tensor) -> Tensor:
-    """Windows (..., F) of unnormalised features reflected left <-> right (see mirror_tables)."""
-    idx, sign = _mirror_tensors()
-    return x[..., idx] * sign.to(x.dtype)
-
-
-@functools.lru_cache(maxsize=1)
-def _mirror_tensors() -> tuple[Tensor, Tensor]:
-    """mirror_tables as tensors, built once: the augmentation runs on every training step."""
-    idx, sign = mirror_tables()
-    return torch.as_tensor(idx), torch.as_tensor(sign)
-
-
-def mirror_points(p: Tensor, names: tuple[str, ...]) -> Tensor:
-    """Per-name 3-vectors (..., len(names), 3) in a segment frame (bone offsets, contact
-    points) for the mirrored body: sides swapped, y negated."""
-    out = p[..., _swap_side(names), :].clone()
-    out[..., 1] = -out[..., 1]
     return out
 
 
@@ -1058,7 +1006,7 @@ def export_model(checkpoint: str | os.PathLike, dest: str | os.PathLike, fp16: b
     """Write the EMA weights of a training checkpoint as an inference model file (what is
     shipped: fp16 halves it; denoiser.load_model casts back to float32). ``poser``: the
     poser defaults to record with it (``inpaint_mode``, ``history``, ``noise``,
-    ``contact_threshold``; see Poser),
+    ``contact_threshold``, ``mirror``; see Poser),
     chosen by whoever measured them on this model."""
     ck = torch.load(checkpoint, map_location="cpu", weights_only=False)
     if ck.get("format") != CHECKPOINT_FORMAT:

@@ -128,31 +128,6 @@ def test_rotate_yaw_is_a_consistent_rigid_turn():
     assert torch.equal(y[..., SL_PZ], x[..., SL_PZ]) and torch.equal(y[..., SL_CONTACT], x[..., SL_CONTACT])
 
 
-def test_mirror_features_equal_the_features_of_the_mirrored_motion():
-    """Reflect a walk physically (world y -> -y, left <-> right, on the mirrored body) and
-    derive its features from scratch: they must equal mirror_features of the original's,
-    orientations, accelerations, root motion and contacts alike."""
-    from inference.body import Body
-    from inference.evaluation import synthetic_motion
-    from inference.feature_codec import features_from_motion
-    from inference.motion import Motion
-    from inference.skeleton import SEGMENTS
-
-    m = synthetic_motion(seconds=3.0)
-    M = np.diag([1.0, -1.0, 1.0])
-    swap = [SEGMENTS.index({"l_": "r_", "r_": "l_"}.get(n[:2], n[:2]) + n[2:]) for n in SEGMENTS]
-    off = mirror_points(torch.as_tensor(m.body.offsets), SEGMENTS).numpy()
-    mm = Motion(rot=M @ m.rot[:, swap] @ M, root=m.root @ M, fps=m.fps,
-                body=Body.from_offsets(off, m.body.height), name="mirrored")
-    x = features_from_motion(m)
-    xm = features_from_motion(mm)
-    assert x[:, SL_CONTACT].std() > 0 and np.abs(x[:, SL_DP]).max() > 0  # a real walk, not a still pose
-    got = mirror_features(torch.as_tensor(x)).numpy()
-    np.testing.assert_allclose(got, xm, atol=1e-4)
-    assert not np.allclose(got, x, atol=1e-2)
-    np.testing.assert_array_equal(mirror_features(mirror_features(torch.as_tensor(x))).numpy(), x)
-
-
 def _augmentation_batch_and_loss(option: str):
     """A fixed batch (with heel/toe points) and ``loss(batch, value)``: the unweighted loss
     terms of a tiny eval-mode model with ``option`` = value and no yaw turn, drawn from the
@@ -281,12 +256,15 @@ def test_resume_reproduces_uninterrupted_run(tmp_path, kind):
 
     assert main(["train", "--out", str(tmp_path / "part"), "--export", str(tmp_path / "ship.pt"), "--fp16",
                  "--default-steps", "10", "--history", "measured", "--noise", "fixed",
-                 "--contact-threshold", "0.8"]) == 0
+                 "--contact-threshold", "0.8", "--mirror"]) == 0
     shipped = load_model(tmp_path / "ship.pt")
     assert shipped.meta["default_steps"] == "10" and shipped.step == 4
     assert shipped.meta["history"] == "measured" and shipped.meta["noise"] == "fixed"
-    assert shipped.meta["contact_threshold"] == 0.8
+    assert shipped.meta["contact_threshold"] == 0.8 and shipped.meta["mirror"] is True
     from inference.poser import CONTACT_THRESHOLD, Poser
+
+    assert Poser(shipped, freeze=False).mirror and not Poser(lm, freeze=False).mirror
+    assert not Poser(shipped, freeze=False, mirror=False).mirror
 
     assert Poser(shipped, freeze=False).contact_threshold == 0.8
     assert Poser(lm, freeze=False).contact_threshold == CONTACT_THRESHOLD  # a file without one: the default
