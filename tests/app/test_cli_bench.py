@@ -32,3 +32,15 @@ def test_bench_json_contract(capsys, monkeypatch):
         assert 0 < r["p50_ms"] <= r["p99_ms"]
     assert res["steps"] == 2 and res["paper"]["steps"] == 30 and res["threads"] == 1
     assert "4/128/512" in res["model"] and "paper" in res["paper"]["model"]
+
+
+def test_bench_times_the_loop_without_mirror_averaging_too_when_it_mirrors(capsys):
+    code = main(["bench", "--json", "--random-weights", "--frames", "3", "--warmup", "1", "--threads", "1",
+                 "--steps", "2", "--no-paper", "--mirror"])
+    res = json.loads(capsys.readouterr().out)
+    assert code == 0 and res["mirror"] is True and "paper" not in res
+    assert res["without_mirror"]["mirror"] is False and res["without_mirror"]["steps"] == 2
+    code = main(["bench", "--json", "--random-weights", "--frames", "3", "--warmup", "1", "--threads", "1",
+                 "--steps", "2", "--no-paper"])
+    res = json.loads(capsys.readouterr().out)
+    assert res["mirror"] is False and "without_mirror" not in res
