@@ -37,7 +37,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("train", help="train the model (diffusion) or the regressive baseline",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", type=Path, help="training config JSON (TrainConfig fields)")
-    p.add_argument("--out", type=Path, required=True, help="run directory: last.pt, model.pt, train.jsonl")
+    p.add_argument("--out", type=Path, help="run directory: last.pt, model.pt, train.jsonl (required but with "
+                                                  "--retag)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
     p.add_argument("--init", type=Path, metavar="LAST_PT",
                    help="start from another run's last.pt (weights, EMA, normaliser; fresh optimiser): fine-tuning")
@@ -49,6 +50,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, help="random seed (overrides the config)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--export", type=Path, metavar="FILE", help="write OUT/last.pt's EMA weights to FILE and exit")
+    p.add_argument("--retag", type=Path, metavar="MODEL_PT",
+                   help="with --export: take MODEL_PT, a model file, instead of OUT/last.pt and only change the "
+                        "poser defaults given (weights untouched), e.g. to ship --mirror with a baseline whose run "
+                        "is gone")
     p.add_argument("--fp16", action="store_true", help="with --export: store half-precision weights")
     p.add_argument("--default-steps", help="with --export: step list the poser uses (e.g. 10, paper, 1000,500,0)")
     p.add_argument("--inpaint-mode", choices=INPAINT_MODES,
@@ -76,6 +81,10 @@ def run(args: argparse.Namespace) -> int:
 
     from inference.training import LAST, TrainConfig, export_model, train
 
+    if args.retag is not None and args.export is None:
+        raise ValueError("--retag needs --export DEST")
+    if args.out is None and args.retag is None:
+        raise ValueError("--out is required")
     if args.contact_detector:
         return run_contact_detector(args)
     if args.export is not None:
@@ -87,6 +96,14 @@ def run(args: argparse.Namespace) -> int:
                                    ("noise", args.noise), ("contact_threshold", args.contact_threshold),
                                    ("mirror", args.mirror))
                  if v is not None}
+        if args.retag is not None:
+            from inference.denoiser import retag_model
+
+            if args.default_steps is not None:
+                poser["default_steps"] = args.default_steps
+            retag_model(args.retag, args.export, poser)
+            print(json.dumps({"exported": str(args.export), "retagged": str(args.retag), **poser}))
+            return 0
         export_model(args.out / LAST, args.export, fp16=args.fp16, default_steps=args.default_steps, poser=poser)
         print(json.dumps({"exported": str(args.export), "fp16": args.fp16}))
         return 0

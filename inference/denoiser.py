@@ -286,6 +286,17 @@ def save_model(path: str | os.PathLike, model: nn.Module, kind: str, norm_mean: 
     atomic_torch_save(obj, path)
 
 
+def retag_model(path: str | os.PathLike, dest: str | os.PathLike, meta: dict) -> None:
+    """Write model file ``path`` to ``dest`` with ``meta`` merged into its metadata (the
+    poser defaults it carries) and every tensor as it was, bit for bit: a shipped file's
+    defaults can change without its training run at hand."""
+    obj = torch.load(path, map_location="cpu", weights_only=False)
+    if not isinstance(obj, dict) or obj.get("format") != MODEL_FORMAT or "state_dict" not in obj:
+        raise ValueError(f"{path} is not an imucap model file (a training checkpoint exports with --out RUN)")
+    obj["meta"] = {**(obj.get("meta") or {}), **meta}
+    atomic_torch_save(obj, dest)
+
+
 def load_model(path: str | os.PathLike, use_ema: bool = True) -> LoadedModel:
     """Load an inference model file or a training checkpoint (its EMA weights by default),
     in eval mode, float32, on the CPU."""

@@ -499,3 +499,24 @@ def test_cli_init_and_stop_after(tmp_path, capsys):
 def test_shipped_configs_parse(path):
     cfg = TrainConfig.load(path)
     assert cfg.kind in ("diffusion", "regressor") and cfg.steps > 0 and cfg.data.get("train")
+
+
+def test_retag_changes_a_model_files_poser_defaults_and_not_its_weights(tmp_path, capsys):
+    from app.cli import main
+    from inference.denoiser import save_model
+
+    torch.manual_seed(0)
+    net = build_model("regressor", ModelConfig.tiny())
+    save_model(tmp_path / "base.pt", net, "regressor", np.zeros(190), np.ones(190), step=7,
+               meta={"inpaint_mode": "paper"}, fp16=True)
+    assert main(["train", "--retag", str(tmp_path / "base.pt"), "--export", str(tmp_path / "tagged.pt"),
+                 "--mirror"]) == 0
+    before = torch.load(tmp_path / "base.pt", weights_only=False)
+    after = torch.load(tmp_path / "tagged.pt", weights_only=False)
+    assert after["meta"] == {"inpaint_mode": "paper", "mirror": True} and after["step"] == 7
+    assert all(torch.equal(before["state_dict"][k], v) for k, v in after["state_dict"].items())
+    torch.save({"x": 1}, tmp_path / "other.pt")
+    assert main(["train", "--retag", str(tmp_path / "other.pt"), "--export", str(tmp_path / "x.pt")]) != 0
+    assert "not an imucap model file" in capsys.readouterr().err and not (tmp_path / "x.pt").exists()
+    assert main(["train", "--config", "c.json"]) != 0
+    assert "--out is required" in capsys.readouterr().err
