@@ -49,6 +49,7 @@ def test_headless_json_contract(tiny_model, tmp_path, capsys):
                                                                                       "bno08x-rvc"]
     r = read_recording(rec)
     assert r.metadata["steps"] == 3 and r.metadata["sensors"] == ["pelvis", "l_wrist", "r_shank"]
+    assert r.metadata["mirror"] is False  # the tiny file says nothing; replays need to know
     assert len(r.calibrations) == 1 and len(r.recon["t"]) >= out["frames"] - 25
     assert r.n_frames > 200
 

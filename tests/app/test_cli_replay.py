@@ -102,3 +102,30 @@ def test_clear_errors(recorded, tmp_path, capsys, argv, message):
     code, out, err = _run(capsys, *argv)
     assert code == 2 and out == ""
     assert message in err and err.count("\n") == 1  # one line, no traceback
+
+
+def test_replay_mirrors_as_recorded_else_as_the_model_file_says(recorded, tiny_model, tmp_path, capsys):
+    import shutil
+
+    import h5py
+
+    from inference.denoiser import retag_model
+
+    tagged = tmp_path / "tagged.pt"
+    retag_model(tiny_model, tagged, {"mirror": True})
+    base = ("replay", None, "--model", str(tagged), "--steps", "2", "--json", "--no-progress")
+
+    def mirror_of(path, *extra):
+        code, out, err = _run(capsys, base[0], str(path), *base[2:], *extra)
+        assert code == 0, err
+        return json.loads(out)["mirror"]
+
+    assert mirror_of(recorded.path) is True  # nothing recorded: the model file's default
+    assert mirror_of(recorded.path, "--no-mirror") is False
+    # a session recorded without mirror averaging replays without it, unless asked
+    old = tmp_path / "old.h5"
+    shutil.copy(recorded.path, old)
+    with h5py.File(old, "r+") as f:
+        f.attrs["metadata"] = json.dumps({**json.loads(f.attrs["metadata"]), "mirror": False})
+    assert mirror_of(old) is False
+    assert mirror_of(old, "--mirror") is True
