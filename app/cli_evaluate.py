@@ -111,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
     )
     from inference.features import FPS_MODEL
     from inference.metrics import paired_difference
-    from inference.poser import default_steps, noise_mode_for, resolve_model
+    from inference.poser import default_steps, mirror_for, noise_mode_for, resolve_model
     from inference.skeleton import parse_sites
 
     if args.threads > 0:
@@ -159,6 +159,7 @@ def run(args: argparse.Namespace) -> int:
             "noise": bool(noise is not None), "seed": args.seed, "smoothing": args.smoothing,
             "inpaint_noise": noise_mode_for(model, args.inpaint_noise) if kind == "diffusion" else None,
             "contact_detector": args.contact_detector and kind != "floor",
+            "mirror": mirror_for(model, args.mirror),
         })
         return summary, clips
 
@@ -172,8 +173,8 @@ def run(args: argparse.Namespace) -> int:
         mine, theirs = [c.metrics for c in clips], [c.metrics for c in other_clips]
         diffs = {m: paired_difference(mine, theirs, m, seed=args.seed) for m in ("ga_deg", "la_deg", "jpe_cm")}
         result["against"] = {
-            **{k: other[k] for k in ("model", "kind", "steps", "ga_deg", "la_deg", "jpe_cm", "jitter_ratio",
-                                     "re2_m", "re5_m", "re10_m")},
+            **{k: other[k] for k in ("model", "kind", "steps", "mirror", "ga_deg", "la_deg", "jpe_cm",
+                                     "jitter_ratio", "re2_m", "re5_m", "re10_m")},
             "differences": {m: d.as_dict() for m, d in diffs.items()},
             "per_clip": [{"name": c.name, **c.metrics.summary()} for c in other_clips],
         }
@@ -208,7 +209,8 @@ def run(args: argparse.Namespace) -> int:
         noise_txt = "with the sensor noise model" if noise is not None else "without sensor noise"
         text = report_markdown(rows) + ("\n" + comparison_markdown(comparisons) if comparisons else "") + (
             f"\n{len(motions)} clip(s) from {', '.join(map(str, args.data))}; signals synthesized {noise_txt}; "
-            f"seed {args.seed}; live poser frame by frame at 20 Hz"
+            f"seed {args.seed}; live poser frame by frame at 20 Hz; mirror averaging: "
+            f"{', '.join(sorted({str(r['model']) for r in rows if r.get('mirror')})) or 'none'}"
             f"{'; broken feet in the truth repaired (--repair-truth)' if repaired else ''}.\n\n"
             f"Reproduce: `imucap evaluate --data {' '.join(map(str, args.data))}"
             f"{' --limit ' + str(args.limit) if args.limit else ''}{' --repair-truth' if repaired else ''}"

@@ -205,6 +205,14 @@ def noise_mode_for(model: LoadedModel | None, noise: str | None = None) -> str:
     return noise or meta.get("noise") or "fresh"
 
 
+def mirror_for(model: LoadedModel | None, mirror: bool | None = None) -> bool:
+    """Whether a poser mirror-averages (``mirror.MirrorAveraged``): ``mirror`` if given, else
+    what the model file says; never for the floor, which has no model to ask."""
+    if model is None:
+        return False
+    return bool((model.meta or {}).get("mirror", False) if mirror is None else mirror)
+
+
 class Poser:
     """Frame-by-frame reconstruction with a diffusion model, the regressive baseline or
     the floor baseline, all behind one interface (``step``).
@@ -272,11 +280,11 @@ class Poser:
                          if smoothing else None)
         self.root_xy0 = (float(root_xy0[0]), float(root_xy0[1]))
         self.schedule = Schedule.cosine()
-        # the live loop always calls the denoiser with one (1, N, 190) window: a frozen
-        # TorchScript trace of it is ~25-30% faster per call on CPU (bench_model.py)
-        # mirror averaging (mirror.MirrorAveraged): each denoiser call also answers for the
-        # mirror image of the window, in the same batch; None = what the model file says
-        self.mirror = bool(meta.get("mirror", False) if mirror is None else mirror) and self.kind != "floor"
+        # the live loop always calls the denoiser with one (1, N, 190) window, or two with
+        # mirror averaging (mirror.MirrorAveraged: the window and its mirror image in one
+        # batch): a frozen TorchScript trace of that shape is ~25-30% faster per call on CPU
+        # (bench_model.py)
+        self.mirror = mirror_for(model, mirror)
         self._net = None
         if model is not None:
             frozen = freeze and isinstance(model.model, Denoiser)
@@ -500,7 +508,7 @@ def make_poser(spec: str | os.PathLike | LoadedModel | None, body: Body | float 
 
 
 __all__ = [
-    "Poser", "PoseFrame", "Reconstruction", "reconstruct_offline", "make_poser", "resolve_model",
+    "Poser", "PoseFrame", "Reconstruction", "reconstruct_offline", "make_poser", "resolve_model", "mirror_for",
     "default_weights", "default_steps", "standing_features", "correct_root_displacement",
     "DEFAULT_WEIGHTS", "WEIGHTS_DIR", "POSER_KINDS",
 ]

@@ -61,7 +61,7 @@ def test_json_contract_and_nulls(capsys, data_dir, tiny_models):
     assert res["re2_m"] is not None and res["re5_m"] is None and res["re10_m"] is None
     assert all(np.isfinite(res[k]) for k in ("ga_deg", "la_deg", "jpe_cm", "jitter_ratio"))
     assert [c["name"] for c in res["per_clip"]] == ["walk_a", "walk_b"]
-    assert res["smoothing"] is True
+    assert res["smoothing"] is True and res["mirror"] is False
     # the raw per-frame reconstructions: same angles up to the filter, a rougher path
     code, out, _ = _run(capsys, "--data", str(data_dir), "--sensors", "pelvis,l_wrist,r_wrist", "--steps", "2",
                         "--model", str(tiny_models["diffusion"]), "--json", "--no-smoothing")
@@ -139,7 +139,7 @@ def test_report_over_sensor_sets_and_models(capsys, data_dir, tiny_models, tmp_p
         assert c["difference"] == pytest.approx(ga[c["label"], "diffusion"] - ga[c["label"], c["baseline"]])
         assert c["clips"] == 1 and c["low"] == c["high"] == c["difference"]  # one clip: nothing to resample
         assert f"| {c['label']} | diffusion | {c['baseline']} | ga_deg | {c['difference']:+.2f} |" in text
-    assert "## Side by side, paired over clips" in text
+    assert "## Side by side, paired over clips" in text and "mirror averaging: none" in text
 
 
 def test_against_scores_a_second_model_on_the_same_clips(capsys, data_dir, tiny_models):
@@ -199,3 +199,15 @@ def test_repair_truth_puts_back_a_broken_foot_before_scoring(capsys, tmp_path):
     assert fixed["implausible_truth_share"] == 0.0 and "repaired in 1 clip" in err2
     # the standing floor's feet are flat: against the repaired truth they are nearer
     assert fixed["ga_deg"] < raw["ga_deg"] - 0.5
+
+
+def test_mirror_averaging_is_reported_and_changes_the_answer(capsys, data_dir, tiny_models):
+    args = ("--data", str(data_dir), "--sensors", "pelvis,l_wrist,r_shank", "--steps", "2", "--json",
+            "--model", str(tiny_models["diffusion"]), "--against", str(tiny_models["regressor"]))
+    _, out, _ = _run(capsys, *args)
+    plain = json.loads(out)
+    code, out, _ = _run(capsys, *args, "--mirror")
+    mirrored = json.loads(out)
+    assert code == 0 and plain["mirror"] is False and plain["against"]["mirror"] is False
+    assert mirrored["mirror"] is True and mirrored["against"]["mirror"] is True  # both models, same poser
+    assert mirrored["ga_deg"] != plain["ga_deg"] and mirrored["against"]["ga_deg"] != plain["against"]["ga_deg"]
