@@ -59,7 +59,7 @@ from .features import (
     WINDOW,
     observation_mask,
 )
-from .mirror import mirror_features, mirror_points, mirror_tables, swap_sides  # noqa: F401 (re-exported)
+from .mirror import MirrorAveraged, mirror_features, mirror_points, mirror_tables, swap_sides  # noqa: F401
 from .regressor import MaskConfig, random_observation_mask
 from .rotations import axis_angle_to_matrix, matrix_angle_between, matrix_to_rot6d, rot6d_to_matrix
 from .skeleton import CONTACTS, METRIC_EXCLUDED, N_SEGMENTS, SEGMENT_INDEX, SEGMENTS, parse_sites
@@ -156,6 +156,10 @@ class TrainConfig:
     # share of training windows mirrored left <-> right (``mirror_features``): the data has
     # few actors, each with their own handedness and habits; a mirrored actor is a new one
     augment_mirror: float = 0.0
+    # train the mirror-averaged model the poser runs (mirror.MirrorAveraged: every forward
+    # pass also answers for the mirrored windows, in one batch of twice the size), so the
+    # average, not each half, is what the loss shapes (NOTES.md "Session 13")
+    mirror_average: bool = False
     # body-size augmentation: each window's body scaled by s, log-uniform in
     # [1 / (1 + a), 1 + a] (``scale_features``). The data has one body size per actor, so
     # without it the height token tells the model who is moving and it learns that
@@ -607,6 +611,8 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
         offsets = torch.where(flip[:, None, None], mirror_points(offsets, SEGMENTS), offsets)
         contact_local = torch.where(flip[:, None, None], mirror_points(contact_local, CONTACTS), contact_local)
     xn = (x - ctx.mean) / ctx.std
+    if cfg.mirror_average:
+        model = MirrorAveraged(model, ctx.mean, ctx.std)
     m = None  # known entries, where the model is told them
     if cfg.kind == "diffusion":
         t = training_levels(cfg, B, gen, ctx.schedule.T)

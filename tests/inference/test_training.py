@@ -165,6 +165,33 @@ def test_mirror_augmentation_mirrors_the_window_and_its_body(tmp_path):
     assert TrainConfig.from_dict(_cfg(augment_mirror=0.5).to_dict()).augment_mirror == 0.5
 
 
+def test_mirror_average_trains_the_averaged_model_the_poser_runs():
+    """mirror_average: the loss is the mirror-averaged model's (what the poser runs with a
+    file that says ``mirror``), not the plain model's, and gradients reach the weights."""
+    from inference.diffusion import Schedule
+    from inference.mirror import MirrorAveraged
+
+    ds = synthetic_dataset(3, 70, seed=0)
+    batch = ds.sample(np.random.default_rng(0), 4, 61)
+    mean, std = (torch.as_tensor(a, dtype=torch.float32) for a in feature_stats(ds.clips))
+    torch.manual_seed(0)
+    model = build_model("diffusion", ModelConfig.from_dict(TINY)).eval()
+
+    def terms(net, on: bool):
+        cfg = _cfg(augment_yaw=False, mirror_average=on)
+        ctx = StepContext(cfg=cfg, mean=mean, std=std, schedule=Schedule.cosine())
+        return batch_loss(net, batch, ctx, np.random.default_rng(1), torch.Generator().manual_seed(1))
+
+    (loss_on, on), (_, wrapped), (_, off) = terms(model, True), terms(MirrorAveraged(model, mean, std), False), \
+        terms(model, False)
+    for k in on:
+        assert on[k] == pytest.approx(wrapped[k], rel=1e-5, abs=1e-8), k
+    assert on["simple"] != pytest.approx(off["simple"], rel=1e-3)
+    loss_on.backward()
+    assert all(p.grad is not None and torch.isfinite(p.grad).all() for p in model.parameters() if p.requires_grad)
+    assert TrainConfig.from_dict(_cfg(mirror_average=True).to_dict()).mirror_average is True
+
+
 def test_scale_features_equal_the_features_of_the_scaled_motion():
     """Derive the features of a walk on a 1.15x body from scratch: orientations, gravity-free
     accelerations, root displacement and height must be scale_features of the original's.
