@@ -37,7 +37,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("train", help="train the model (diffusion) or the regressive baseline",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", type=Path, help="training config JSON (TrainConfig fields)")
-    p.add_argument("--out", type=Path, help="run directory: last.pt, model.pt, train.jsonl (required but with "
+    p.add_argument("--out", type=Path, help="run directory: last.pt, model.pt, train.jsonl (required unless "
                                                   "--retag)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
     p.add_argument("--init", type=Path, metavar="LAST_PT",

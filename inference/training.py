@@ -59,7 +59,7 @@ from .features import (
     WINDOW,
     observation_mask,
 )
-from .mirror import MirrorAveraged, mirror_features, mirror_points, mirror_tables, swap_sides  # noqa: F401
+from .mirror import MirrorAveraged, mirror_features, mirror_points
 from .regressor import MaskConfig, random_observation_mask
 from .rotations import axis_angle_to_matrix, matrix_angle_between, matrix_to_rot6d, rot6d_to_matrix
 from .skeleton import CONTACTS, METRIC_EXCLUDED, N_SEGMENTS, SEGMENT_INDEX, SEGMENTS, parse_sites

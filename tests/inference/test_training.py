@@ -15,6 +15,7 @@ import torch
 
 from inference.denoiser import ModelConfig, build_model, load_model
 from inference.features import SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT
+from inference.mirror import mirror_features, mirror_points
 from inference.rotations import matrix_to_rot6d, rot6d_to_matrix
 from inference.training import (
     EMA,
@@ -24,8 +25,6 @@ from inference.training import (
     batch_loss,
     contact_offsets_for,
     feature_stats,
-    mirror_features,
-    mirror_points,
     motion_losses,
     rotate_yaw,
     scale_features,
