@@ -9,8 +9,9 @@ So when one side of a knee is measured, the other side is the measured one turne
 about that axis, and only the flexion angle is left to the model: the
 reconstruction keeps the model's flexion and takes everything else from the sensor.
 
-Elbows are not treated this way: HDM05's elbow is a hinge about an axis that differs
-by actor, and Bandai's forearm also pronates (15-21 deg off any single axis).
+Elbows are not treated this way: a forearm sensor turns with pronation, a twist about
+the forearm the elbow's hinge does not constrain. Both datasets' forearms carry it
+(HDM05's from its wrist bone, see joint_maps.ASF; Bandai's in its forearm bone).
 """
 
 from __future__ import annotations

@@ -57,15 +57,22 @@ MIXAMO = JointMap(
     }),
 )
 
-# Acclaim ASF (HDM05, CMU): bone names; each bone's rotation acts at its start joint
+# Acclaim ASF (HDM05, CMU): bone names; each bone's rotation acts at its start joint.
+# The forearm is two bones on one line: ``radius`` (the elbow, a hinge: dof rx) and
+# ``wrist`` (pronation, a twist about the forearm: dof ry). A sensor strapped near the
+# wrist turns with the second, as a real forearm's distal end does and as Bandai's
+# forearm bone does, so our forearm starts at the elbow and takes the wrist bone's
+# orientation, and our hand is ``hand`` (NOTES.md, session 14: mapping the wrist bone to
+# our hand left HDM05's wrist sensors without pronation).
 ASF = JointMap(
     name="acclaim",
     segments=_sides({
         "pelvis": "root", "spine1": "lowerback", "spine2": "upperback", "spine3": "thorax",
         "neck": "lowerneck", "head": "head", "collar": "{s}clavicle", "upperarm": "{s}humerus",
-        "forearm": "{s}radius", "hand": "{s}wrist", "fingers": "{s}hand", "thigh": "{s}femur",
+        "forearm": "{s}radius", "hand": "{s}hand", "fingers": "{s}fingers", "thigh": "{s}femur",
         "shank": "{s}tibia", "foot": "{s}foot", "toes": "{s}toes",
     }),
+    orient=_sides({"forearm": "{s}wrist"}),
 )
 
 BVH_MAPS = (BANDAI, CMU_BVH, MIXAMO)

@@ -70,7 +70,9 @@ class JointMap:
 
     segments: our segment name -> source joint name. A segment missing here copies its
     parent's orientation. `split` names our segments that sit partway along a source
-    bone: segment -> fraction of the parent's bone at which its joint lies.
+    bone: segment -> fraction of the parent's bone at which its joint lies. `orient`
+    names segments whose orientation comes from a source bone further along the same line
+    than the one that places their joint (the Acclaim forearm, see joint_maps.ASF).
     """
 
     name: str
@@ -80,9 +82,10 @@ class JointMap:
     # its parent), which a zero pose cannot show: the smallest-rotation T-pose would leave
     # the segment rolled by that much in every frame (see joint_maps.BANDAI)
     roll_quarters: dict[str, int] = field(default_factory=dict)
+    orient: dict[str, str] = field(default_factory=dict)
 
     def required(self) -> set[str]:
-        return set(self.segments.values())
+        return set(self.segments.values()) | set(self.orient.values())
 
 
 def _source_direction(src: SourceSkeleton, j: int, children: list[int]) -> np.ndarray | None:
@@ -207,12 +210,15 @@ def retarget(
             # zero-pose offset of j from its parent, rotated by the parent's T-pose rotation
             P[j] = P[p] + Q[p] @ (src.rest[j] - src.rest[p])
 
-    # step 2: our orientations; segments without a source copy their parent
+    # step 2: our orientations; segments without a source copy their parent. A bone named
+    # in ``jmap.orient`` lies on its segment's line and drives no segment of its own, so
+    # its T-pose rotation is its parent's (tpose_rotations) and a zero pose adds nothing.
     T = src.glob.shape[0]
     rot = np.zeros((T, N_SEGMENTS, 3, 3))
+    orient = {SEGMENT_INDEX[s]: src.index(n) for s, n in jmap.orient.items()}
     for i in range(N_SEGMENTS):
         if i in ours_to_src:
-            j = ours_to_src[i]
+            j = orient.get(i, ours_to_src[i])
             rot[:, i] = W @ src.glob[:, j] @ Q[j].T @ Wt
         else:
             rot[:, i] = rot[:, PARENTS[i]]

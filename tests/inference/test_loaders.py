@@ -181,15 +181,18 @@ _ASF_BONES = [
     ("lradius", "lhumerus", (1, 0, 0), 3.5, (180, -30, -90), "rx"),
     ("lwrist", "lradius", (1, 0, 0), 1.7, (0, 90, 90), "ry"),
     ("lhand", "lwrist", (1, 0, 0), 0.7, (0, 90, 90), "rx rz"),
+    ("lfingers", "lhand", (1, 0, 0), 0.5, (0, 90, 90), "rx"),
     ("rclavicle", "thorax", (-1, 0.2, 0), 3.0, (0, 0, 0), "ry rz"),
     ("rhumerus", "rclavicle", (-1, 0, 0), 5.0, (180, 30, 90), "rx ry rz"),
     ("rradius", "rhumerus", (-1, 0, 0), 3.5, (180, 30, 90), "rx"),
     ("rwrist", "rradius", (-1, 0, 0), 1.7, (0, -90, -90), "ry"),
     ("rhand", "rwrist", (-1, 0, 0), 0.7, (0, -90, -90), "rx rz"),
+    ("rfingers", "rhand", (-1, 0, 0), 0.5, (0, -90, -90), "rx"),
 ]
 
 
-def _write_asf_amc(folder: Path, T: int = 30, corrupt: str = "") -> Path:
+def _write_asf_amc(folder: Path, T: int = 30, corrupt: str = "", moving: tuple[str, ...] | None = None) -> Path:
+    """An ASF/AMC pair whose bones (all, or only ``moving``) swing by 10 deg about their first dof."""
     lines = [":version 1.10", ":name test", ":units", "  mass 1.0", "  length 0.45", "  angle deg", ":root",
              "   order TX TY TZ RX RY RZ", "   axis XYZ", "   position 0 0 0", "   orientation 0 0 0", ":bonedata"]
     for i, (name, _, d, ln, ax, dofs) in enumerate(_ASF_BONES, start=1):
@@ -212,7 +215,8 @@ def _write_asf_amc(folder: Path, T: int = 30, corrupt: str = "") -> Path:
             if not dofs:
                 continue
             n = len(dofs.split())
-            vals = [10 * np.sin(f / 7)] + [0.0] * (n - 1)
+            amp = 10.0 if moving is None or name in moving else 0.0
+            vals = [amp * np.sin(f / 7)] + [0.0] * (n - 1)
             amc.append(name + " " + " ".join(f"{v:.4f}" for v in vals))
     if corrupt == "truncated":
         amc = amc[:-3]
@@ -236,6 +240,27 @@ def test_asf_amc_loads_with_units_and_fps(tmp_path):
     assert m.contacts()[..., 2].min() == pytest.approx(0.0, abs=1e-9)
     assert np.all(m.rot[:, 0, 2, 2] > 0.99)  # pelvis upright (Y-up file mapped to Z-up)
     assert 1.2 < m.body.height < 2.2
+
+
+def test_asf_forearm_carries_the_wrist_bones_pronation(tmp_path):
+    """Acclaim splits the forearm into a hinge (radius) and a twist (wrist); a sensor near
+    the wrist turns with both, so our forearm must show the wrist bone's twist, about its
+    own bone, with the wrist joint left where it was and the hand not twisted by it."""
+    m = load_motion(_write_asf_amc(tmp_path, T=40, moving=("lwrist",)))
+    up, fore, hand = (SEGMENT_INDEX[n] for n in ("l_upperarm", "l_forearm", "l_hand"))
+    local = np.einsum("tji,tjk->tik", m.rot[:, up], m.rot[:, fore])
+    bone = m.body.offsets[hand] / np.linalg.norm(m.body.offsets[hand])
+    # a rotation about the bone: it leaves the bone where it was, by the AMC's angle
+    np.testing.assert_allclose(local @ bone, np.broadcast_to(bone, (40, 3)), atol=1e-9)
+    angle = np.degrees(np.arccos(np.clip((np.trace(local, axis1=1, axis2=2) - 1) / 2, -1, 1)))
+    np.testing.assert_allclose(angle, np.abs(10 * np.sin(np.arange(40) / 7)), atol=1e-3)  # AMC: 4 decimals
+    np.testing.assert_allclose(np.einsum("tji,tjk->tik", m.rot[:, fore], m.rot[:, hand]),
+                               np.broadcast_to(np.eye(3), (40, 3, 3)), atol=1e-9)
+    joints = m.joints()
+    wrist = joints[:, hand] - joints[:, fore]
+    np.testing.assert_allclose(wrist, np.broadcast_to(wrist[0], wrist.shape), atol=1e-9)
+    # the forearm runs from the elbow to the end of the wrist bone: radius + wrist lengths
+    assert np.linalg.norm(m.body.offsets[hand]) == pytest.approx((3.5 + 1.7) * 0.0254 / 0.45, rel=1e-9)
 
 
 @pytest.mark.parametrize("corrupt,expect", [("truncated", "truncated"), ("unknown", "unknown bone"),

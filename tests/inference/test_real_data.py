@@ -54,13 +54,36 @@ def test_hdm05_retarget_reproduces_source_joint_positions(shared_data):
     src = to_source_skeleton(asf, parse_amc(f, asf), 120.0)
     m = load_motion(f)
     j = m.joints()
-    pairs = {"l_shank": "ltibia", "r_foot": "rfoot", "l_forearm": "lradius", "r_upperarm": "rhumerus"}
+    pairs = {"l_shank": "ltibia", "r_foot": "rfoot", "l_forearm": "lradius", "r_upperarm": "rhumerus",
+             "l_hand": "lhand"}
     from inference.skeleton import SEGMENT_INDEX
 
     for ours, theirs in pairs.items():
         d_ours = np.linalg.norm(j[:, SEGMENT_INDEX[ours]] - j[:, 0], axis=-1)
         d_src = np.linalg.norm(src.pos[:, src.index(theirs)] - src.pos[:, 0], axis=-1) * asf.scale
         assert np.abs(d_ours - d_src).max() < 1e-3, ours
+
+
+def test_hdm05_forearm_pronates_with_the_wrist_bone(shared_data):
+    """HDM05 puts pronation in a short ``wrist`` bone after the hinged ``radius``; our
+    forearm (where the wrist sensor sits) must turn with it: its twist about its own bone,
+    relative to the upper arm, is the AMC's wrist angle, frame by frame."""
+    from scipy.spatial.transform import Rotation
+
+    from inference.loaders.asf_amc import find_asf, parse_amc
+    from inference.skeleton import SEGMENT_INDEX
+
+    f = next(p for p in find_motion_files(shared_data / "hdm05" / "dg") if "throw" in p.name)
+    amc = parse_amc(f, parse_asf(find_asf(f)))
+    m = load_motion(f)
+    for s in "lr":
+        local = np.swapaxes(m.rot[:, SEGMENT_INDEX[f"{s}_upperarm"]], -1, -2) @ m.rot[:, SEGMENT_INDEX[f"{s}_forearm"]]
+        bone = m.body.offsets[SEGMENT_INDEX[f"{s}_hand"]] / np.linalg.norm(m.body.offsets[SEGMENT_INDEX[f"{s}_hand"]])
+        q = Rotation.from_matrix(local).as_quat()  # x, y, z, w
+        twist = np.degrees(2 * np.arctan2(q[:, :3] @ bone, q[:, 3]))
+        ry = amc[f"{s}wrist"][:, 0]
+        assert np.ptp(ry) > 20, "the clip should pronate"
+        np.testing.assert_allclose((twist + ry + 180) % 360 - 180, 0.0, atol=0.2)
 
 
 def test_bandai_walk_faces_where_it_goes(shared_data):
