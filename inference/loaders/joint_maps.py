@@ -36,17 +36,14 @@ BANDAI = JointMap(
     roll_quarters={"spine1": 1, "l_collar": 3, "r_collar": 3, "r_thigh": 2},
 )
 
-# CMU's 31-joint BVH is its ASF converted bone for bone: ForeArm = radius, Hand = wrist
-# (the pronation bone, parent of the thumb), FingerBase = hand; read it as ASF is read
 CMU_BVH = JointMap(
     name="cmu31",
     segments=_sides({
         "pelvis": "Hips", "spine1": "LowerBack", "spine2": "Spine", "spine3": "Spine1", "neck": "Neck",
         "head": "Head", "collar": "{Side}Shoulder", "upperarm": "{Side}Arm", "forearm": "{Side}ForeArm",
-        "hand": "{Side}FingerBase", "fingers": "{Side}HandIndex1", "thigh": "{Side}UpLeg", "shank": "{Side}Leg",
+        "hand": "{Side}Hand", "fingers": "{Side}FingerBase", "thigh": "{Side}UpLeg", "shank": "{Side}Leg",
         "foot": "{Side}Foot", "toes": "{Side}ToeBase",
     }),
-    orient=_sides({"forearm": "{Side}Hand"}),
 )
 
 # Mixamo-style and most game skeletons
