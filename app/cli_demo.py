@@ -286,7 +286,9 @@ class DemoSession:
         c = self.cfg
         return {
             "app_version": APP_VERSION, "model": self.model_label, "steps": self.steps_count(),
-            "mirror": bool(self.poser.mirror), "sensors": list(c.sensors), "insoles": c.insoles, "protocol": c.protocol,
+            "mirror": bool(self.poser.mirror),
+            "stride_scale": self.poser.stride is not None, "sensors": list(c.sensors), "insoles": c.insoles,
+            "protocol": c.protocol,
             "assignment": self.assignment, "motion": c.file or c.motion, "seed": c.seed,
             "source": "imucap demo (simulated suit)", "body_height_m": float(self.truth.body.height),
             # the exact bones the poser used, so `imucap replay/export` rebuild the same body

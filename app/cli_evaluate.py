@@ -64,6 +64,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--contact-detector", action=argparse.BooleanOptionalAction, default=True,
                    help="contacts for the root correction from the shank contact detector when both shanks are "
                         "measured (default); --no-contact-detector uses the model's own contact outputs")
+    p.add_argument("--stride-scale", action=argparse.BooleanOptionalAction, default=False,
+                   help="scale the root path by the shanks' inertial strides when both shanks are measured "
+                        "(inference/stride.py; off by default, NOTES.md 'Session 15')")
     p.add_argument("--against", default=None, metavar="SPEC",
                    help="also score this model (same forms as --model) on the same clips and sensors, and "
                         "report --model minus it per metric with a bootstrap interval over clips")
@@ -152,7 +155,8 @@ def run(args: argparse.Namespace) -> int:
                                           progress=progress, keep=keep, desc=f"{label or spec}",
                                           smoothing=args.smoothing,
                                           contact_detector="default" if args.contact_detector else None,
-                                          inpaint_noise=args.inpaint_noise, mirror=args.mirror)
+                                          inpaint_noise=args.inpaint_noise, mirror=args.mirror,
+                                          stride_scale=args.stride_scale)
         summary.update({
             "model": str(spec), "kind": kind, "sensors": list(set_sites),
             "insoles": insoles, "steps": _steps_label(st, kind), "step_list": st if kind == "diffusion" else None,
@@ -160,6 +164,7 @@ def run(args: argparse.Namespace) -> int:
             "inpaint_noise": noise_mode_for(model, args.inpaint_noise) if kind == "diffusion" else None,
             "contact_detector": args.contact_detector and kind != "floor",
             "mirror": mirror_for(model, args.mirror),
+            "stride_scale": args.stride_scale and kind != "floor",
         })
         return summary, clips
 

@@ -47,6 +47,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="diffusion steps: K, 'paper', '10D:K' or a list (default: the model's)")
     p.add_argument("--mirror", action=argparse.BooleanOptionalAction, default=None,
                    help="mirror averaging (default: as recorded, else the model file's own)")
+    p.add_argument("--stride-scale", action=argparse.BooleanOptionalAction, default=None,
+                   help="scale the root path by the shanks' inertial strides (default: as recorded; sessions "
+                        "recorded before it existed ran without it)")
     p.add_argument("--seed", type=int, default=0, help="seed of the inpainting noise (replays are reproducible)")
     p.add_argument("--threads", type=int, default=1, help="torch threads (0 = torch's default)")
     p.add_argument("--height", type=float, default=None, help="subject height in m (default: from the recording)")
@@ -140,7 +143,8 @@ def run_replay(args: argparse.Namespace) -> int:
     model = resolve_model(args.model)
     # a session recorded before the model file's defaults changed replays as it ran
     mirror = args.mirror if args.mirror is not None else rec.metadata.get("mirror")
-    poser = Poser(model, body=body, steps=args.steps, seed=args.seed, mirror=mirror)
+    stride = args.stride_scale if args.stride_scale is not None else bool(rec.metadata.get("stride_scale", False))
+    poser = Poser(model, body=body, steps=args.steps, seed=args.seed, mirror=mirror, stride_scale=stride)
     label = _model_label(args.model, model)
     steps = len(poser.steps) if poser.kind == "diffusion" else (1 if poser.kind == "regressor" else 0)
     if not args.no_progress:
@@ -155,7 +159,8 @@ def run_replay(args: argparse.Namespace) -> int:
     if args.out:
         motion = motion_from_poses(res.poses, body, rec, meta={
             "model": label, "steps": steps, "sensors": list(res.sensors), "insoles": res.insoles,
-            "what": f"imucap replay (seed {args.seed})", "step_list": list(poser.steps), "mirror": poser.mirror})
+            "what": f"imucap replay (seed {args.seed})", "step_list": list(poser.steps), "mirror": poser.mirror,
+            "stride_scale": poser.stride is not None})
         for o in args.out:
             outputs.append(str(export_motion(o, motion)))
             if not args.no_progress:
@@ -166,7 +171,7 @@ def run_replay(args: argparse.Namespace) -> int:
         "recording": str(args.recording), "frames": n, "duration_s": round(span, 3),
         "sensors": list(res.sensors), "insoles": res.insoles, "model": label, "kind": poser.kind,
         "steps": steps, "step_list": list(poser.steps) if poser.kind == "diffusion" else None, "seed": args.seed,
-        "mirror": poser.mirror,
+        "mirror": poser.mirror, "stride_scale": poser.stride is not None,
         "recorded_sensors": list(rec.sites), "recorded_model": rec.metadata.get("model"),
         "calibrations": res.calibrations_used, "hub_frames": res.hub_frames,
         "frames_filled": res.stats.get("frames_filled"), "resampler_restarts": res.stats.get("resampler_restarts"),

@@ -13,7 +13,11 @@ last 60 frames) and whose last frame holds the new measurement. Each step:
 3. clean the reconstructed frame (6D -> rotation -> 6D, contacts to 0/1, each knee a
    hinge about its lateral axis: ``joint_constraints``, ``knee_hinge=False`` to skip), correct the
    root displacement from the predicted contacts, write it back into the history;
-4. integrate the root path and run FK for the outputs; the output root and the
+4. with both shanks measured, scale the root displacement by the running ratio of the
+   shanks' inertial strides to the reconstructed ones (``stride.StrideScale``,
+   opt-in with ``stride_scale=True``, see NOTES.md "Session 15"): the reconstructed stride
+   is the unmeasured thigh's guess;
+5. integrate the root path and run FK for the outputs; the output root and the
    unmeasured orientations go through light speed-adaptive low-passes (``smoothing``,
    ``smoothing=False`` to skip): per-frame inference makes them wobble. Output only: the
    history and the root integration use the unfiltered values.
@@ -54,13 +58,14 @@ from .body import Body, contact_points, forward_kinematics, npose_rotations, tpo
 from .contact_detector import DETECTOR_THRESHOLD, SHANK_INDEX, ContactDetector, load_detector
 from .denoiser import Denoiser, LoadedModel, freeze_for_cpu, load_model
 from .diffusion import Schedule, inpaint, paper_steps, parse_steps
-from .features import FPS_MODEL, N_FEATURES, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
+from .features import FPS_MODEL, N_FEATURES, SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
 from .joint_constraints import constrain_knees
 from .mirror import MirrorAveraged
 from .regressor import regress
 from .rotations import matrix_to_rot6d, rot6d_to_matrix
-from .skeleton import N_CONTACTS, N_SEGMENTS
+from .skeleton import N_CONTACTS, N_SEGMENTS, SEGMENT_INDEX, SITE_INDEX
 from .smoothing import ROOT_SMOOTHING, ROTATION_SMOOTHING, RotationOneEuro, VectorOneEuro
+from .stride import SHANK_SITES, StrideScale
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 DEFAULT_WEIGHTS: dict[str, Path] = {
@@ -243,6 +248,7 @@ class Poser:
         contact_threshold: float | None = None,
         contact_detector: ContactDetector | str | os.PathLike | None = "default",
         mirror: bool | None = None,
+        stride_scale: bool = False,
     ) -> None:
         self.model = model
         self.kind = "floor" if model is None else model.kind
@@ -254,6 +260,7 @@ class Poser:
             self.steps = [] if self.kind == "floor" else [0]  # one pass; reported as such
         self.window = model.config.window if model is not None else WINDOW
         self.root_correction = root_correction and self.kind != "floor"
+        self.stride = StrideScale(self.body, FPS_MODEL) if stride_scale and self.root_correction else None
         self.start_pose = start_pose
         # None = what the model file recommends (meta, set at export), else the paper's way
         meta = (model.meta or {}) if model is not None else {}
@@ -326,9 +333,12 @@ class Poser:
             j0 = forward_kinematics(R0, torch.zeros(3), self._offsets)
             self._prev_cps = contact_points(R0, j0, self._contact_offsets)
             self._root_xy = torch.tensor(self.root_xy0, dtype=torch.float64)
+            self._root_raw = np.zeros(2)  # the root path without stride scaling
             self._gen = torch.Generator().manual_seed(self.seed)
         for f in self._filters or ():
             f.reset()
+        if self.stride is not None:
+            self.stride.reset()
         self.index = 0
 
     def _normalize(self, x: Tensor) -> Tensor:
@@ -417,6 +427,8 @@ class Poser:
             # history keeps the exact normalised measurement where observed
             win[0, -1] = torch.where(m, fn, self._normalize(y))
 
+            if self.stride is not None and not bool(m[SL_DP].any()):
+                y[SL_DP] = y[SL_DP] * self._stride_scale(joints_rel, f32, m, contact, y[SL_DP])
             self._root_xy += y[SL_DP].to(torch.float64)
             root = torch.cat([self._root_xy.to(torch.float32), y[SL_PZ]])
             if self._filters is not None:
@@ -433,6 +445,28 @@ class Poser:
             )
         self.index += 1
         return frame
+
+
+    def _stride_scale(self, joints_rel: Tensor, f32: Tensor, m: Tensor, contact: Tensor,
+                      dp: Tensor) -> float:
+        """Feed this frame to the stride estimator; the factor for this frame's root step.
+        Without both shanks the paper's root stands alone (the bias the scale undoes belongs
+        to the sensor set it was measured with); the scale is kept for when they return."""
+        self._root_raw += dp.numpy().astype(np.float64)
+        if not (bool(m[_SHANK_ROT].all()) and bool(m[_SHANK_ACC].all())):
+            self.stride.drop()
+            return 1.0
+        c = contact.numpy()
+        ankles = joints_rel.numpy()[list(_FOOT_JOINTS), :2].astype(np.float64) + self._root_raw
+        R = rot6d_to_matrix(f32[_SHANK_ROT].reshape(2, 6)).numpy()
+        return self.stride.update(R, f32[_SHANK_ACC].numpy().reshape(2, 3),
+                                  np.array([c[0] or c[1], c[2] or c[3]]), ankles)
+
+
+_SHANK_SEGMENTS = tuple(SEGMENT_INDEX[s] for s in SHANK_SITES)
+_FOOT_JOINTS = (SEGMENT_INDEX["l_foot"], SEGMENT_INDEX["r_foot"])
+_SHANK_ROT = torch.tensor([SL_ROT.start + 6 * k + i for k in _SHANK_SEGMENTS for i in range(6)])
+_SHANK_ACC = torch.tensor([SL_ACC.start + 3 * SITE_INDEX[s] + i for s in SHANK_SITES for i in range(3)])
 
 
 def _writable(a):

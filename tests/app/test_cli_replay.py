@@ -129,3 +129,30 @@ def test_replay_mirrors_as_recorded_else_as_the_model_file_says(recorded, tiny_m
         f.attrs["metadata"] = json.dumps({**json.loads(f.attrs["metadata"]), "mirror": False})
     assert mirror_of(old) is False
     assert mirror_of(old, "--mirror") is True
+
+
+def test_replay_scales_strides_as_recorded(recorded, tiny_model, tmp_path, capsys):
+    """A session recorded before stride scaling existed replays without it; one that had it
+    replays with it; either way the flag overrides."""
+    import shutil
+
+    import h5py
+
+    def stride_of(path, *extra):
+        code, out, err = _run(capsys, "replay", str(path), "--model", str(tiny_model), "--steps", "2", "--json",
+                              "--no-progress", *extra)
+        assert code == 0, err
+        return json.loads(out)["stride_scale"]
+
+    for recorded_as in (None, True):
+        rec = tmp_path / f"rec_{recorded_as}.h5"
+        shutil.copy(recorded.path, rec)
+        with h5py.File(rec, "r+") as f:
+            meta = json.loads(f.attrs["metadata"])
+            meta.pop("stride_scale", None)
+            if recorded_as is not None:
+                meta["stride_scale"] = recorded_as
+            f.attrs["metadata"] = json.dumps(meta)
+        assert stride_of(rec) is bool(recorded_as)
+        assert stride_of(rec, "--stride-scale") is True
+        assert stride_of(rec, "--no-stride-scale") is False

@@ -338,3 +338,51 @@ def test_mirror_averaging_makes_the_live_output_the_same_for_a_motion_and_its_mi
 
     assert gap(True) < 1e-4
     assert gap(False) > 1e-2
+
+
+class _FixedStride:
+    """Stands in for the stride estimator: always the same factor, and counts its calls."""
+
+    def __init__(self, scale: float) -> None:
+        self.scale, self.updates, self.drops = scale, 0, 0
+
+    def update(self, R, acc, stance, ankle_xy) -> float:
+        assert R.shape == (2, 3, 3) and acc.shape == (2, 3) and stance.shape == (2,) and ankle_xy.shape == (2, 2)
+        self.updates += 1
+        return self.scale
+
+    def drop(self, leg=None) -> None:
+        self.drops += 1
+
+    def reset(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize("shanks", [True, False])
+def test_stride_scale_multiplies_the_root_step_only_while_both_shanks_deliver(shanks):
+    """A model walking 10 cm per frame with no foot down: scaled by the estimator's factor
+    when both shanks are measured, left alone (and the pending strides dropped) when not."""
+    body = Body.from_height(1.75)
+    mean, std = np.zeros(N_FEATURES, np.float32), np.ones(N_FEATURES, np.float32)
+    echo = Echo(dp=(0.1, 0.0), contact=0.0, mean=torch.as_tensor(mean), std=torch.as_tensor(std))
+    lm = LoadedModel(model=echo, kind="diffusion", config=ModelConfig.tiny(), norm_mean=mean, norm_std=std)
+    sites = ["pelvis", "l_shank", "r_shank"] if shanks else ["pelvis", "l_shank"]
+    m = observation_mask(sites)
+    feats = standing_features(body)
+    p = Poser(lm, body, steps=[0], smoothing=False, contact_detector=None, stride_scale=True)
+    fake = p.stride = _FixedStride(0.5)
+    for _ in range(10):
+        fr = p.step(feats, m)
+    expected = 0.5 if shanks else 1.0
+    np.testing.assert_allclose(fr.root[0], 10 * 0.1 * expected, atol=1e-5)
+    np.testing.assert_allclose(fr.features[SL_DP], [0.1 * expected, 0.0], atol=1e-6)
+    assert (fake.updates, fake.drops) == ((10, 0) if shanks else (0, 10))
+    off = Poser(lm, body, steps=[0], smoothing=False, contact_detector=None, stride_scale=False)
+    assert off.stride is None
+    for _ in range(10):
+        fr_off = off.step(feats, m)
+    np.testing.assert_allclose(fr_off.root[0], 1.0, atol=1e-5)
+
+
+def test_floor_baseline_has_no_stride_scale():
+    assert Poser(None, 1.75, stride_scale=True).stride is None

@@ -1,0 +1,193 @@
+"""Stride length from the shank sensors' own accelerations, to scale the root path.
+
+Why: the paper's root correction walks the pelvis by the planted foot's displacement
+relative to it, so the stride it produces is whatever the *reconstructed* leg says. The
+thigh is never measured by the sensor sets we ship (the knee hinge fixes only its axis),
+and its flexion amplitude is the model's prior: with the shanks alone a short-step walker
+gets the typical stride (NOTES.md, sessions 12-14: 8-17 % too long on the held-out "sad"
+walks; with 6 sites 0-13 % too short).
+
+A shank sensor measures what the root correction lacks. Between two stance phases the
+ankle's displacement is the sensor's displacement (strapdown integration of its free
+acceleration) plus the change of the sensor-to-ankle lever. In mid-stance the ankle
+is still, which fixes the sensor's velocity there (``-omega x lever``: the tibia rolls
+over the planted ankle). Pinning the integrated velocity to those values at both ends of
+a stride removes any constant acceleration bias exactly (a linear velocity drift). This is
+the zero-velocity-update method of foot- and shank-mounted gait analysis, run per stride.
+
+Each completed stride gives the ratio of the inertial stride length to the same ankle's
+displacement on the *unscaled* reconstructed path; a running (log-domain) mean of that
+ratio scales the root displacement of the frames that follow. It is causal: a stride is
+known when its second stance ends, so the first stride of a walk is unscaled.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from .body import Body
+from .skeleton import SEGMENT_INDEX, SITE_INDEX
+
+SHANK_SITES = ("l_shank", "r_shank")
+FOOT_SEGMENTS = ("l_foot", "r_foot")
+
+
+@dataclass(frozen=True)
+class StrideScaleConfig:
+    """min_stride_m: strides shorter than this (on either path) say nothing about scale
+    (shuffling, turning on the spot). gain: weight of a new stride in the running mean
+    (log domain), so ~1/gain strides of memory. limits: the scale is clamped to this range;
+    a ratio outside it is a detection error, not a stride. anchor_frames: how far into a
+    stance run (from either end) the zero-velocity anchor may sit; the middle of shorter
+    runs. max_stride_frames: a longer gap between anchors (a dropout, standing still on
+    one leg) is not integrated: drift grows with its square."""
+
+    min_stride_m: float = 0.2
+    gain: float = 0.4
+    limits: tuple[float, float] = (0.6, 1.6)
+    anchor_at: float = 0.5
+    max_stride_frames: int = 60
+
+
+class _Leg:
+    """One shank's integration state: a buffer of frames since its last anchor."""
+
+    def __init__(self, maxlen: int) -> None:
+        self.frames: deque[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = deque(maxlen=maxlen)
+        self.count = 0          # frames pushed since the leg's buffer was (re)started
+        self.vint = np.zeros(3)  # running integral of the free acceleration
+        self.prev_acc: np.ndarray | None = None
+        self.stance_start: int | None = None  # frame count where the current stance began
+        self.anchor: int | None = None  # frame count of the pending stride's start
+
+    def restart(self) -> None:
+        self.frames.clear()
+        self.count = 0
+        self.vint = np.zeros(3)
+        self.prev_acc = None
+        self.stance_start = None
+        self.anchor = None
+
+
+class StrideScale:
+    """Running ratio of the shanks' inertial strides to the reconstructed ones.
+
+    ``update`` once per 20 Hz frame with both shanks' orientation and free acceleration
+    (world frame, m/s^2, the model's smoothed input), whether each foot is in stance, and
+    each ankle's horizontal position on the unscaled root path. ``scale`` is the factor
+    for the root displacement of the next frame.
+    """
+
+    def __init__(self, body: Body, fps: float = 20.0, config: StrideScaleConfig | None = None) -> None:
+        self.config = config or StrideScaleConfig()
+        self.dt = 1.0 / float(fps)
+        # lever from each shank sensor to its ankle (the foot segment's origin), shank frame
+        self._lever = np.stack([
+            np.asarray(body.offsets[SEGMENT_INDEX[f]], dtype=np.float64)
+            - np.asarray(body.site_offsets[SITE_INDEX[s]], dtype=np.float64)
+            for s, f in zip(SHANK_SITES, FOOT_SEGMENTS)])
+        self.reset()
+
+    def reset(self) -> None:
+        self.log_scale = 0.0
+        self.strides: list[tuple[float, float]] = []  # (inertial, reconstructed) lengths, m
+        self._legs = [_Leg(self.config.max_stride_frames + 4) for _ in SHANK_SITES]
+
+    @property
+    def scale(self) -> float:
+        return math.exp(self.log_scale)
+
+    def drop(self, leg: int | None = None) -> None:
+        """A shank stopped delivering: its pending stride cannot be integrated."""
+        for k in range(len(self._legs)) if leg is None else (leg,):
+            self._legs[k].restart()
+
+    def update(self, R: np.ndarray, acc: np.ndarray, stance: np.ndarray, ankle_xy: np.ndarray) -> float:
+        """R: (2, 3, 3) shank orientations R_WB; acc: (2, 3) free acceleration at the
+        sensors; stance: (2,) bool; ankle_xy: (2, 2) ankles on the unscaled path."""
+        for k, leg in enumerate(self._legs):
+            self._push(k, leg, np.asarray(R[k], dtype=np.float64), np.asarray(acc[k], dtype=np.float64),
+                       bool(stance[k]), np.asarray(ankle_xy[k], dtype=np.float64))
+        return self.scale
+
+    # ------------------------------------------------------------------ internals
+    def _push(self, k: int, leg: _Leg, R: np.ndarray, acc: np.ndarray, stance: bool, ankle: np.ndarray) -> None:
+        if leg.prev_acc is not None:
+            leg.vint = leg.vint + 0.5 * (acc + leg.prev_acc) * self.dt
+        leg.prev_acc = acc
+        leg.frames.append((leg.vint.copy(), R, R @ self._lever[k], ankle))
+        n = leg.count
+        leg.count += 1
+        if stance and leg.stance_start is None:
+            leg.stance_start = n
+        elif not stance and leg.stance_start is not None:
+            self._stance_ended(leg, leg.stance_start, n - 1)
+            leg.stance_start = None
+
+    def _stance_ended(self, leg: _Leg, first: int, last: int) -> None:
+        """A stance run [first, last] closed: its early part ends the pending stride, its
+        late part starts the next one (both still: the foot is planted in between)."""
+        c = self.config
+        mid = first + int(round(c.anchor_at * (last - first)))
+        end_anchor = start_anchor = mid
+        if leg.anchor is not None:
+            self._stride(leg, leg.anchor, end_anchor)
+        leg.anchor = start_anchor
+
+    def _frame(self, leg: _Leg, n: int):
+        """Buffered frame with count ``n`` (None if it fell out of the buffer)."""
+        i = n - (leg.count - len(leg.frames))
+        return leg.frames[i] if 0 <= i < len(leg.frames) else None
+
+    def _still_velocity(self, leg: _Leg, n: int) -> np.ndarray | None:
+        """The sensor's velocity when its ankle is still: the tibia turning about it."""
+        before, here, after = self._frame(leg, n - 1), self._frame(leg, n), self._frame(leg, n + 1)
+        if before is None or here is None or after is None:
+            return None
+        w = _world_rate(before[1], after[1], 2.0 * self.dt)
+        return -np.cross(w, here[2])
+
+    def _stride(self, leg: _Leg, a0: int, a1: int) -> None:
+        c = self.config
+        if not 0 < a1 - a0 <= c.max_stride_frames:
+            return
+        v0, v1 = self._still_velocity(leg, a0), self._still_velocity(leg, a1)
+        if v0 is None or v1 is None:
+            return
+        seg = [self._frame(leg, n) for n in range(a0, a1 + 1)]
+        vint = np.stack([f[0] for f in seg])
+        # integrated velocity, pinned to the still-ankle values at both ends
+        v = vint - vint[0] + v0
+        frac = np.linspace(0.0, 1.0, len(seg))[:, None]
+        v = v + frac * (v1 - v[-1])
+        sensor = 0.5 * (v[1:] + v[:-1]).sum(axis=0) * self.dt
+        inertial = sensor + seg[-1][2] - seg[0][2]
+        L_in = float(np.hypot(inertial[0], inertial[1]))
+        L_rec = float(np.hypot(*(seg[-1][3] - seg[0][3])))
+        if min(L_in, L_rec) < c.min_stride_m:
+            return
+        lo, hi = c.limits
+        ratio = L_in / L_rec
+        if not lo <= ratio <= hi:
+            return
+        self.strides.append((L_in, L_rec))
+        self.log_scale += c.gain * (math.log(ratio) - self.log_scale)
+
+
+def _world_rate(R_before: np.ndarray, R_after: np.ndarray, dt: float) -> np.ndarray:
+    """World-frame angular velocity from two orientations ``dt`` apart."""
+    dR = R_after @ R_before.T
+    cos = float(np.clip((np.trace(dR) - 1.0) * 0.5, -1.0, 1.0))
+    angle = math.acos(cos)
+    axis = np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]])
+    s = math.sin(angle)
+    if s < 1e-9:
+        return 0.5 * axis / dt  # small angle: the skew part is the rotation vector
+    return axis * (angle / (2.0 * s)) / dt
+
+
+__all__ = ["StrideScale", "StrideScaleConfig", "SHANK_SITES"]
