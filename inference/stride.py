@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .body import Body
+from .rotations import so3_log
 from .skeleton import SEGMENT_INDEX, SITE_INDEX
 
 SHANK_SITES = ("l_shank", "r_shank")
@@ -180,14 +181,7 @@ class StrideScale:
 
 def _world_rate(R_before: np.ndarray, R_after: np.ndarray, dt: float) -> np.ndarray:
     """World-frame angular velocity from two orientations ``dt`` apart."""
-    dR = R_after @ R_before.T
-    cos = float(np.clip((np.trace(dR) - 1.0) * 0.5, -1.0, 1.0))
-    angle = math.acos(cos)
-    axis = np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]])
-    s = math.sin(angle)
-    if s < 1e-9:
-        return 0.5 * axis / dt  # small angle: the skew part is the rotation vector
-    return axis * (angle / (2.0 * s)) / dt
+    return so3_log(R_after @ R_before.T) / dt
 
 
 __all__ = ["StrideScale", "StrideScaleConfig", "SHANK_SITES"]
