@@ -65,7 +65,7 @@ from .regressor import regress
 from .rotations import matrix_to_rot6d, rot6d_to_matrix
 from .skeleton import N_CONTACTS, N_SEGMENTS, SEGMENT_INDEX, SITE_INDEX
 from .smoothing import ROOT_SMOOTHING, ROTATION_SMOOTHING, RotationOneEuro, VectorOneEuro
-from .stride import SHANK_SITES, StrideScale
+from .stride import FOOT_SEGMENTS, SHANK_SITES, StrideScale
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 DEFAULT_WEIGHTS: dict[str, Path] = {
@@ -446,7 +446,6 @@ class Poser:
         self.index += 1
         return frame
 
-
     def _stride_scale(self, joints_rel: Tensor, f32: Tensor, m: Tensor, contact: Tensor,
                       dp: Tensor) -> float:
         """Feed this frame to the stride estimator; the factor for this frame's root step.
@@ -464,7 +463,7 @@ class Poser:
 
 
 _SHANK_SEGMENTS = tuple(SEGMENT_INDEX[s] for s in SHANK_SITES)
-_FOOT_JOINTS = (SEGMENT_INDEX["l_foot"], SEGMENT_INDEX["r_foot"])
+_FOOT_JOINTS = tuple(SEGMENT_INDEX[s] for s in FOOT_SEGMENTS)
 _SHANK_ROT = torch.tensor([SL_ROT.start + 6 * k + i for k in _SHANK_SEGMENTS for i in range(6)])
 _SHANK_ACC = torch.tensor([SL_ACC.start + 3 * SITE_INDEX[s] + i for s in SHANK_SITES for i in range(3)])
 

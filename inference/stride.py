@@ -41,11 +41,12 @@ FOOT_SEGMENTS = ("l_foot", "r_foot")
 class StrideScaleConfig:
     """min_stride_m: strides shorter than this (on either path) say nothing about scale
     (shuffling, turning on the spot). gain: weight of a new stride in the running mean
-    (log domain), so ~1/gain strides of memory. limits: the scale is clamped to this range;
-    a ratio outside it is a detection error, not a stride. anchor_frames: how far into a
-    stance run (from either end) the zero-velocity anchor may sit; the middle of shorter
-    runs. max_stride_frames: a longer gap between anchors (a dropout, standing still on
-    one leg) is not integrated: drift grows with its square."""
+    (log domain), so ~1/gain strides of memory. limits: a stride ratio outside this range
+    is a detection error, not a stride, and is skipped. anchor_at: where in a stance run
+    (0 = its first frame, 1 = its last) the zero-velocity anchor sits; the heel is already
+    rising late in stance (NOTES.md "Session 15"). max_stride_frames: a longer gap between
+    anchors (a dropout, standing still on one leg) is not integrated: drift grows with its
+    square."""
 
     min_stride_m: float = 0.2
     gain: float = 0.4
@@ -55,7 +56,7 @@ class StrideScaleConfig:
 
 
 class _Leg:
-    """One shank's integration state: a buffer of frames since its last anchor."""
+    """One shank's integration state and a bounded buffer of its recent frames."""
 
     def __init__(self, maxlen: int) -> None:
         self.frames: deque[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = deque(maxlen=maxlen)
@@ -130,14 +131,12 @@ class StrideScale:
             leg.stance_start = None
 
     def _stance_ended(self, leg: _Leg, first: int, last: int) -> None:
-        """A stance run [first, last] closed: its early part ends the pending stride, its
-        late part starts the next one (both still: the foot is planted in between)."""
-        c = self.config
-        mid = first + int(round(c.anchor_at * (last - first)))
-        end_anchor = start_anchor = mid
+        """A stance run [first, last] closed: its anchor ends the pending stride and starts
+        the next one."""
+        anchor = first + int(round(self.config.anchor_at * (last - first)))
         if leg.anchor is not None:
-            self._stride(leg, leg.anchor, end_anchor)
-        leg.anchor = start_anchor
+            self._stride(leg, leg.anchor, anchor)
+        leg.anchor = anchor
 
     def _frame(self, leg: _Leg, n: int):
         """Buffered frame with count ``n`` (None if it fell out of the buffer)."""
