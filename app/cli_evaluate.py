@@ -64,9 +64,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--contact-detector", action=argparse.BooleanOptionalAction, default=True,
                    help="contacts for the root correction from the shank contact detector when both shanks are "
                         "measured (default); --no-contact-detector uses the model's own contact outputs")
-    p.add_argument("--stride-scale", action=argparse.BooleanOptionalAction, default=False,
+    p.add_argument("--stride-scale", action=argparse.BooleanOptionalAction, default=True,
                    help="scale the root path by the shanks' inertial strides when both shanks are measured "
-                        "(inference/stride.py; off by default, NOTES.md 'Session 15')")
+                        "(inference/stride.py; default; NOTES.md 'Session 16')")
     p.add_argument("--against", default=None, metavar="SPEC",
                    help="also score this model (same forms as --model) on the same clips and sensors, and "
                         "report --model minus it per metric with a bootstrap interval over clips")

@@ -129,7 +129,7 @@ class ClipResult:
 def reconstruct_clip(model: LoadedModel | None, inp: ClipInput, steps=None, seed: int = 0,
                      progress: Callable[[int], object] | None = None, smoothing: bool = True,
                      contact_detector="default", inpaint_noise: str | None = None,
-                     mirror: bool | None = None, stride_scale: bool = False) -> Reconstruction:
+                     mirror: bool | None = None, stride_scale: bool = True) -> Reconstruction:
     """The live poser over one clip, starting from a standing history at the clip's
     first root position (only for nicer exports: every metric is translation-free).
     ``inpaint_noise``: the poser's noise mode, ``mirror`` its mirror averaging (None: the
@@ -155,7 +155,7 @@ def evaluate_motions(
     contact_detector="default",
     inpaint_noise: str | None = None,
     mirror: bool | None = None,
-    stride_scale: bool = False,
+    stride_scale: bool = True,
 ) -> tuple[dict, list[ClipResult]]:
     """Evaluate one model and sensor set over motions; returns (pooled summary, per-clip
     results). ``keep`` retains reconstructions (for exports) instead of only metrics;

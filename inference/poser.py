@@ -14,9 +14,9 @@ last 60 frames) and whose last frame holds the new measurement. Each step:
    hinge about its lateral axis: ``joint_constraints``, ``knee_hinge=False`` to skip), correct the
    root displacement from the predicted contacts, write it back into the history;
 4. with both shanks measured, scale the root displacement by the running ratio of the
-   shanks' inertial strides to the reconstructed ones (``stride.StrideScale``,
-   opt-in with ``stride_scale=True``, see NOTES.md "Session 15"): the reconstructed stride
-   is the unmeasured thigh's guess;
+   shanks' inertial strides to the reconstructed ones (``stride.StrideScale``;
+   ``stride_scale=False`` to skip; NOTES.md "Session 15", "Session 16"): the reconstructed
+   stride is the unmeasured thigh's guess;
 5. integrate the root path and run FK for the outputs; the output root and the
    unmeasured orientations go through light speed-adaptive low-passes (``smoothing``,
    ``smoothing=False`` to skip): per-frame inference makes them wobble. Output only: the
@@ -65,7 +65,7 @@ from .regressor import regress
 from .rotations import matrix_to_rot6d, rot6d_to_matrix
 from .skeleton import N_CONTACTS, N_SEGMENTS, SEGMENT_INDEX, SITE_INDEX
 from .smoothing import ROOT_SMOOTHING, ROTATION_SMOOTHING, RotationOneEuro, VectorOneEuro
-from .stride import FOOT_SEGMENTS, SHANK_SITES, StrideScale
+from .stride import FOOT_SEGMENTS, SHANK_SITES, StrideScale, foot_flat
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 DEFAULT_WEIGHTS: dict[str, Path] = {
@@ -248,7 +248,7 @@ class Poser:
         contact_threshold: float | None = None,
         contact_detector: ContactDetector | str | os.PathLike | None = "default",
         mirror: bool | None = None,
-        stride_scale: bool = False,
+        stride_scale: bool = True,
     ) -> None:
         self.model = model
         self.kind = "floor" if model is None else model.kind
@@ -455,11 +455,9 @@ class Poser:
         if not (bool(m[_SHANK_ROT].all()) and bool(m[_SHANK_ACC].all())):
             self.stride.drop()
             return 1.0
-        c = contact.numpy()
         ankles = joints_rel.numpy()[list(_FOOT_JOINTS), :2].astype(np.float64) + self._root_raw
         R = rot6d_to_matrix(f32[_SHANK_ROT].reshape(2, 6)).numpy()
-        return self.stride.update(R, f32[_SHANK_ACC].numpy().reshape(2, 3),
-                                  np.array([c[0] or c[1], c[2] or c[3]]), ankles)
+        return self.stride.update(R, f32[_SHANK_ACC].numpy().reshape(2, 3), foot_flat(contact.numpy()), ankles)
 
 
 _SHANK_SEGMENTS = tuple(SEGMENT_INDEX[s] for s in SHANK_SITES)

@@ -17,7 +17,9 @@ the zero-velocity-update method of foot- and shank-mounted gait analysis, run pe
 
 Each completed stride gives the ratio of the inertial stride length to the same ankle's
 displacement on the *unscaled* reconstructed path; a running (log-domain) mean of that
-ratio scales the root displacement of the frames that follow. It is causal: a stride is
+ratio (by default just the last stride's) scales the root displacement of the frames
+that follow. A stride whose two ends are not at the same height was badly anchored and
+is skipped. It is causal: a stride is
 known when its second stance ends, so the first stride of a walk is unscaled.
 """
 
@@ -41,18 +43,25 @@ FOOT_SEGMENTS = ("l_foot", "r_foot")
 class StrideScaleConfig:
     """min_stride_m: strides shorter than this (on either path) say nothing about scale
     (shuffling, turning on the spot). gain: weight of a new stride in the running mean
-    (log domain), so ~1/gain strides of memory. limits: a stride ratio outside this range
-    is a detection error, not a stride, and is skipped. anchor_at: where in a stance run
-    (0 = its first frame, 1 = its last) the zero-velocity anchor sits; the heel is already
-    rising late in stance (NOTES.md "Session 15"). max_stride_frames: a longer gap between
+    (log domain), so ~1/gain strides of memory; 1 = the last stride alone, which did best
+    on the training walks: the reconstruction's stride error changes from stride to stride,
+    and memory only makes the scale lag it (NOTES.md "Session 16"). limits: a stride ratio
+    outside this range is a detection error, not a stride, and is skipped. anchor_at: where
+    in a stance run (0 = its first frame, 1 = its last) the zero-velocity anchor sits; the
+    poser's stance is foot-flat (heel and toe down), and the ankle of a rolling foot is
+    stillest in its first half. max_stride_frames: a longer gap between
     anchors (a dropout, standing still on one leg) is not integrated: drift grows with its
-    square."""
+    square. max_rise_m: both ends of a stride stand on the ground, so on level ground its
+    inertial displacement has no vertical part; one that rises or sinks by more than this
+    was anchored where the ankle was not still (a sidestep's roll, a heel already lifting),
+    and its length is off too. Stairs fail this test as well: they keep the last scale."""
 
     min_stride_m: float = 0.2
-    gain: float = 0.4
+    gain: float = 1.0
     limits: tuple[float, float] = (0.6, 1.6)
-    anchor_at: float = 0.5
+    anchor_at: float = 0.35
     max_stride_frames: int = 60
+    max_rise_m: float = 0.05
 
 
 class _Leg:
@@ -166,6 +175,8 @@ class StrideScale:
         v = v + frac * (v1 - v[-1])
         sensor = 0.5 * (v[1:] + v[:-1]).sum(axis=0) * self.dt
         inertial = sensor + seg[-1][2] - seg[0][2]
+        if abs(inertial[2]) > c.max_rise_m:
+            return
         L_in = float(np.hypot(inertial[0], inertial[1]))
         L_rec = float(np.hypot(*(seg[-1][3] - seg[0][3])))
         if min(L_in, L_rec) < c.min_stride_m:
@@ -178,9 +189,18 @@ class StrideScale:
         self.log_scale += c.gain * (math.log(ratio) - self.log_scale)
 
 
+def foot_flat(contacts: np.ndarray) -> np.ndarray:
+    """(..., 2) stance per foot for ``StrideScale.update`` from (..., 4) heel/toe contacts
+    (``skeleton.CONTACTS`` order): heel and toe down. Contact runs from heel strike to toe
+    off, and the ankle is still only while the foot is flat; anchoring in a union of the
+    two put some strides on a rolling foot (NOTES.md "Session 16")."""
+    c = np.asarray(contacts, dtype=bool)
+    return np.stack([c[..., 0] & c[..., 1], c[..., 2] & c[..., 3]], axis=-1)
+
+
 def _world_rate(R_before: np.ndarray, R_after: np.ndarray, dt: float) -> np.ndarray:
     """World-frame angular velocity from two orientations ``dt`` apart."""
     return so3_log(R_after @ R_before.T) / dt
 
 
-__all__ = ["StrideScale", "StrideScaleConfig", "SHANK_SITES"]
+__all__ = ["StrideScale", "StrideScaleConfig", "SHANK_SITES", "foot_flat"]

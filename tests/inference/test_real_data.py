@@ -124,15 +124,14 @@ def test_shank_strides_of_a_real_walk_come_from_the_shanks_alone(shared_data):
     from inference.features import SL_ACC, SL_CONTACT, SL_ROT
     from inference.rotations import rot6d_to_matrix
     from inference.skeleton import SEGMENT_INDEX, SITE_INDEX
-    from inference.stride import SHANK_SITES, StrideScale
+    from inference.stride import SHANK_SITES, StrideScale, foot_flat
 
     m = load_motion(shared_data / "bandai" / "d1" / "dataset-1_walk_proud_001.bvh.gz")
     inp = clip_input(m, list(SHANK_SITES), insoles=True, noise=evaluation_noise(), seed=3)
     seg = [SEGMENT_INDEX[s] for s in SHANK_SITES]
     R = np.stack([rot6d_to_matrix(inp.features[:, SL_ROT][:, 6 * k: 6 * k + 6]) for k in seg], axis=1)
     acc = np.stack([inp.features[:, SL_ACC][:, 3 * SITE_INDEX[s]: 3 * SITE_INDEX[s] + 3] for s in SHANK_SITES], 1)
-    c = inp.features[:, SL_CONTACT] > 0.5
-    stance = np.stack([c[:, 0] | c[:, 1], c[:, 2] | c[:, 3]], axis=1)
+    stance = foot_flat(inp.features[:, SL_CONTACT] > 0.5)
     ankles = inp.joints[:, [SEGMENT_INDEX["l_foot"], SEGMENT_INDEX["r_foot"]], :2]
     est = StrideScale(inp.body, 20.0)
     for i in range(len(R)):

@@ -21,9 +21,10 @@ FPS = 60.0
 
 
 def planted_gait(body: Body, stride: float = 1.1, period: float = 1.1, seconds: float = 12.0,
-                 heading_deg: float = 30.0):
+                 heading_deg: float = 30.0, climb: float = 0.0):
     """60 Hz: shank orientations (T, 2, 3, 3), sensor positions (T, 2, 3), ankles (T, 2, 3)
-    and stance (T, 2) of a walk along ``heading_deg``; the legs half a period apart."""
+    and stance (T, 2) of a walk along ``heading_deg``; the legs half a period apart.
+    ``climb``: how far each stride rises (a stair has two steps a stride)."""
     t = np.arange(int(seconds * FPS)) / FPS
     yaw = np.deg2rad(heading_deg)
     fwd = np.array([np.cos(yaw), np.sin(yaw), 0.0])
@@ -42,7 +43,8 @@ def planted_gait(body: Body, stride: float = 1.1, period: float = 1.1, seconds: 
         ramp = 0.5 - 0.5 * np.cos(np.pi * s)  # 0 -> 1 over the swing, still in stance
         along = stride * (cycle + ramp)
         lift = 0.08 * np.sin(np.pi * s)
-        ankle[:, k] = along[:, None] * fwd + lift[:, None] * np.array([0.0, 0.0, 1.0]) + np.array([0, 0, 0.08])
+        up = 0.08 + lift + climb * (cycle + ramp)
+        ankle[:, k] = along[:, None] * fwd + up[:, None] * np.array([0.0, 0.0, 1.0])
         # the tibia rolls forward over the planted ankle and swings back in the air
         pitch = 0.5 * np.sin(2 * np.pi * phase + 0.4)
         R[:, k] = Rz @ matrix_about_axis(y_axis, pitch)
@@ -141,3 +143,18 @@ def test_an_implausible_ratio_is_a_detection_error_not_a_stride():
     R, acc, stance, ankle = gait_at_20hz(body)
     est = run(body, R, acc, stance, 3.0 * ankle[..., :2], StrideScaleConfig(limits=(0.6, 1.6)))
     assert est.strides == [] and est.scale == 1.0
+
+
+def test_a_stride_that_does_not_end_at_its_starting_height_is_not_trusted():
+    """Both anchors of a level stride stand on the same floor, so an inertial stride that
+    rises was anchored on a moving ankle or climbs stairs; either way its length is not the
+    scale's business. The same gait on level ground is scaled."""
+    body = Body.from_height(1.75)
+    R, acc, stance, ankle = gait_at_20hz(body, stride=0.6)
+    level = run(body, R, acc, stance, 1.3 * ankle[..., :2])
+    assert level.scale == pytest.approx(1 / 1.3, rel=0.03)
+    R, acc, stance, ankle = gait_at_20hz(body, stride=0.6, climb=0.34)
+    stairs = run(body, R, acc, stance, 1.3 * ankle[..., :2])
+    assert stairs.strides == [] and stairs.scale == 1.0
+    lenient = run(body, R, acc, stance, 1.3 * ankle[..., :2], StrideScaleConfig(max_rise_m=0.5))
+    assert lenient.scale == pytest.approx(1 / 1.3, rel=0.03)
