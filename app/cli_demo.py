@@ -349,6 +349,7 @@ class DemoSession:
             "hub_frames": stats["frames_in"], "dropped": stats["dropped"],
             "hub_frames_skipped": self.hub.stats.frames_skipped if self.hub else 0,
             "frames_filled": stats["frames_filled"], "resampler_restarts": stats["resampler_restarts"],
+            "stride": self.pipeline.stride_status(),
         }
         if self.warning:
             out["warning"] = self.warning

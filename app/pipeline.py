@@ -34,6 +34,7 @@ from inference.resample import STEP, StreamingResampler
 from inference.rotations import matrix_to_rot6d
 from inference.signals import SiteSignals
 from inference.skeleton import N_CONTACTS, N_SITES, SITE_INDEX, SITE_SEGMENT_INDEX, SITES
+from inference.stride import SHANK_SITES
 
 if TYPE_CHECKING:  # the poser pulls in torch; recorders and replay readers need not
     from inference.poser import PoseFrame, Poser
@@ -61,6 +62,17 @@ class LivePose:
     insoles: bool
     latency_ms: float | None
     compute_ms: float
+
+
+def stride_text(status: dict[str, Any]) -> str:
+    """``Pipeline.stride_status`` in words for a clinician's screen."""
+    if not status["enabled"]:
+        return "off"
+    if not status["shanks"]:
+        return "needs both shanks"
+    if status["scale"] is None:
+        return "waiting for the first strides"
+    return f"x{status['scale']:.2f} from {status['strides']} strides"
 
 
 class Sink:
@@ -204,6 +216,17 @@ class Pipeline:
     @property
     def status(self) -> str:
         return "calibrated" if self.calibration is not None else self.calibrator.status()
+
+    def stride_status(self) -> dict[str, Any]:
+        """What the shank stride scaling of the root is doing (``inference/stride.py``), so
+        a screen can say whether the walked distance comes from the shanks yet: enabled
+        (the poser has it), shanks (both feed the poser now), scale (None until a stride
+        has been measured since calibration) and how many strides were measured. Read from
+        another thread: plain attribute reads of the poser's estimator."""
+        est = self.poser.stride
+        strides = 0 if est is None else len(est.strides)
+        return {"enabled": est is not None, "shanks": all(s in self.active_sites for s in SHANK_SITES),
+                "scale": round(est.scale, 3) if strides else None, "strides": strides}
 
     # ------------------------------------------------------------------ the chain
     def _emit(self, method: str, *args: Any) -> None:
@@ -532,5 +555,5 @@ class LivePipeline:
 
 __all__ = [
     "LivePose", "Sink", "CallbackSink", "PipelineStats", "Pipeline", "SuitHub", "FrameSource",
-    "frames_from_signals", "ListSource", "LivePipeline", "STEP",
+    "frames_from_signals", "ListSource", "LivePipeline", "STEP", "stride_text",
 ]

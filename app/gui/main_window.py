@@ -22,6 +22,7 @@ from inference.body import contact_points
 from inference.skeleton import CONTACTS, PARENTS
 
 from ..cli_demo import DemoConfig, DemoSession
+from ..pipeline import stride_text
 
 _BONES = np.array([(i, PARENTS[i]) for i in range(1, len(PARENTS))], dtype=int)
 PRESETS: dict[str, tuple[str, ...]] = {
@@ -74,6 +75,10 @@ class DemoWindow(QtWidgets.QMainWindow):
         self.status_label = QtWidgets.QLabel("starting")
         self.status_label.setWordWrap(True)
         self.perf_label = QtWidgets.QLabel("")
+        # whether the walked distance comes from the shanks yet (a few strides after calibration)
+        self.stride_label = QtWidgets.QLabel("")
+        self.stride_label.setToolTip("The root path's scale from the shank sensors' own strides "
+                                     "(inference/stride.py): needs both shanks and a few steps")
         side.addWidget(self.model_label)
         if session.warning:
             warn = QtWidgets.QLabel("NO TRAINED MODEL: floor baseline")
@@ -82,6 +87,7 @@ class DemoWindow(QtWidgets.QMainWindow):
             side.addWidget(warn)
         side.addWidget(self.status_label)
         side.addWidget(self.perf_label)
+        side.addWidget(self.stride_label)
 
         side.addWidget(QtWidgets.QLabel("Sensors"))
         self.table = QtWidgets.QTableWidget(0, len(self.STATUS_COLUMNS))
@@ -175,6 +181,7 @@ class DemoWindow(QtWidgets.QMainWindow):
                 f"frames {st['poses']}, dropped {st['dropped']}, latency p50 "
                 f"{'-' if lat is None else f'{lat:.0f} ms'}, step p50 "
                 f"{'-' if step is None else f'{step:.1f} ms'}")
+        self.stride_label.setText(f"<b>Stride from shanks</b>: {stride_text(s.pipeline.stride_status())}")
         status = s.sensor_status()
         self.table.setRowCount(len(status))
         for r, (site, d) in enumerate(status.items()):

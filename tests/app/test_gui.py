@@ -69,6 +69,7 @@ def test_demo_window(qtbot, tmp_path):
         assert np.isfinite(win.bones.pos).all()
         _wait(qtbot, session, lambda: win.table.rowCount() == len(SUIT), 30_000)
         assert win.table.item(0, 0).text() == "pelvis"
+        assert win.stride_label.text().endswith(": off")  # the floor has no root to scale
 
         # the clinician's sensor configuration goes to the pipeline thread
         win.preset.setCurrentIndex(win.preset.findText("paper 6 (pelvis, head, wrists, shanks)"))

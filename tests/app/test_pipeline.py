@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from app.pipeline import CallbackSink, ListSource, LivePipeline, Pipeline, frames_from_signals
+from app.pipeline import CallbackSink, ListSource, LivePipeline, Pipeline, frames_from_signals, stride_text
 from calibration import Calibrator, Protocol, synthesize_session
 from inference.features import SL_ACC
 from inference.metrics import global_angle_error
@@ -188,3 +188,17 @@ def test_suit_hub_keeps_battery_and_status():
     hub.push("pelvis", Sample(t=1.01, device_time=1.01, device_id="p", quat=q))
     st = hub.status()["pelvis"]
     assert st["battery"] == 80.0 and st["packets"] == 0 and st["errors"] == 0 and st["gaps"] == 0
+
+
+def test_stride_status_says_whether_the_distance_comes_from_the_shanks(session):
+    sig, truth = session
+    pipe = Pipeline(make_poser("diffusion", body=truth.body, steps=[0]), SITES,
+                    calibrator=Calibrator(SITES, schedule=PROTO.schedule()))
+    st = pipe.stride_status()
+    assert st == {"enabled": True, "shanks": True, "scale": None, "strides": 0}
+    assert stride_text(st) == "waiting for the first strides"
+    pipe.set_active_sites(("pelvis", "head", "l_wrist", "r_wrist", "l_shank"))
+    assert stride_text(pipe.stride_status()) == "needs both shanks"
+    assert stride_text(_pipeline(truth).stride_status()) == "off"  # the floor has no root to scale
+    assert stride_text({"enabled": True, "shanks": True, "scale": 0.934, "strides": 12}) == "x0.93 from 12 strides"
+
