@@ -65,7 +65,7 @@ from .regressor import regress
 from .rotations import matrix_to_rot6d, rot6d_to_matrix
 from .skeleton import N_CONTACTS, N_SEGMENTS, SEGMENT_INDEX, SITE_INDEX
 from .smoothing import ROOT_SMOOTHING, ROTATION_SMOOTHING, RotationOneEuro, VectorOneEuro
-from .stride import FOOT_SEGMENTS, SHANK_SITES, StrideScale, foot_flat
+from .stride import FOOT_SEGMENTS, SHANK_SITES, StrideScale
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 DEFAULT_WEIGHTS: dict[str, Path] = {
@@ -457,7 +457,7 @@ class Poser:
             return 1.0
         ankles = joints_rel.numpy()[list(_FOOT_JOINTS), :2].astype(np.float64) + self._root_raw
         R = rot6d_to_matrix(f32[_SHANK_ROT].reshape(2, 6)).numpy()
-        return self.stride.update(R, f32[_SHANK_ACC].numpy().reshape(2, 3), foot_flat(contact.numpy()), ankles)
+        return self.stride.update(R, f32[_SHANK_ACC].numpy().reshape(2, 3), contact.numpy(), ankles)
 
 
 _SHANK_SEGMENTS = tuple(SEGMENT_INDEX[s] for s in SHANK_SITES)

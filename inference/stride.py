@@ -19,7 +19,8 @@ Each completed stride gives the ratio of the inertial stride length to the same 
 displacement on the *unscaled* reconstructed path; a running (log-domain) mean of that
 ratio (by default just the last stride's) scales the root displacement of the frames
 that follow. A stride whose two ends are not at the same height was badly anchored and
-is skipped. It is causal: a stride is
+is skipped; one with a flight phase is a run, which a 20 Hz stance cannot anchor, and
+returns the scale to 1. It is causal: a stride is
 known when its second stance ends, so the first stride of a walk is unscaled.
 """
 
@@ -47,14 +48,18 @@ class StrideScaleConfig:
     on the training walks: the reconstruction's stride error changes from stride to stride,
     and memory only makes the scale lag it (NOTES.md "Session 16"). limits: a stride ratio
     outside this range is a detection error, not a stride, and is skipped. anchor_at: where
-    in a stance run (0 = its first frame, 1 = its last) the zero-velocity anchor sits; the
-    poser's stance is foot-flat (heel and toe down), and the ankle of a rolling foot is
+    in a stance run (0 = its first frame, 1 = its last) the zero-velocity anchor sits; stance
+    is foot-flat (heel and toe down, ``foot_flat``), and the ankle of a rolling foot is
     stillest in its first half. max_stride_frames: a longer gap between
     anchors (a dropout, standing still on one leg) is not integrated: drift grows with its
     square. max_rise_m: both ends of a stride stand on the ground, so on level ground its
     inertial displacement has no vertical part; one that rises or sinks by more than this
     was anchored where the ankle was not still (a sidestep's roll, a heel already lifting),
-    and its length is off too. Stairs fail this test as well: they keep the last scale."""
+    and its length is off too. Stairs fail this test as well: they keep the last scale.
+    max_flight_frames: a stride with more frames than this where neither foot touches the
+    ground is a run. Its stance is too short to hold the ankle still at 20 Hz (the
+    inertial strides of the training runs came out 10-30 % short), and the walking scale
+    says nothing about the model's running stride, so the scale returns to 1."""
 
     min_stride_m: float = 0.2
     gain: float = 1.0
@@ -62,13 +67,15 @@ class StrideScaleConfig:
     anchor_at: float = 0.35
     max_stride_frames: int = 60
     max_rise_m: float = 0.05
+    max_flight_frames: int = 2
 
 
 class _Leg:
     """One shank's integration state and a bounded buffer of its recent frames."""
 
     def __init__(self, maxlen: int) -> None:
-        self.frames: deque[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = deque(maxlen=maxlen)
+        # (velocity integral, R, lever in the world, ankle on the path, neither foot down)
+        self.frames: deque[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]] = deque(maxlen=maxlen)
         self.count = 0          # frames pushed since the leg's buffer was (re)started
         self.vint = np.zeros(3)  # running integral of the free acceleration
         self.prev_acc: np.ndarray | None = None
@@ -88,7 +95,7 @@ class StrideScale:
     """Running ratio of the shanks' inertial strides to the reconstructed ones.
 
     ``update`` once per 20 Hz frame with both shanks' orientation and free acceleration
-    (world frame, m/s^2, the model's smoothed input), whether each foot is in stance, and
+    (world frame, m/s^2, the model's smoothed input), the four heel/toe contacts, and
     each ankle's horizontal position on the unscaled root path. ``scale`` is the factor
     for the root displacement of the next frame.
     """
@@ -117,20 +124,24 @@ class StrideScale:
         for k in range(len(self._legs)) if leg is None else (leg,):
             self._legs[k].restart()
 
-    def update(self, R: np.ndarray, acc: np.ndarray, stance: np.ndarray, ankle_xy: np.ndarray) -> float:
+    def update(self, R: np.ndarray, acc: np.ndarray, contacts: np.ndarray, ankle_xy: np.ndarray) -> float:
         """R: (2, 3, 3) shank orientations R_WB; acc: (2, 3) free acceleration at the
-        sensors; stance: (2,) bool; ankle_xy: (2, 2) ankles on the unscaled path."""
+        sensors; contacts: (4,) bool, ``skeleton.CONTACTS`` order (detector, insoles or
+        model); ankle_xy: (2, 2) ankles on the unscaled path."""
+        contacts = np.asarray(contacts, dtype=bool)
+        stance, flight = foot_flat(contacts), not bool(contacts.any())
         for k, leg in enumerate(self._legs):
             self._push(k, leg, np.asarray(R[k], dtype=np.float64), np.asarray(acc[k], dtype=np.float64),
-                       bool(stance[k]), np.asarray(ankle_xy[k], dtype=np.float64))
+                       bool(stance[k]), np.asarray(ankle_xy[k], dtype=np.float64), flight)
         return self.scale
 
     # ------------------------------------------------------------------ internals
-    def _push(self, k: int, leg: _Leg, R: np.ndarray, acc: np.ndarray, stance: bool, ankle: np.ndarray) -> None:
+    def _push(self, k: int, leg: _Leg, R: np.ndarray, acc: np.ndarray, stance: bool, ankle: np.ndarray,
+              flight: bool) -> None:
         if leg.prev_acc is not None:
             leg.vint = leg.vint + 0.5 * (acc + leg.prev_acc) * self.dt
         leg.prev_acc = acc
-        leg.frames.append((leg.vint.copy(), R, R @ self._lever[k], ankle))
+        leg.frames.append((leg.vint.copy(), R, R @ self._lever[k], ankle, flight))
         n = leg.count
         leg.count += 1
         if stance and leg.stance_start is None:
@@ -168,6 +179,9 @@ class StrideScale:
         if v0 is None or v1 is None:
             return
         seg = [self._frame(leg, n) for n in range(a0, a1 + 1)]
+        if sum(f[4] for f in seg) > c.max_flight_frames:
+            self.log_scale = 0.0
+            return
         vint = np.stack([f[0] for f in seg])
         # integrated velocity, pinned to the still-ankle values at both ends
         v = vint - vint[0] + v0
@@ -190,8 +204,8 @@ class StrideScale:
 
 
 def foot_flat(contacts: np.ndarray) -> np.ndarray:
-    """(..., 2) stance per foot for ``StrideScale.update`` from (..., 4) heel/toe contacts
-    (``skeleton.CONTACTS`` order): heel and toe down. Contact runs from heel strike to toe
+    """(..., 2) stance per foot, where the strides are anchored, from (..., 4) heel/toe
+    contacts (``skeleton.CONTACTS`` order): heel and toe down. Contact runs from heel strike to toe
     off, and the ankle is still only while the foot is flat; anchoring in a union of the
     two put some strides on a rolling foot (NOTES.md "Session 16")."""
     c = np.asarray(contacts, dtype=bool)

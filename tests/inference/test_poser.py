@@ -346,8 +346,8 @@ class _FixedStride:
     def __init__(self, scale: float) -> None:
         self.scale, self.updates, self.drops = scale, 0, 0
 
-    def update(self, R, acc, stance, ankle_xy) -> float:
-        assert R.shape == (2, 3, 3) and acc.shape == (2, 3) and stance.shape == (2,) and ankle_xy.shape == (2, 2)
+    def update(self, R, acc, contacts, ankle_xy) -> float:
+        assert R.shape == (2, 3, 3) and acc.shape == (2, 3) and contacts.shape == (4,) and ankle_xy.shape == (2, 2)
         self.updates += 1
         return self.scale
 

@@ -124,18 +124,18 @@ def test_shank_strides_of_a_real_walk_come_from_the_shanks_alone(shared_data):
     from inference.features import SL_ACC, SL_CONTACT, SL_ROT
     from inference.rotations import rot6d_to_matrix
     from inference.skeleton import SEGMENT_INDEX, SITE_INDEX
-    from inference.stride import SHANK_SITES, StrideScale, foot_flat
+    from inference.stride import SHANK_SITES, StrideScale
 
     m = load_motion(shared_data / "bandai" / "d1" / "dataset-1_walk_proud_001.bvh.gz")
     inp = clip_input(m, list(SHANK_SITES), insoles=True, noise=evaluation_noise(), seed=3)
     seg = [SEGMENT_INDEX[s] for s in SHANK_SITES]
     R = np.stack([rot6d_to_matrix(inp.features[:, SL_ROT][:, 6 * k: 6 * k + 6]) for k in seg], axis=1)
     acc = np.stack([inp.features[:, SL_ACC][:, 3 * SITE_INDEX[s]: 3 * SITE_INDEX[s] + 3] for s in SHANK_SITES], 1)
-    stance = foot_flat(inp.features[:, SL_CONTACT] > 0.5)
+    contacts = inp.features[:, SL_CONTACT] > 0.5
     ankles = inp.joints[:, [SEGMENT_INDEX["l_foot"], SEGMENT_INDEX["r_foot"]], :2]
     est = StrideScale(inp.body, 20.0)
     for i in range(len(R)):
-        est.update(R[i], acc[i], stance[i], 1.25 * ankles[i])
+        est.update(R[i], acc[i], contacts[i], 1.25 * ankles[i])
     assert len(est.strides) >= 6
     ratios = np.array([a / b for a, b in est.strides])
     assert np.median(ratios) == pytest.approx(0.8, abs=0.04)
