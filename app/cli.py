@@ -12,7 +12,7 @@ import sys
 # checkout still runs what it has
 _COMMAND_MODULES = (
     "app.cli_data", "app.cli_devices", "app.cli_train", "app.cli_evaluate", "app.cli_bench", "app.cli_demo",
-    "app.cli_replay",
+    "app.cli_replay", "app.cli_import",
 )
 
 

@@ -1,0 +1,132 @@
+"""Calibration from a standing start, for sessions recorded without our protocol.
+
+A log from another system (``drivers.ximu3``: an x-IMU3 GUI log) starts with the subject
+standing still, and has no sensors-on-a-table window. Two facts stand in for it:
+
+1. Sensors whose AHRS uses the magnetometer share one Earth frame G (Z up, heading to
+   magnetic north), so one yaw, the same for every sensor, turns G into our world W
+   (X = the subject's forward). Without a table window the sensors' heading offsets
+   cannot be measured, so this *assumes* a shared G; a sensor whose own heading drifted
+   (magnetic disturbance) comes out yawed by that much.
+2. The forward direction comes from the motion itself: a knee only flexes one way. With
+   the bone-down axis of each thigh and shank fixed from the standing window, the
+   horizontal part of (shank-down - thigh-down) points backward whenever the knee bends,
+   in walking, squatting and climbing alike. Its mean over the session, weighted by how
+   much the knee bends, is the subject's backward. (Functional calibration of this
+   kind is how lower-body IMU systems find the sagittal plane without a T-pose.)
+
+Sensor-to-bone then follows as in ``core.calibrate_tpose``, with the standing N-pose as
+the rest pose (legs and trunk as in the T-pose, arms by the side).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from inference.body import npose_rotations
+from inference.rotations import matrix_about_axis, quat_to_matrix
+from inference.skeleton import parse_sites
+
+from .core import (
+    Calibration,
+    CalibrationError,
+    StillnessLimits,
+    _free_acc_G,
+    calibrate_tpose,
+    mean_rotation,
+)
+
+KNEE_PAIRS = (("l_thigh", "l_shank"), ("r_thigh", "r_shank"))
+DOWN = np.array([0.0, 0.0, -1.0])
+MIN_BEND_DEG = 20.0  # a knee must bend this far at least once for its plane to count
+
+
+def still_start(gyro: np.ndarray, present: np.ndarray, rate: float, min_seconds: float = 1.0,
+                max_gyro_deg_s: float = 10.0) -> slice:
+    """The still stretch at the start of a session: frames from the first until any
+    present sensor turns faster than ``max_gyro_deg_s``. gyro (T,S,3) rad/s, present
+    (T,S). Raises CalibrationError when it is shorter than ``min_seconds``."""
+    g = np.rad2deg(np.linalg.norm(np.nan_to_num(np.asarray(gyro, dtype=np.float64)), axis=-1))
+    moving = np.any((g > max_gyro_deg_s) & np.asarray(present, bool), axis=1)
+    end = int(np.argmax(moving)) if moving.any() else len(moving)
+    if end < min_seconds * rate:
+        raise CalibrationError(
+            f"standing calibration: the session is still for only {end / rate:.2f} s at its start "
+            f"(need {min_seconds:g} s with every sensor below {max_gyro_deg_s:g} deg/s); record a still stand first")
+    return slice(0, end)
+
+
+def forward_from_knees(sites: Sequence[str], quat: np.ndarray, present: np.ndarray, still: slice) -> np.ndarray:
+    """(3,) the subject's forward in the sensors' shared frame G, horizontal, unit, from
+    the knees' flexion over the whole session (module docstring). quat (T,S,4) R_GS."""
+    sites = list(sites)
+    quat = np.asarray(quat, dtype=np.float64)
+    ok = np.all(np.isfinite(quat), axis=-1) & np.asarray(present, bool)
+    R = quat_to_matrix(np.where(ok[..., None], quat, [1.0, 0, 0, 0]))
+    back = np.zeros(3)
+    pairs = seen = 0
+    for thigh, shank in KNEE_PAIRS:
+        if thigh not in sites or shank not in sites:
+            continue
+        i, j = sites.index(thigh), sites.index(shank)
+        both = ok[:, i] & ok[:, j]
+        if not both[still].any() or both.sum() < 2:
+            continue
+        down = []
+        for k in (i, j):  # the bone's down axis in the sensor frame, from standing
+            Rm = mean_rotation(np.where(ok[still, k][:, None, None], R[still, k], np.nan)[:, None])[0]
+            down.append(Rm.T @ DOWN)
+        d_thigh = R[both, i] @ down[0]
+        d_shank = R[both, j] @ down[1]
+        bend = d_shank - d_thigh
+        angle = np.degrees(2.0 * np.arcsin(np.clip(np.linalg.norm(bend, axis=1) / 2.0, 0.0, 1.0)))
+        bent = angle > MIN_BEND_DEG / 2  # a straight knee's bend is sensor noise in any direction
+        if angle.max(initial=0.0) >= MIN_BEND_DEG:
+            back[:2] += bend[bent, :2].sum(axis=0)
+            pairs += 1
+        seen += 1
+    if seen == 0:
+        raise CalibrationError("standing calibration: the forward direction needs a thigh and a shank sensor of one "
+                               "leg; give it another way")
+    n = float(np.linalg.norm(back[:2]))
+    if pairs == 0 or n < 1e-6:
+        raise CalibrationError(f"standing calibration: the knees never bent by {MIN_BEND_DEG:g} deg, so the forward "
+                               "direction is unknown; record a few steps or a squat after the still stand")
+    return -back / n
+
+
+def calibrate_standing(sites: Sequence[str], quat: np.ndarray, free_acc: np.ndarray | None = None,
+                       acc: np.ndarray | None = None, gyro: np.ndarray | None = None,
+                       present: np.ndarray | None = None, still: slice | None = None, rate: float = 60.0,
+                       forward_G: np.ndarray | None = None, limits: StillnessLimits | None = None) -> Calibration:
+    """A ``Calibration`` from a session that starts standing still (module docstring).
+    quat (T,S,4) R_GS, free_acc (T,S,3) in G or acc (T,S,3) specific force, gyro (T,S,3),
+    present (T,S); ``still`` the standing frames (default ``still_start``), ``forward_G``
+    the subject's forward in G (default from the knees)."""
+    sites = tuple(parse_sites(list(sites)))
+    quat = np.asarray(quat, dtype=np.float64)
+    present = np.all(np.isfinite(quat), axis=-1) if present is None else np.asarray(present, bool)
+    if still is None:
+        if gyro is None:
+            raise CalibrationError("standing calibration: without gyro data the still start must be given")
+        still = still_start(gyro, present, rate)
+    f = forward_from_knees(sites, quat, present, still) if forward_G is None else np.asarray(forward_G, float)
+    yaw = float(np.arctan2(f[1], f[0]))
+    S = len(sites)
+    R_WG = np.tile(matrix_about_axis(np.array([0.0, 0.0, 1.0]), -yaw), (S, 1, 1))
+    win = {k: None if v is None else np.asarray(v, dtype=np.float64)[still]
+           for k, v in (("free_acc", free_acc), ("acc", acc), ("gyro", gyro))}
+    R_SB, valid, resid = calibrate_tpose(sites, quat[still], R_WG, present=present[still],
+                                         R_WB_rest=npose_rotations(1)[0], limits=limits, **win)
+    a_W = (R_WG[None] @ _free_acc_G(quat[still], win["free_acc"], win["acc"])[..., None])[..., 0]
+    a_W[~present[still]] = np.nan
+    with np.errstate(invalid="ignore"):
+        offset = np.nan_to_num(np.nanmean(a_W, axis=0))
+    offset[~valid] = 0.0
+    return Calibration(sites=sites, R_WG=R_WG, R_SB=R_SB, acc_offset=offset, valid=valid, residual_tpose_deg=resid,
+                       meta={"method": "standing", "forward_G": [float(x) for x in f], "still_frames": still.stop})
+
+
+__all__ = ["calibrate_standing", "forward_from_knees", "still_start", "KNEE_PAIRS"]

@@ -1,0 +1,66 @@
+"""Calibration from a standing start (calibration/standing.py) on a session synthesized
+here: a still N-pose, then a walk, sensors strapped on at random angles, every sensor's
+reference frame the same Earth frame whose X is *not* the subject's forward."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from calibration import CalibrationError
+from calibration.standing import calibrate_standing, forward_from_knees, still_start
+from inference.motion import Motion
+from inference.rotations import matrix_angle_between
+from inference.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX
+from inference.synthesis import NoiseModel, synthesize
+from sim_devices.motions import generate
+
+SITES = ("pelvis", "l_thigh", "r_thigh", "l_shank", "r_shank", "l_foot", "r_foot")
+FPS = 60.0
+
+
+def stand_then(kind: str, heading_deg: float, stand_s: float = 1.5, seconds: float = 6.0) -> Motion:
+    stand = generate("npose", seconds=stand_s, heading_deg=heading_deg)
+    move = generate(kind, seconds=seconds, heading_deg=heading_deg)
+    root = move.root - move.root[0] + stand.root[-1] * [1, 1, 0] + [0, 0, move.root[0, 2]]
+    return Motion(rot=np.concatenate([stand.rot, move.rot]), root=np.concatenate([stand.root, root]), fps=FPS,
+                  body=stand.body)
+
+
+def session(kind="walk", heading_deg=70.0, seed=3):
+    motion = stand_then(kind, heading_deg)
+    noise = NoiseModel(mounting_deg=40.0, heading_deg=0.0, ori_white_deg=0.3, acc_white=0.05, gyro_white=0.01)
+    sig = synthesize(motion, noise, rng=seed, sites=SITES)
+    return motion, sig
+
+
+def test_forward_comes_from_the_knees_and_the_bones_come_out_right():
+    motion, sig = session(heading_deg=70.0)
+    present = np.ones(sig.quat.shape[:2], bool)
+    still = still_start(sig.gyro, present, FPS)
+    assert 1.2 * FPS <= still.stop <= 1.6 * FPS
+    f = forward_from_knees(SITES, sig.quat, present, still)
+    assert np.degrees(np.arctan2(f[1], f[0])) == pytest.approx(70.0, abs=4.0)
+    cal = calibrate_standing(SITES, sig.quat, acc=sig.specific_force, gyro=sig.gyro, present=present, rate=FPS)
+    assert cal.valid.all()
+    R_WB, a_W = cal.apply(sig.quat, acc=sig.specific_force)
+    # our world is the subject's: the truth turned by -70 deg about Z
+    c, s = np.cos(np.deg2rad(-70.0)), np.sin(np.deg2rad(-70.0))
+    Rz = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    seg = [SITE_SEGMENT_INDEX[SITE_INDEX[x]] for x in SITES]
+    err = np.degrees(matrix_angle_between(R_WB, Rz @ motion.rot[:, seg]))
+    assert np.median(err) < 4.0, np.median(err, axis=0)
+    still_acc = a_W[: still.stop]
+    assert np.abs(still_acc.mean(axis=0)).max() < 0.05  # gravity leak removed
+
+
+def test_a_session_that_never_bends_a_knee_or_never_stands_still_is_refused():
+    motion, sig = session(kind="arm_raises")
+    present = np.ones(sig.quat.shape[:2], bool)
+    with pytest.raises(CalibrationError, match="knees never bent|forward"):
+        calibrate_standing(SITES, sig.quat, acc=sig.specific_force, gyro=sig.gyro, present=present, rate=FPS)
+    walk = synthesize(generate("walk", seconds=4.0), NoiseModel(), rng=1, sites=SITES)
+    with pytest.raises(CalibrationError, match="still for only"):
+        calibrate_standing(SITES, walk.quat, acc=walk.specific_force, gyro=walk.gyro, rate=FPS)
+    with pytest.raises(CalibrationError, match="thigh and a shank"):
+        forward_from_knees(("pelvis", "l_foot"), sig.quat[:, [0, 5]], present[:, [0, 5]], slice(0, 60))
