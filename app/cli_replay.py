@@ -50,6 +50,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--stride-scale", action=argparse.BooleanOptionalAction, default=None,
                    help="scale the root path by the shanks' inertial strides (default: as recorded; sessions "
                         "recorded before it existed ran without it)")
+    p.add_argument("--held-out", action="store_true",
+                   help="with --sensors a subset: replay again with every recorded sensor and report, per site "
+                        "left out, the mean angle between its reconstructed segment and what its sensor measured")
     p.add_argument("--seed", type=int, default=0, help="seed of the inpainting noise (replays are reproducible)")
     p.add_argument("--threads", type=int, default=1, help="torch threads (0 = torch's default)")
     p.add_argument("--height", type=float, default=None, help="subject height in m (default: from the recording)")
@@ -127,7 +130,7 @@ def run_replay(args: argparse.Namespace) -> int:
     from inference.poser import Poser, resolve_model
 
     from .exporters import body_for_recording, export_motion, motion_from_poses
-    from .replay import compare_to_recorded, replay_recording, resolve_insoles, resolve_sensors
+    from .replay import compare_to_recorded, held_out_errors, replay_recording, resolve_insoles, resolve_sensors
 
     _check_outs(args.out)
     rec = _open(args.recording)
@@ -153,6 +156,15 @@ def run_replay(args: argparse.Namespace) -> int:
               file=sys.stderr, flush=True)
     t0 = time.perf_counter()
     res = replay_recording(rec, poser, sensors=sensors, insoles=insoles, progress=_Progress(not args.no_progress))
+    held_out = None
+    left_out = [s for s in rec.sites if s not in res.sensors]
+    if args.held_out:
+        if not left_out:
+            raise ValueError("--held-out needs --sensors to leave out some of the recorded sensors "
+                             f"({', '.join(rec.sites)})")
+        full = Poser(model, body=body, steps=args.steps, seed=args.seed, mirror=mirror, stride_scale=stride)
+        held_out = held_out_errors(res.poses, replay_recording(rec, full, sensors=rec.sites, insoles=insoles).poses,
+                                   left_out)
     seconds = time.perf_counter() - t0
     outputs = []
     motion = None
@@ -177,6 +189,7 @@ def run_replay(args: argparse.Namespace) -> int:
         "frames_filled": res.stats.get("frames_filled"), "resampler_restarts": res.stats.get("resampler_restarts"),
         "step_p50_ms": res.stats.get("step_p50_ms"), "body_height_m": round(float(body.height), 3),
         **compare_to_recorded(rec, res.poses),
+        **({"held_out": held_out} if held_out is not None else {}),
         "outputs": outputs, "seconds": round(seconds, 2),
     }
     if note:

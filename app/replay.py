@@ -24,7 +24,7 @@ import numpy as np
 
 from calibration import Calibration
 from drivers.hub import HubFrame
-from inference.skeleton import SITES, parse_sites
+from inference.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX, SITES, parse_sites
 
 from .pipeline import LivePose, Pipeline
 from .recording import Recording
@@ -179,5 +179,30 @@ def compare_to_recorded(rec: Recording, poses: Sequence[LivePose]) -> dict[str, 
     return {"vs_recorded_frames": int(ok.sum()), "vs_recorded_ga_deg": round(float(np.mean(ga)), 3)}
 
 
+def held_out_errors(poses: Sequence[LivePose], measured: Sequence[LivePose], sites: Sequence[str]) -> dict[str, Any]:
+    """How far a reconstruction from fewer sensors is from what the left-out sensors
+    measured: per site in ``sites``, the mean angle (deg) between its segment in ``poses``
+    and in ``measured`` (a replay in which that site was observed, so its segment is the
+    calibrated measurement), over the frames both replays produced at the same time and
+    in which the site delivered. A real-data check that needs no motion capture, only a
+    session recorded with more sensors than the set under test."""
+    from inference.rotations import matrix_angle_between
+
+    by_t = {round(lp.t, 6): lp for lp in measured}
+    pairs = [(lp, by_t[round(lp.t, 6)]) for lp in poses if round(lp.t, 6) in by_t]
+    out: dict[str, float | None] = {}
+    for s in sites:
+        k, seg = SITE_INDEX[s], SITE_SEGMENT_INDEX[SITE_INDEX[s]]
+        use = [(a, b) for a, b in pairs if b.observed_sites[k]]
+        if not use:
+            out[s] = None
+            continue
+        ang = matrix_angle_between(np.stack([a.pose.rot[seg] for a, _ in use]),
+                                   np.stack([b.pose.rot[seg] for _, b in use]))
+        out[s] = round(float(np.degrees(np.mean(ang))), 2)
+    vals = [v for v in out.values() if v is not None]
+    return {"frames": len(pairs), "deg": out, "mean_deg": round(float(np.mean(vals)), 2) if vals else None}
+
+
 __all__ = ["replay_recording", "resolve_sensors", "resolve_insoles", "recording_has_insoles", "compare_to_recorded",
-           "ReplayResult", "SITES"]
+           "held_out_errors", "ReplayResult", "SITES"]

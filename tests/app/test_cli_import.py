@@ -110,3 +110,8 @@ def test_the_real_log_reconstructs_to_a_body_that_walks_and_comes_back(shared_da
     assert 2.0 < path < 8.0 and np.linalg.norm(root[-1, :2] - root[0, :2]) < 0.8  # out and back
     assert len(poser.stride.strides) >= 2  # the shanks measured strides of their own
     assert all(0.3 < s_in < 1.8 for s_in, _ in poser.stride.strides)
+    # the thighs and feet left out: the model's guess against what their sensors measured
+    assert main(["replay", str(tmp_path / "real.h5"), "--sensors", "pelvis,l_shank,r_shank", "--held-out", "--json",
+                 "--no-progress"]) == 0
+    held = json.loads(capsys.readouterr().out)["held_out"]
+    assert set(held["deg"]) == {"l_thigh", "r_thigh", "l_foot", "r_foot"} and held["mean_deg"] < 25.0

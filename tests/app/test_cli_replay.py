@@ -156,3 +156,21 @@ def test_replay_scales_strides_as_recorded(recorded, tiny_model, tmp_path, capsy
         assert stride_of(rec) is bool(recorded_as)
         assert stride_of(rec, "--stride-scale") is True
         assert stride_of(rec, "--no-stride-scale") is False
+
+
+def test_held_out_sensors_score_a_subset_against_what_they_measured(recorded, capsys):
+    from app.replay import held_out_errors, replay_recording
+    from inference.poser import make_poser
+
+    code, out, err = _run(capsys, "replay", str(recorded.path), "--model", "floor", "--sensors",
+                          "pelvis,head,l_wrist,r_wrist", "--held-out", "--json", "--no-progress")
+    assert code == 0, err
+    res = json.loads(out)
+    ho = res["held_out"]
+    assert set(ho["deg"]) == {"l_shank", "r_shank"} and ho["frames"] == res["frames"] > 0
+    assert min(ho["deg"].values()) > 3.0  # the floor's standing shanks against the walking ones
+    assert ho["mean_deg"] == pytest.approx(np.mean(list(ho["deg"].values())), abs=0.01)
+    poses = replay_recording(read_recording(recorded.path), make_poser("floor", body=recorded.body)).poses
+    assert held_out_errors(poses, poses, ["l_shank"])["deg"]["l_shank"] == 0.0  # a measured segment is its sensor
+    code, _, err = _run(capsys, "replay", str(recorded.path), "--model", "floor", "--held-out")
+    assert code != 0 and "--held-out needs --sensors" in err
