@@ -38,6 +38,7 @@ from .skeleton import SEGMENT_INDEX, SITE_INDEX
 
 SHANK_SITES = ("l_shank", "r_shank")
 FOOT_SEGMENTS = ("l_foot", "r_foot")
+FLIGHT_WINDOW = 20  # frames (1 s at 20 Hz) in which more than max_flight_frames of flight mean running
 
 
 @dataclass(frozen=True)
@@ -114,6 +115,7 @@ class StrideScale:
         self.log_scale = 0.0
         self.strides: list[tuple[float, float]] = []  # (inertial, reconstructed) lengths, m
         self._legs = [_Leg(self.config.max_stride_frames + 4) for _ in SHANK_SITES]
+        self._flight: deque[bool] = deque(maxlen=FLIGHT_WINDOW)
 
     @property
     def scale(self) -> float:
@@ -130,6 +132,10 @@ class StrideScale:
         model); ankle_xy: (2, 2) ankles on the unscaled path."""
         contacts = np.asarray(contacts, dtype=bool)
         stance, flight = foot_flat(contacts), not bool(contacts.any())
+        # a run with no foot-flat at all (a forefoot runner) completes no stride to test
+        self._flight.append(flight)
+        if sum(self._flight) > self.config.max_flight_frames:
+            self.log_scale = 0.0
         for k, leg in enumerate(self._legs):
             self._push(k, leg, np.asarray(R[k], dtype=np.float64), np.asarray(acc[k], dtype=np.float64),
                        bool(stance[k]), np.asarray(ankle_xy[k], dtype=np.float64), flight)

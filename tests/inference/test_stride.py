@@ -178,4 +178,12 @@ def test_a_run_returns_the_scale_to_one():
     for i in range(len(R)):
         est.update(R[i], acc[i], contacts[i], 1.3 * ankle[i, :, :2])
     assert len(est.strides) <= walked + 1 and est.scale == 1.0  # one stride may bridge the change
+    # a forefoot runner never puts a heel down, so no stride completes; the flight still tells
+    R0, acc0, contacts0, ankle0 = gait_at_20hz(body, seconds=8.0)
+    est = run(body, R0, acc0, contacts0, 1.3 * ankle0[..., :2])
+    assert est.scale == pytest.approx(1 / 1.3, rel=0.03)
+    contacts[:, [0, 2]] = False
+    for i in range(30):
+        est.update(R[i], acc[i], contacts[i], 1.3 * ankle[i, :, :2])
+    assert est.scale == 1.0
 
