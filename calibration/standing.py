@@ -58,13 +58,33 @@ def still_start(gyro: np.ndarray, present: np.ndarray, rate: float, min_seconds:
     return slice(0, end)
 
 
+def _heading_change(R: np.ndarray, ok: np.ndarray, still: slice) -> np.ndarray:
+    """(T,) how far (rad) one sensor has turned about the vertical since the still stand,
+    from its rotation in G since then; NaN where it did not deliver."""
+    Rm = mean_rotation(np.where(ok[still][:, None, None], R[still], np.nan)[:, None])[0]
+    dR = R @ Rm.T
+    yaw = np.arctan2(dR[:, 1, 0] - dR[:, 0, 1], dR[:, 0, 0] + dR[:, 1, 1])
+    return np.where(ok, yaw, np.nan)
+
+
+def _turn_back(v: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+    """(N,2) horizontal vectors turned by -yaw: into the heading the subject had when standing."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1]], axis=1)
+
+
 def forward_from_knees(sites: Sequence[str], quat: np.ndarray, present: np.ndarray, still: slice) -> np.ndarray:
     """(3,) the subject's forward in the sensors' shared frame G, horizontal, unit, from
-    the knees' flexion over the whole session (module docstring). quat (T,S,4) R_GS."""
+    the knees' flexion over the whole session (module docstring). quat (T,S,4) R_GS.
+
+    The subject turns during a session, and a walk back bends the knees the other way in
+    G: each frame's vote is turned back by how far the pelvis (else that leg's thigh) has
+    turned since the stand, so every frame votes for the forward *at calibration*."""
     sites = list(sites)
     quat = np.asarray(quat, dtype=np.float64)
     ok = np.all(np.isfinite(quat), axis=-1) & np.asarray(present, bool)
     R = quat_to_matrix(np.where(ok[..., None], quat, [1.0, 0, 0, 0]))
+    pelvis = sites.index("pelvis") if "pelvis" in sites and ok[still, sites.index("pelvis")].any() else None
     back = np.zeros(3)
     pairs = seen = 0
     for thigh, shank in KNEE_PAIRS:
@@ -81,10 +101,13 @@ def forward_from_knees(sites: Sequence[str], quat: np.ndarray, present: np.ndarr
         d_thigh = R[both, i] @ down[0]
         d_shank = R[both, j] @ down[1]
         bend = d_shank - d_thigh
+        turned = _heading_change(R[:, i if pelvis is None else pelvis], ok[:, i if pelvis is None else pelvis],
+                                 still)[both]
         angle = np.degrees(2.0 * np.arcsin(np.clip(np.linalg.norm(bend, axis=1) / 2.0, 0.0, 1.0)))
-        bent = angle > MIN_BEND_DEG / 2  # a straight knee's bend is sensor noise in any direction
+        # a straight knee's bend is sensor noise in any direction
+        bent = (angle > MIN_BEND_DEG / 2) & np.isfinite(turned)
         if angle.max(initial=0.0) >= MIN_BEND_DEG:
-            back[:2] += bend[bent, :2].sum(axis=0)
+            back[:2] += _turn_back(bend[bent, :2], turned[bent]).sum(axis=0)
             pairs += 1
         seen += 1
     if seen == 0:

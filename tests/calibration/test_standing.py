@@ -19,16 +19,22 @@ SITES = ("pelvis", "l_thigh", "r_thigh", "l_shank", "r_shank", "l_foot", "r_foot
 FPS = 60.0
 
 
-def stand_then(kind: str, heading_deg: float, stand_s: float = 1.5, seconds: float = 6.0) -> Motion:
-    stand = generate("npose", seconds=stand_s, heading_deg=heading_deg)
-    move = generate(kind, seconds=seconds, heading_deg=heading_deg)
-    root = move.root - move.root[0] + stand.root[-1] * [1, 1, 0] + [0, 0, move.root[0, 2]]
-    return Motion(rot=np.concatenate([stand.rot, move.rot]), root=np.concatenate([stand.root, root]), fps=FPS,
-                  body=stand.body)
+def stand_then(kind: str, heading_deg: float, stand_s: float = 1.5, seconds: float = 6.0,
+               back_s: float = 0.0) -> Motion:
+    """A still N-pose, then ``kind`` facing ``heading_deg``, then (``back_s`` > 0) the same
+    facing the other way, as after a turn."""
+    parts = [generate("npose", seconds=stand_s, heading_deg=heading_deg),
+             generate(kind, seconds=seconds, heading_deg=heading_deg)]
+    if back_s > 0:
+        parts.append(generate(kind, seconds=back_s, heading_deg=heading_deg + 180.0, seed=1))
+    roots = [parts[0].root]
+    for m in parts[1:]:
+        roots.append(m.root - m.root[0] + roots[-1][-1] * [1, 1, 0] + [0, 0, m.root[0, 2]])
+    return Motion(rot=np.concatenate([m.rot for m in parts]), root=np.concatenate(roots), fps=FPS, body=parts[0].body)
 
 
-def session(kind="walk", heading_deg=70.0, seed=3):
-    motion = stand_then(kind, heading_deg)
+def session(kind="walk", heading_deg=70.0, seed=3, back_s=0.0):
+    motion = stand_then(kind, heading_deg, back_s=back_s)
     noise = NoiseModel(mounting_deg=40.0, heading_deg=0.0, ori_white_deg=0.3, acc_white=0.05, gyro_white=0.01)
     sig = synthesize(motion, noise, rng=seed, sites=SITES)
     return motion, sig
@@ -52,6 +58,18 @@ def test_forward_comes_from_the_knees_and_the_bones_come_out_right():
     assert np.median(err) < 4.0, np.median(err, axis=0)
     still_acc = a_W[: still.stop]
     assert np.abs(still_acc.mean(axis=0)).max() < 0.05  # gravity leak removed
+
+
+def test_a_walk_back_after_a_turn_still_votes_for_the_forward_at_calibration():
+    """Out for 3 s, turn, back for 6 s: in G the knees bend the other way for twice as
+    long, so summing the votes as they fall would point the subject backward."""
+    _, sig = session(heading_deg=-40.0, back_s=6.0)
+    sig_out = synthesize(stand_then("walk", -40.0, seconds=3.0, back_s=6.0), NoiseModel(mounting_deg=40.0), rng=4,
+                         sites=SITES)
+    for s in (sig, sig_out):
+        present = np.ones(s.quat.shape[:2], bool)
+        f = forward_from_knees(SITES, s.quat, present, still_start(s.gyro, present, FPS))
+        assert np.degrees(np.arctan2(f[1], f[0])) == pytest.approx(-40.0, abs=5.0)
 
 
 def test_a_session_that_never_bends_a_knee_or_never_stands_still_is_refused():
