@@ -72,6 +72,7 @@ class Imported:
     duration_s: float
     still_s: float
     forward_G: list[float]
+    forward_from: str
     devices: dict[str, dict[str, Any]]
 
 
@@ -136,7 +137,7 @@ def import_ximu3(log_dir: str | Path, out: str | Path, mapping: dict[str, str] |
                    "grid_present": round(float(present[:, k].mean()), 3), "skipped": by_site[s].skipped}
                for k, s in enumerate(sites)}
     return Imported(Path(out), sites, n, round(n / RATE, 3), round(still / RATE, 3),
-                    [round(float(x), 4) for x in cal.meta["forward_G"]], devices)
+                    [round(float(x), 4) for x in cal.meta["forward_G"]], str(cal.meta["forward_from"]), devices)
 
 
 def _mapping(items: list[str]) -> dict[str, str]:
@@ -155,6 +156,7 @@ def run_import(args: argparse.Namespace) -> int:
     res = import_ximu3(args.log, args.out, _mapping(args.map), args.height)
     summary = {"recording": str(res.path), "sites": list(res.sites), "frames": res.frames,
                "duration_s": res.duration_s, "still_start_s": res.still_s, "forward_G": res.forward_G,
+               "forward_from": res.forward_from,
                "devices": res.devices}
     if args.json:
         print(json.dumps(summary))

@@ -13,7 +13,10 @@ standing still, and has no sensors-on-a-table window. Two facts stand in for it:
    horizontal part of (shank-down - thigh-down) points backward whenever the knee bends,
    in walking, squatting and climbing alike. Its mean over the session, weighted by how
    much the knee bends, is the subject's backward. (Functional calibration of this
-   kind is how lower-body IMU systems find the sagittal plane without a T-pose.)
+   kind is how lower-body IMU systems find the sagittal plane without a T-pose.) Without
+   a thigh (the paper's six sensors) the shanks' swing says it instead: they turn
+   fastest when the foot goes forward. On the real x-IMU3 log the two agree within
+   1.1 deg.
 
 Sensor-to-bone then follows as in ``core.calibrate_tpose``, with the standing N-pose as
 the rest pose (legs and trunk as in the T-pose, arms by the side).
@@ -41,6 +44,8 @@ from .core import (
 KNEE_PAIRS = (("l_thigh", "l_shank"), ("r_thigh", "r_shank"))
 DOWN = np.array([0.0, 0.0, -1.0])
 MIN_BEND_DEG = 20.0  # a knee must bend this far at least once for its plane to count
+MIN_SWING_DEG_S = 30.0  # a shank turning slower than this is standing, not swinging
+MIN_SWING_SKEW = 0.3  # below it the swing peaks do not stand out: forward and backward look alike
 
 
 def still_start(gyro: np.ndarray, present: np.ndarray, rate: float, min_seconds: float = 1.0,
@@ -120,6 +125,58 @@ def forward_from_knees(sites: Sequence[str], quat: np.ndarray, present: np.ndarr
     return -back / n
 
 
+def forward_from_shanks(sites: Sequence[str], quat: np.ndarray, gyro: np.ndarray, present: np.ndarray,
+                        still: slice) -> np.ndarray:
+    """(3,) the subject's forward in G from the shanks' swing, for sensor sets without a
+    thigh (the paper's six: pelvis, head, wrists, shanks). A shank turns mostly about the
+    knee's axis, and fastest in swing, when the foot goes forward: the main axis of its
+    angular velocity (turned back by the pelvis's turn since the stand) is lateral, and
+    its sign is the one that makes the swing peaks the large ones (a positive third
+    moment). gyro (T,S,3) rad/s in the sensor frame."""
+    sites = list(sites)
+    quat = np.asarray(quat, dtype=np.float64)
+    gyro = np.asarray(gyro, dtype=np.float64)
+    ok = np.all(np.isfinite(quat), axis=-1) & np.asarray(present, bool) & np.all(np.isfinite(gyro), axis=-1)
+    R = quat_to_matrix(np.where(ok[..., None], quat, [1.0, 0, 0, 0]))
+    p_idx = sites.index("pelvis") if "pelvis" in sites else None
+    turned = (_heading_change(R[:, p_idx], ok[:, p_idx], still) if p_idx is not None
+              else np.zeros(len(quat)))
+    fwd = np.zeros(2)
+    used = []
+    for s in ("l_shank", "r_shank"):
+        if s not in sites:
+            continue
+        k = sites.index(s)
+        use = ok[:, k] & np.isfinite(turned)
+        w = _turn_back(np.einsum("tij,tj->ti", R[use, k], gyro[use, k])[:, :2], turned[use])
+        w = w[np.linalg.norm(w, axis=1) > np.deg2rad(MIN_SWING_DEG_S)]
+        if len(w) < 10:
+            continue
+        a = np.linalg.eigh(w.T @ w)[1][:, -1]
+        p = w @ a
+        skew = float(np.mean(p**3) / np.mean(p**2) ** 1.5)
+        if abs(skew) < MIN_SWING_SKEW:
+            continue
+        a = a if skew > 0 else -a
+        fwd += np.array([-a[1], a[0]])  # z x a
+        used.append(s)
+    n = float(np.linalg.norm(fwd))
+    if not used or n < 1e-6:
+        raise CalibrationError("standing calibration: neither a thigh-and-shank pair nor a shank's swing tells the "
+                               "forward direction; walk a few steps after the still stand")
+    return np.array([fwd[0] / n, fwd[1] / n, 0.0])
+
+
+def forward_from_motion(sites: Sequence[str], quat: np.ndarray, gyro: np.ndarray | None, present: np.ndarray,
+                        still: slice) -> tuple[np.ndarray, str]:
+    """The forward from the knees where a thigh and a shank of one leg are worn, else from
+    the shanks' swing; and which of the two it came from."""
+    sites = list(sites)
+    if any(t in sites and sh in sites for t, sh in KNEE_PAIRS) or gyro is None:
+        return forward_from_knees(sites, quat, present, still), "knees"
+    return forward_from_shanks(sites, quat, gyro, present, still), "shank swing"
+
+
 def calibrate_standing(sites: Sequence[str], quat: np.ndarray, free_acc: np.ndarray | None = None,
                        acc: np.ndarray | None = None, gyro: np.ndarray | None = None,
                        present: np.ndarray | None = None, still: slice | None = None, rate: float = 60.0,
@@ -135,7 +192,10 @@ def calibrate_standing(sites: Sequence[str], quat: np.ndarray, free_acc: np.ndar
         if gyro is None:
             raise CalibrationError("standing calibration: without gyro data the still start must be given")
         still = still_start(gyro, present, rate)
-    f = forward_from_knees(sites, quat, present, still) if forward_G is None else np.asarray(forward_G, float)
+    if forward_G is None:
+        f, method = forward_from_motion(sites, quat, gyro, present, still)
+    else:
+        f, method = np.asarray(forward_G, float), "given"
     yaw = float(np.arctan2(f[1], f[0]))
     S = len(sites)
     R_WG = np.tile(matrix_about_axis(np.array([0.0, 0.0, 1.0]), -yaw), (S, 1, 1))
@@ -149,7 +209,9 @@ def calibrate_standing(sites: Sequence[str], quat: np.ndarray, free_acc: np.ndar
         offset = np.nan_to_num(np.nanmean(a_W, axis=0))
     offset[~valid] = 0.0
     return Calibration(sites=sites, R_WG=R_WG, R_SB=R_SB, acc_offset=offset, valid=valid, residual_tpose_deg=resid,
-                       meta={"method": "standing", "forward_G": [float(x) for x in f], "still_frames": still.stop})
+                       meta={"method": "standing", "forward_G": [float(x) for x in f], "forward_from": method,
+                             "still_frames": still.stop})
 
 
-__all__ = ["calibrate_standing", "forward_from_knees", "still_start", "KNEE_PAIRS"]
+__all__ = ["calibrate_standing", "forward_from_knees", "forward_from_shanks", "forward_from_motion", "still_start",
+           "KNEE_PAIRS"]

@@ -16,6 +16,7 @@ from app.cli import main
 from app.cli_import import site_for
 from app.recording import read_recording
 from app.replay import replay_recording
+from calibration.standing import forward_from_knees, forward_from_shanks, still_start
 from inference.motion import Motion
 from inference.poser import Poser, resolve_model
 from inference.rotations import matrix_about_axis, matrix_angle_between
@@ -96,8 +97,16 @@ def test_the_real_log_reconstructs_to_a_body_that_walks_and_comes_back(shared_da
     if not log.is_dir():
         pytest.skip("no x-IMU3 log in shared data")
     out = _import(capsys, log, tmp_path / "real.h5", "--height", "1.75")
-    assert len(out["sites"]) == 7 and out["still_start_s"] > 1.0
+    assert len(out["sites"]) == 7 and out["still_start_s"] > 1.0 and out["forward_from"] == "knees"
     rec = read_recording(tmp_path / "real.h5")
+    # two functional estimates of the forward, from different motions, agree on real data
+    quat = np.stack([rec.raw[s]["quat"] for s in rec.sites], axis=1).astype(np.float64)
+    gyro = np.stack([rec.raw[s]["gyro"] for s in rec.sites], axis=1).astype(np.float64)
+    present = np.all(np.isfinite(quat), axis=-1)
+    still = still_start(gyro, present, 60.0)
+    knees, swing = forward_from_knees(rec.sites, quat, present, still), forward_from_shanks(rec.sites, quat, gyro,
+                                                                                          present, still)
+    assert np.degrees(np.arccos(np.clip(knees @ swing, -1, 1))) < 5.0
     poser = Poser(resolve_model("diffusion"), body=1.75)
     poses = replay_recording(rec, poser).poses
     R = np.array([p.pose.rot for p in poses])

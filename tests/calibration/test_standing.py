@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from calibration import CalibrationError
-from calibration.standing import calibrate_standing, forward_from_knees, still_start
+from calibration.standing import calibrate_standing, forward_from_knees, forward_from_shanks, still_start
 from inference.motion import Motion
 from inference.rotations import matrix_angle_between
 from inference.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX
@@ -70,6 +70,20 @@ def test_a_walk_back_after_a_turn_still_votes_for_the_forward_at_calibration():
         present = np.ones(s.quat.shape[:2], bool)
         f = forward_from_knees(SITES, s.quat, present, still_start(s.gyro, present, FPS))
         assert np.degrees(np.arctan2(f[1], f[0])) == pytest.approx(-40.0, abs=5.0)
+
+
+def test_without_thighs_the_forward_comes_from_the_shanks_swing():
+    """The paper's six wear no thigh: the shanks' fastest turn (the swing) says which way
+    is forward, through a turn too."""
+    lower = ("pelvis", "l_shank", "r_shank")
+    for back_s, heading in ((0.0, 70.0), (6.0, -40.0)):
+        sig = synthesize(stand_then("walk", heading, seconds=3.0, back_s=back_s), NoiseModel(mounting_deg=40.0),
+                         rng=6, sites=lower)
+        present = np.ones(sig.quat.shape[:2], bool)
+        f = forward_from_shanks(lower, sig.quat, sig.gyro, present, still_start(sig.gyro, present, FPS))
+        assert np.degrees(np.arctan2(f[1], f[0])) == pytest.approx(heading, abs=8.0)
+        cal = calibrate_standing(lower, sig.quat, acc=sig.specific_force, gyro=sig.gyro, rate=FPS)
+        assert cal.meta["forward_from"] == "shank swing"
 
 
 def test_a_session_that_never_bends_a_knee_or_never_stands_still_is_refused():
