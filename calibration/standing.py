@@ -11,8 +11,9 @@ standing still, and has no sensors-on-a-table window. Two facts stand in for it:
 2. The forward direction comes from the motion itself: a knee only flexes one way. With
    the bone-down axis of each thigh and shank fixed from the standing window, the
    horizontal part of (shank-down - thigh-down) points backward whenever the knee bends,
-   in walking, squatting and climbing alike. Its mean over the session, weighted by how
-   much the knee bends, is the subject's backward. (Functional calibration of this
+   in walking, squatting and climbing alike. Its sum over the session (each frame turned
+   back by how far the pelvis has turned since the stand, so a walk back after a turn
+   votes the same way) is the subject's backward at calibration. (Functional calibration of this
    kind is how lower-body IMU systems find the sagittal plane without a T-pose.) Without
    a thigh (the paper's six sensors) the shanks' swing says it instead: they turn
    fastest when the foot goes forward. On the real x-IMU3 log the two agree within
