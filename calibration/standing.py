@@ -64,11 +64,15 @@ def still_start(gyro: np.ndarray, present: np.ndarray, rate: float, min_seconds:
     return slice(0, end)
 
 
+def _still_mean(R: np.ndarray, ok: np.ndarray, still: slice) -> np.ndarray:
+    """(3,3) one sensor's mean orientation over the still stand (R (T,3,3), ok (T,))."""
+    return mean_rotation(np.where(ok[still][:, None, None], R[still], np.nan)[:, None])[0]
+
+
 def _heading_change(R: np.ndarray, ok: np.ndarray, still: slice) -> np.ndarray:
     """(T,) how far (rad) one sensor has turned about the vertical since the still stand,
     from its rotation in G since then; NaN where it did not deliver."""
-    Rm = mean_rotation(np.where(ok[still][:, None, None], R[still], np.nan)[:, None])[0]
-    dR = R @ Rm.T
+    dR = R @ _still_mean(R, ok, still).T
     yaw = np.arctan2(dR[:, 1, 0] - dR[:, 0, 1], dR[:, 0, 0] + dR[:, 1, 1])
     return np.where(ok, yaw, np.nan)
 
@@ -91,6 +95,7 @@ def forward_from_knees(sites: Sequence[str], quat: np.ndarray, present: np.ndarr
     ok = np.all(np.isfinite(quat), axis=-1) & np.asarray(present, bool)
     R = quat_to_matrix(np.where(ok[..., None], quat, [1.0, 0, 0, 0]))
     pelvis = sites.index("pelvis") if "pelvis" in sites and ok[still, sites.index("pelvis")].any() else None
+    pelvis_turn = _heading_change(R[:, pelvis], ok[:, pelvis], still) if pelvis is not None else None
     back = np.zeros(3)
     pairs = seen = 0
     for thigh, shank in KNEE_PAIRS:
@@ -100,15 +105,11 @@ def forward_from_knees(sites: Sequence[str], quat: np.ndarray, present: np.ndarr
         both = ok[:, i] & ok[:, j]
         if not both[still].any() or both.sum() < 2:
             continue
-        down = []
-        for k in (i, j):  # the bone's down axis in the sensor frame, from standing
-            Rm = mean_rotation(np.where(ok[still, k][:, None, None], R[still, k], np.nan)[:, None])[0]
-            down.append(Rm.T @ DOWN)
-        d_thigh = R[both, i] @ down[0]
-        d_shank = R[both, j] @ down[1]
+        # each bone's down axis in its sensor's frame, from standing
+        d_thigh = R[both, i] @ (_still_mean(R[:, i], ok[:, i], still).T @ DOWN)
+        d_shank = R[both, j] @ (_still_mean(R[:, j], ok[:, j], still).T @ DOWN)
         bend = d_shank - d_thigh
-        turned = _heading_change(R[:, i if pelvis is None else pelvis], ok[:, i if pelvis is None else pelvis],
-                                 still)[both]
+        turned = (pelvis_turn if pelvis_turn is not None else _heading_change(R[:, i], ok[:, i], still))[both]
         angle = np.degrees(2.0 * np.arcsin(np.clip(np.linalg.norm(bend, axis=1) / 2.0, 0.0, 1.0)))
         # a straight knee's bend is sensor noise in any direction
         bent = (angle > MIN_BEND_DEG / 2) & np.isfinite(turned)
