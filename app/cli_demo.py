@@ -287,7 +287,8 @@ class DemoSession:
         return {
             "app_version": APP_VERSION, "model": self.model_label, "steps": self.steps_count(),
             "mirror": bool(self.poser.mirror),
-            "stride_scale": self.poser.stride is not None, "sensors": list(c.sensors), "insoles": c.insoles,
+            "stride_scale": self.poser.stride is not None,
+            "pelvis_odometry": self.poser.pelvis_odometry is not None, "sensors": list(c.sensors), "insoles": c.insoles,
             "protocol": c.protocol,
             "assignment": self.assignment, "motion": c.file or c.motion, "seed": c.seed,
             "source": "imucap demo (simulated suit)", "body_height_m": float(self.truth.body.height),

@@ -67,6 +67,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--stride-scale", action=argparse.BooleanOptionalAction, default=True,
                    help="scale the root path by the shanks' inertial strides when both shanks are measured "
                         "(inference/stride.py; default; NOTES.md 'Session 16')")
+    p.add_argument("--pelvis-odometry", action=argparse.BooleanOptionalAction, default=True,
+                   help="without both shanks and insoles, the root's walk from the pelvis sensor "
+                        "(inference/pelvis_odometry.py; default; NOTES.md 'Session 17'); --no-pelvis-odometry "
+                        "uses the model's own root displacement corrected by its contacts")
     p.add_argument("--against", default=None, metavar="SPEC",
                    help="also score this model (same forms as --model) on the same clips and sensors, and "
                         "report --model minus it per metric with a bootstrap interval over clips")
@@ -156,7 +160,8 @@ def run(args: argparse.Namespace) -> int:
                                           smoothing=args.smoothing,
                                           contact_detector="default" if args.contact_detector else None,
                                           inpaint_noise=args.inpaint_noise, mirror=args.mirror,
-                                          stride_scale=args.stride_scale)
+                                          stride_scale=args.stride_scale,
+                                          pelvis_odometry="default" if args.pelvis_odometry else None)
         summary.update({
             "model": str(spec), "kind": kind, "sensors": list(set_sites),
             "insoles": insoles, "steps": _steps_label(st, kind), "step_list": st if kind == "diffusion" else None,
@@ -165,6 +170,7 @@ def run(args: argparse.Namespace) -> int:
             "contact_detector": args.contact_detector and kind != "floor",
             "mirror": mirror_for(model, args.mirror),
             "stride_scale": args.stride_scale and kind != "floor",
+            "pelvis_odometry": args.pelvis_odometry and kind != "floor",
         })
         return summary, clips
 

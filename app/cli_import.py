@@ -119,6 +119,7 @@ def import_ximu3(log_dir: str | Path, out: str | Path, mapping: dict[str, str] |
         "source": "x-IMU3 log", "log": str(log_dir), "sensors": list(sites), "insoles": False,
         "devices": {s: {"name": by_site[s].name, "serial": by_site[s].serial} for s in sites},
         "calibration": "standing start (calibration/standing.py)", "stride_scale": True,
+        "pelvis_odometry": True,
     }
     if height is not None:
         meta["body_height_m"] = float(height)

@@ -50,6 +50,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--stride-scale", action=argparse.BooleanOptionalAction, default=None,
                    help="scale the root path by the shanks' inertial strides (default: as recorded; sessions "
                         "recorded before it existed ran without it)")
+    p.add_argument("--pelvis-odometry", action=argparse.BooleanOptionalAction, default=None,
+                   help="without both shanks, the root's walk from the pelvis sensor (default: as recorded; "
+                        "sessions recorded before it existed ran without it)")
     p.add_argument("--held-out", action="store_true",
                    help="with --sensors a subset: replay again with every recorded sensor and report, per site "
                         "left out, the mean angle between its reconstructed segment and what its sensor measured")
@@ -147,7 +150,11 @@ def run_replay(args: argparse.Namespace) -> int:
     # a session recorded before the model file's defaults changed replays as it ran
     mirror = args.mirror if args.mirror is not None else rec.metadata.get("mirror")
     stride = args.stride_scale if args.stride_scale is not None else bool(rec.metadata.get("stride_scale", False))
-    poser = Poser(model, body=body, steps=args.steps, seed=args.seed, mirror=mirror, stride_scale=stride)
+    odometry = (args.pelvis_odometry if args.pelvis_odometry is not None
+                else bool(rec.metadata.get("pelvis_odometry", False)))
+    setting = dict(steps=args.steps, seed=args.seed, mirror=mirror, stride_scale=stride,
+                   pelvis_odometry="default" if odometry else None)
+    poser = Poser(model, body=body, **setting)
     label = _model_label(args.model, model)
     steps = len(poser.steps) if poser.kind == "diffusion" else (1 if poser.kind == "regressor" else 0)
     if not args.no_progress:
@@ -162,7 +169,7 @@ def run_replay(args: argparse.Namespace) -> int:
         if not left_out:
             raise ValueError("--held-out needs --sensors to leave out some of the recorded sensors "
                              f"({', '.join(rec.sites)})")
-        full = Poser(model, body=body, steps=args.steps, seed=args.seed, mirror=mirror, stride_scale=stride)
+        full = Poser(model, body=body, **setting)
         held_out = held_out_errors(res.poses, replay_recording(rec, full, sensors=rec.sites, insoles=insoles).poses,
                                    left_out)
     seconds = time.perf_counter() - t0
@@ -172,7 +179,7 @@ def run_replay(args: argparse.Namespace) -> int:
         motion = motion_from_poses(res.poses, body, rec, meta={
             "model": label, "steps": steps, "sensors": list(res.sensors), "insoles": res.insoles,
             "what": f"imucap replay (seed {args.seed})", "step_list": list(poser.steps), "mirror": poser.mirror,
-            "stride_scale": poser.stride is not None})
+            "stride_scale": poser.stride is not None, "pelvis_odometry": poser.pelvis_odometry is not None})
         for o in args.out:
             outputs.append(str(export_motion(o, motion)))
             if not args.no_progress:
@@ -184,6 +191,7 @@ def run_replay(args: argparse.Namespace) -> int:
         "sensors": list(res.sensors), "insoles": res.insoles, "model": label, "kind": poser.kind,
         "steps": steps, "step_list": list(poser.steps) if poser.kind == "diffusion" else None, "seed": args.seed,
         "mirror": poser.mirror, "stride_scale": poser.stride is not None,
+        "pelvis_odometry": poser.pelvis_odometry is not None,
         "recorded_sensors": list(rec.sites), "recorded_model": rec.metadata.get("model"),
         "calibrations": res.calibrations_used, "hub_frames": res.hub_frames,
         "frames_filled": res.stats.get("frames_filled"), "resampler_restarts": res.stats.get("resampler_restarts"),

@@ -16,7 +16,9 @@ inference model file (``--fp16`` to halve it, ``--default-steps`` for the live p
 ``--contact-detector`` trains the shank contact detector instead (inference/contact_detector.py)
 on the issue's training split (or ``--data PATH...``), reports its accuracy on the held-out
 sets (or ``--val PATH...``) and writes OUT/contact_detector.pt; copy that to
-inference/weights/ to ship it.
+inference/weights/ to ship it. ``--pelvis-odometry`` does the same for the pelvis odometry
+(inference/pelvis_odometry.py; OUT/pelvis_odometry.pt; its held-out figures are the root
+errors RE2/5/10 of the path it integrates alone from each clip's measured pelvis).
 """
 
 from __future__ import annotations
@@ -69,10 +71,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "window (inference.mirror; twice the batch per call)")
     p.add_argument("--contact-detector", action="store_true",
                    help="train the shank contact detector (writes OUT/contact_detector.pt)")
+    p.add_argument("--pelvis-odometry", action="store_true",
+                   help="train the pelvis odometry, the root's walk without shanks (writes OUT/pelvis_odometry.pt)")
     p.add_argument("--data", nargs="+", type=Path, metavar="PATH",
-                   help="with --contact-detector: motion files/folders to train on (default: the issue's split)")
+                   help="with --contact-detector / --pelvis-odometry: motion files/folders to train on "
+                        "(default: the issue's split)")
     p.add_argument("--val", nargs="+", type=Path, metavar="PATH",
-                   help="with --contact-detector: held-out motion files/folders (default: dg and the sad walks)")
+                   help="with --contact-detector / --pelvis-odometry: held-out motion files/folders "
+                        "(default: dg and the sad walks)")
     p.set_defaults(func=run)
 
 
@@ -85,8 +91,10 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--retag needs --export DEST")
     if args.out is None and args.retag is None:
         raise ValueError("--out is required")
-    if args.contact_detector:
-        return run_contact_detector(args)
+    if args.contact_detector and args.pelvis_odometry:
+        raise ValueError("--contact-detector and --pelvis-odometry train different files: pick one")
+    if args.contact_detector or args.pelvis_odometry:
+        return run_helper_stage(args)
     if args.export is not None:
         if args.default_steps is not None:
             from inference.diffusion import parse_steps
@@ -149,18 +157,29 @@ def _leave_distributed_run(rc: int) -> None:
     os._exit(rc)
 
 
-def run_contact_detector(args: argparse.Namespace) -> int:
+def run_helper_stage(args: argparse.Namespace) -> int:
+    """Train one of the poser's small helper stages (contact detector, pelvis odometry) on
+    every frame of the split's clips; both train in about a minute on one core."""
     import torch
 
     from inference import splits
-    from inference.contact_detector import DetectorTraining, save_detector, train_detector
 
     torch.set_num_threads(1)
     build = lambda paths: splits.build_files(paths, progress=not args.no_progress)  # noqa: E731
     train_clips = build(args.data).clips if args.data else splits.train_set(progress=not args.no_progress).clips
     val = ({"val": build(args.val).clips} if args.val else
            {"dg": splits.val_set(progress=False).clips, "sad": build(splits.root_val_files()).clips})
-    cfg = DetectorTraining(steps=args.steps or DetectorTraining.steps, seed=args.seed or 0)
+    if args.contact_detector:
+        from inference.contact_detector import DetectorTraining as Config
+        from inference.contact_detector import save_detector as save
+        from inference.contact_detector import train_detector as fit
+        name, kept = "contact_detector", ("acc_",)
+    else:
+        from inference.pelvis_odometry import OdometryTraining as Config
+        from inference.pelvis_odometry import save_odometry as save
+        from inference.pelvis_odometry import train_odometry as fit
+        name, kept = "pelvis_odometry", tuple(f"{k}_" for k in val)
+    cfg = Config(steps=args.steps or Config.steps, seed=args.seed or 0)
     args.out.mkdir(parents=True, exist_ok=True)
     with open(args.out / "train.jsonl", "a") as log:
         def report(entry: dict) -> None:
@@ -169,13 +188,13 @@ def run_contact_detector(args: argparse.Namespace) -> int:
             if not args.no_progress:
                 print(json.dumps(entry), file=sys.stderr)
 
-        det = train_detector(train_clips, val, cfg, progress=report)
+        stage = fit(train_clips, val, cfg, progress=report)
     final = cfg.log[-1]
     meta = {"steps": cfg.steps, "seed": cfg.seed, "train_frames": int(sum(len(c) for c in train_clips)),
             "data": [str(p) for p in args.data] if args.data else "inference.splits:train_set",
-            **{k: v for k, v in final.items() if k.startswith("acc_")}}
-    save_detector(args.out / "contact_detector.pt", det, meta)
-    print(json.dumps({"contact_detector": str(args.out / "contact_detector.pt"), **meta}))
+            **{k: v for k, v in final.items() if k.startswith(kept)}}
+    save(args.out / f"{name}.pt", stage, meta)
+    print(json.dumps({name: str(args.out / f"{name}.pt"), **meta}))
     return 0
 
 

@@ -69,7 +69,7 @@ def stride_text(status: dict[str, Any]) -> str:
     if not status["enabled"]:
         return "off"
     if not status["shanks"]:
-        return "needs both shanks"
+        return "needs both shanks (walk from the pelvis sensor)" if status.get("odometry") else "needs both shanks"
     if status["scale"] is None:
         return "waiting for the first strides"
     return f"x{status['scale']:.2f} from {status['strides']} strides"
@@ -221,12 +221,15 @@ class Pipeline:
         """What the shank stride scaling of the root is doing (``inference/stride.py``), so
         a screen can say whether the walked distance comes from the shanks yet: enabled
         (the poser has it), shanks (both feed the poser now), scale (None until a stride
-        has been measured since calibration) and how many strides were measured. Read from
-        another thread: plain attribute reads of the poser's estimator."""
+        has been measured since calibration) and how many strides were measured; odometry:
+        the poser walks the root from the pelvis sensor when the shanks are not both worn
+        (``inference/pelvis_odometry.py``). Read from another thread: plain attribute reads
+        of the poser's estimator."""
         est = self.poser.stride
         strides = 0 if est is None else len(est.strides)
         return {"enabled": est is not None, "shanks": all(s in self.active_sites for s in SHANK_SITES),
-                "scale": round(est.scale, 3) if strides else None, "strides": strides}
+                "scale": round(est.scale, 3) if strides else None, "strides": strides,
+                "odometry": getattr(self.poser, "pelvis_odometry", None) is not None and "pelvis" in self.active_sites}
 
     # ------------------------------------------------------------------ the chain
     def _emit(self, method: str, *args: Any) -> None:

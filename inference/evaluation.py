@@ -129,14 +129,16 @@ class ClipResult:
 def reconstruct_clip(model: LoadedModel | None, inp: ClipInput, steps=None, seed: int = 0,
                      progress: Callable[[int], object] | None = None, smoothing: bool = True,
                      contact_detector="default", inpaint_noise: str | None = None,
-                     mirror: bool | None = None, stride_scale: bool = True) -> Reconstruction:
+                     mirror: bool | None = None, stride_scale: bool = True,
+                     pelvis_odometry="default") -> Reconstruction:
     """The live poser over one clip, starting from a standing history at the clip's
     first root position (only for nicer exports: every metric is translation-free).
     ``inpaint_noise``: the poser's noise mode, ``mirror`` its mirror averaging (None: the
-    model file's own), ``stride_scale`` its shank stride scaling of the root."""
+    model file's own), ``stride_scale`` its shank stride scaling of the root,
+    ``pelvis_odometry`` its root walk without shanks (None: the model's own)."""
     poser = Poser(model, body=inp.body, steps=steps, seed=seed, root_xy0=(inp.root[0, 0], inp.root[0, 1]),
                   smoothing=smoothing, contact_detector=contact_detector, noise=inpaint_noise, mirror=mirror,
-                  stride_scale=stride_scale)
+                  stride_scale=stride_scale, pelvis_odometry=pelvis_odometry)
     return reconstruct_offline(poser, inp.features, inp.mask, progress=progress)
 
 
@@ -156,12 +158,14 @@ def evaluate_motions(
     inpaint_noise: str | None = None,
     mirror: bool | None = None,
     stride_scale: bool = True,
+    pelvis_odometry="default",
 ) -> tuple[dict, list[ClipResult]]:
     """Evaluate one model and sensor set over motions; returns (pooled summary, per-clip
     results). ``keep`` retains reconstructions (for exports) instead of only metrics;
     ``smoothing=False`` scores the poser's outputs without its 1-Euro filters;
     ``contact_detector`` goes to the poser (None: the model's own contacts), and so do
-    ``inpaint_noise`` and ``mirror`` (None: the model file's own) and ``stride_scale``."""
+    ``inpaint_noise`` and ``mirror`` (None: the model file's own), ``stride_scale`` and
+    ``pelvis_odometry``."""
     from tqdm import tqdm
 
     inputs = [clip_input(m, sites, insoles, noise, clip_seed(seed, m.name)) for m in motions]
@@ -172,7 +176,8 @@ def evaluate_motions(
         for inp in inputs:
             rec = reconstruct_clip(model, inp, steps, clip_seed(seed, inp.name), progress=bar.update,
                                    smoothing=smoothing, contact_detector=contact_detector,
-                                   inpaint_noise=inpaint_noise, mirror=mirror, stride_scale=stride_scale)
+                                   inpaint_noise=inpaint_noise, mirror=mirror, stride_scale=stride_scale,
+                                   pelvis_odometry=pelvis_odometry)
             cm = evaluate_clip(inp.name, rec.rot, rec.root, rec.joints, inp.rot, inp.root, inp.joints, FPS_MODEL)
             results.append(ClipResult(inp.name, cm, rec if keep else None, inp if keep else None))
     return summarize([r.metrics for r in results]), results

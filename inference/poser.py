@@ -16,7 +16,10 @@ last 60 frames) and whose last frame holds the new measurement. Each step:
 4. with both shanks measured, scale the root displacement by the running ratio of the
    shanks' inertial strides to the reconstructed ones (``stride.StrideScale``;
    ``stride_scale=False`` to skip; NOTES.md "Session 15", "Session 16"): the reconstructed
-   stride is the unmeasured thigh's guess;
+   stride is the unmeasured thigh's guess; without both shanks and without insoles, the
+   root displacement comes from the pelvis sensor's last second instead
+   (``pelvis_odometry.PelvisOdometry``; ``pelvis_odometry=None`` to skip; NOTES.md
+   "Session 17"): there the guessed legs' contacts cancel the walk;
 5. integrate the root path and run FK for the outputs; the output root and the
    unmeasured orientations go through light speed-adaptive low-passes (``smoothing``,
    ``smoothing=False`` to skip): per-frame inference makes them wobble. Output only: the
@@ -61,6 +64,7 @@ from .diffusion import Schedule, inpaint, paper_steps, parse_steps
 from .features import FPS_MODEL, N_FEATURES, SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
 from .joint_constraints import constrain_knees
 from .mirror import MirrorAveraged
+from .pelvis_odometry import PELVIS_INDEX, PelvisOdometry, load_odometry
 from .regressor import regress
 from .rotations import matrix_to_rot6d, rot6d_to_matrix
 from .skeleton import N_CONTACTS, N_SEGMENTS, SEGMENT_INDEX, SITE_INDEX
@@ -73,6 +77,7 @@ DEFAULT_WEIGHTS: dict[str, Path] = {
     "regressor": WEIGHTS_DIR / "regressor.pt",
 }
 CONTACT_DETECTOR_WEIGHTS = WEIGHTS_DIR / "contact_detector.pt"
+PELVIS_ODOMETRY_WEIGHTS = WEIGHTS_DIR / "pelvis_odometry.pt"
 POSER_KINDS = ("diffusion", "regressor", "floor")
 # what of the history the model is told is known: all of it (the paper: measured and
 # reconstructed features), or only what was measured (reconstructions are then just the
@@ -116,21 +121,36 @@ def default_weights(kind: str = "diffusion") -> Path:
 def _resolve_detector(spec: ContactDetector | str | os.PathLike | None) -> ContactDetector | None:
     """"default" = the shipped detector if it is installed (else the model's own contacts,
     with a warning), None = none, a path = that file."""
-    if spec is None or isinstance(spec, ContactDetector):
+    return _resolve_stage(spec, ContactDetector, CONTACT_DETECTOR_WEIGHTS, load_detector,
+                          "root correction uses the model's contacts (train one with "
+                          "`imucap train --contact-detector --out DIR`)")
+
+
+def _resolve_odometry(spec: PelvisOdometry | str | os.PathLike | None) -> PelvisOdometry | None:
+    """"default" = the shipped pelvis odometry if it is installed (else the model's own
+    root displacement, with a warning), None = none, a path = that file."""
+    return _resolve_stage(spec, PelvisOdometry, PELVIS_ODOMETRY_WEIGHTS, load_odometry,
+                          "without both shanks the root follows the model's own displacement (train one with "
+                          "`imucap train --pelvis-odometry --out DIR`)")
+
+
+def _resolve_stage(spec, cls: type, path: Path, loader, missing: str):
+    """A helper stage of the poser (contact detector, pelvis odometry) from its spec."""
+    if spec is None or isinstance(spec, cls):
         return spec
     if os.fspath(spec) == "default":
-        if not CONTACT_DETECTOR_WEIGHTS.exists():
-            warnings.warn(f"{CONTACT_DETECTOR_WEIGHTS} is missing: root correction uses the model's contacts "
-                          "(train one with `imucap train --contact-detector --out DIR`)", stacklevel=3)
+        if not path.exists():
+            warnings.warn(f"{path} is missing: {missing}", stacklevel=4)
             return None
-        return _shipped_detector(CONTACT_DETECTOR_WEIGHTS.stat().st_mtime_ns)
-    return load_detector(spec)
+        return _shipped_stage(path, path.stat().st_mtime_ns, loader)
+    return loader(spec)
 
 
-@functools.lru_cache(maxsize=1)
-def _shipped_detector(mtime_ns: int) -> ContactDetector:
-    """One shared instance (it holds no state between calls); reloaded if the file changes."""
-    return load_detector(CONTACT_DETECTOR_WEIGHTS)
+@functools.lru_cache(maxsize=4)
+def _shipped_stage(path: Path, mtime_ns: int, loader):
+    """One shared instance per shipped file (the stages hold no state between calls);
+    reloaded if the file changes."""
+    return loader(path)
 
 
 def resolve_model(spec: str | os.PathLike | LoadedModel | None = "diffusion") -> LoadedModel | None:
@@ -249,6 +269,7 @@ class Poser:
         contact_detector: ContactDetector | str | os.PathLike | None = "default",
         mirror: bool | None = None,
         stride_scale: bool = True,
+        pelvis_odometry: PelvisOdometry | str | os.PathLike | None = "default",
     ) -> None:
         self.model = model
         self.kind = "floor" if model is None else model.kind
@@ -279,6 +300,9 @@ class Poser:
         # contacts from both shank sensors when they are measured (contact_detector.py):
         # far more often right than a reconstruction model's own contact features
         self.contact_detector = None if self.kind == "floor" else _resolve_detector(contact_detector)
+        # without both shanks (and without insoles) the root's walk from the pelvis sensor
+        # (pelvis_odometry.py): the guessed legs' contacts cancel the walk there
+        self.pelvis_odometry = None if self.kind == "floor" else _resolve_odometry(pelvis_odometry)
         # the floor is by definition the standing pose wherever nothing is measured
         self.knee_hinge = knee_hinge and self.kind != "floor"
         # output only: the integrated root path (and so every later frame) is unfiltered
@@ -310,6 +334,7 @@ class Poser:
         self._contact_offsets = torch.as_tensor(self.body.contact_offsets, dtype=torch.float32)
         self._stand = torch.as_tensor(standing_features(self.body, start_pose), dtype=torch.float32)
         self._shank_idx = torch.as_tensor(SHANK_INDEX)
+        self._pelvis_idx = torch.as_tensor(PELVIS_INDEX)
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -421,7 +446,14 @@ class Poser:
             joints_rel = forward_kinematics(R, torch.zeros(3), self._offsets)
             cps = contact_points(R, joints_rel, self._contact_offsets)
             if self.root_correction and not bool(m[SL_DP].any()):
-                y[SL_DP] = correct_root_displacement(y[SL_DP], self._prev_cps, cps, contact)
+                odo = self.pelvis_odometry
+                if (odo is not None and not bool(m[SL_CONTACT].any()) and not bool(m[self._shank_idx].all())
+                        and bool(m[self._pelvis_idx].all())):
+                    pelvis = win[0, -odo.context:, self._pelvis_idx] * self._std[self._pelvis_idx] \
+                        + self._mean[self._pelvis_idx]
+                    y[SL_DP] = odo.displacement(pelvis)
+                else:
+                    y[SL_DP] = correct_root_displacement(y[SL_DP], self._prev_cps, cps, contact)
             self._prev_cps = cps
 
             # history keeps the exact normalised measurement where observed

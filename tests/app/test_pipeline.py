@@ -195,9 +195,11 @@ def test_stride_status_says_whether_the_distance_comes_from_the_shanks(session):
     pipe = Pipeline(make_poser("diffusion", body=truth.body, steps=[0]), SITES,
                     calibrator=Calibrator(SITES, schedule=PROTO.schedule()))
     st = pipe.stride_status()
-    assert st == {"enabled": True, "shanks": True, "scale": None, "strides": 0}
+    assert st == {"enabled": True, "shanks": True, "scale": None, "strides": 0, "odometry": True}
     assert stride_text(st) == "waiting for the first strides"
     pipe.set_active_sites(("pelvis", "head", "l_wrist", "r_wrist", "l_shank"))
+    assert stride_text(pipe.stride_status()) == "needs both shanks (walk from the pelvis sensor)"
+    pipe.set_active_sites(("head", "l_wrist", "r_wrist", "l_shank"))
     assert stride_text(pipe.stride_status()) == "needs both shanks"
     assert stride_text(_pipeline(truth).stride_status()) == "off"  # the floor has no root to scale
     assert stride_text({"enabled": True, "shanks": True, "scale": 0.934, "strides": 12}) == "x0.93 from 12 strides"

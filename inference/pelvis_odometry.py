@@ -1,0 +1,233 @@
+"""The root's walk from the pelvis sensor alone, for sensor sets without both shanks.
+
+Why a separate stage: the paper's root path is the model's root displacement corrected
+by the foot points predicted in contact (sec. 3.4.2). With both shanks measured the
+contacts come from the shanks (``contact_detector``) and the stride from their own
+accelerations (``stride``). Without them the legs, and so the contacts, are the model's
+guess, and on walks that guess cancels the walk: with pelvis + wrists (the paper's best
+3-site set for the whole body) the held-out Bandai walks' reconstructed root stood still
+(RE10 4.6 m, the floor baseline that never moves scores 4.4; NOTES "Session 17").
+
+A pelvis sensor does carry the walk: every step lifts and drops the pelvis and rocks it
+side to side, and the size and rhythm of that bounce follow step length and cadence
+(the inverted-pendulum gait models of pelvis-worn pedometers rest on this). Rather than
+a hand-fitted step model, which would also need the direction of travel, a small causal
+regressor learns the root's horizontal displacement of this frame from the last
+``CONTEXT`` frames (1 s) of the pelvis's orientation and acceleration, on every frame of
+the training split and its mirror image.
+
+Inputs per frame (9 numbers): the pelvis orientation (6D) and the pelvis-site
+acceleration, all turned about the vertical into the frame facing the *current*
+pelvis heading, so a turn within the context shows as one, and the answer is a
+displacement in that frame (x forward, y left) that the poser turns back to the world.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from .features import SL_ACC, SL_DP, SL_ROT
+from .rotations import matrix_about_axis, matrix_to_rot6d, rot6d_to_matrix
+from .skeleton import SEGMENT_INDEX, SITE_INDEX
+
+ODOMETRY_FORMAT = "imucap-pelvis-odometry-v1"
+# frames at 20 Hz (1 s: a stride of a slow walk). Chosen on clips held out of the training
+# split (10 % by clip): RE2 / RE5 0.114 / 0.294 m at 10 frames, 0.108 / 0.271 at 15,
+# 0.099 / 0.245 at 20, 0.107 / 0.284 at 30, 0.100 / 0.268 at 40 (NOTES.md "Session 17")
+CONTEXT = 20
+
+
+def pelvis_feature_index() -> np.ndarray:
+    """(9,) indices into a 190-feature frame: the pelvis 6D, then the pelvis-site acceleration."""
+    rot = [SL_ROT.start + 6 * SEGMENT_INDEX["pelvis"] + k for k in range(6)]
+    acc = [SL_ACC.start + 3 * SITE_INDEX["pelvis"] + k for k in range(3)]
+    return np.asarray(rot + acc)
+
+
+PELVIS_INDEX = pelvis_feature_index()
+_UP = torch.tensor([0.0, 0.0, 1.0])
+
+
+def current_heading(pelvis: Tensor) -> Tensor:
+    """(..., C, 9) pelvis frames -> (...,) R_z(-yaw) of the last frame's pelvis heading
+    as (..., 3, 3): the turn that makes the subject face +X now."""
+    R = rot6d_to_matrix(pelvis[..., -1, :6])
+    yaw = torch.atan2(R[..., 1, 0], R[..., 0, 0])
+    return matrix_about_axis(_UP.to(pelvis.dtype).expand(*yaw.shape, 3), -yaw)
+
+
+def heading_frame_windows(pelvis: Tensor) -> Tensor:
+    """(..., C, 9) raw pelvis frames (oldest first, physical units) -> (..., C * 9) the
+    same turned into the frame facing the last frame's heading."""
+    Rz = current_heading(pelvis)[..., None, :, :]
+    R = rot6d_to_matrix(pelvis[..., :6])
+    rot = matrix_to_rot6d(Rz @ R)
+    acc = (Rz @ pelvis[..., 6:9, None])[..., 0]
+    return torch.cat([rot, acc], dim=-1).flatten(-2)
+
+
+def clip_contexts(x: np.ndarray | Tensor, context: int = CONTEXT) -> Tensor:
+    """(T, 190) one clip's features -> (T, context, 9): per frame, its pelvis frames and
+    the ``context - 1`` before it (the first frame repeated before the start, as the
+    poser's standing history does)."""
+    f = torch.as_tensor(np.asarray(x)[:, PELVIS_INDEX], dtype=torch.float32)
+    pad = torch.cat([f[:1].expand(context - 1, -1), f], dim=0)
+    idx = torch.arange(f.shape[0])[:, None] + torch.arange(context)[None]
+    return pad[idx]
+
+
+class PelvisOdometry(nn.Module):
+    """MLP on ``context`` heading-framed pelvis frames -> this frame's root displacement
+    (2,) in metres, in the frame facing the current heading. The input normaliser and the
+    output scale travel with the weights."""
+
+    def __init__(self, context: int = CONTEXT, hidden: int = 256) -> None:
+        super().__init__()
+        self.context, self.hidden = context, hidden
+        self.meta: dict = {}
+        n = context * len(PELVIS_INDEX)
+        self.register_buffer("in_mean", torch.zeros(n))
+        self.register_buffer("in_std", torch.ones(n))
+        self.register_buffer("out_std", torch.ones(2))
+        self.net = nn.Sequential(nn.Linear(n, hidden), nn.GELU(), nn.Linear(hidden, hidden), nn.GELU(),
+                                 nn.Linear(hidden, 2))
+
+    def forward(self, windows: Tensor) -> Tensor:
+        """(B, context * 9) heading-framed windows -> (B, 2) displacement / out_std."""
+        return self.net((windows - self.in_mean) / self.in_std)
+
+    @torch.no_grad()
+    def displacement(self, pelvis_frames: Tensor) -> Tensor:
+        """(context, 9) raw pelvis features of the last frames (oldest first) -> (2,) this
+        frame's root displacement in the world (metres)."""
+        p = pelvis_frames.to(torch.float32)
+        d = self(heading_frame_windows(p)[None])[0] * self.out_std
+        Rz = current_heading(p)  # world -> heading; its transpose turns back
+        return Rz[:2, :2].T @ d
+
+
+# --------------------------------------------------------------------------- training
+
+@dataclass
+class OdometryTraining:
+    steps: int = 6000
+    batch: int = 512
+    lr: float = 1e-3
+    weight_decay: float = 1e-4
+    input_noise: float = 0.15  # in normalised units (0.05 and 0.3 generalised worse)
+    mirror: float = 0.5  # share of windows mirrored left <-> right
+    seed: int = 0
+    context: int = CONTEXT
+    hidden: int = 256
+    log: list[dict] = field(default_factory=list)
+
+
+def clip_targets(clips: Sequence[np.ndarray], context: int = CONTEXT, mirror: bool = False) -> tuple[Tensor, Tensor]:
+    """Inputs (n, context * 9) and heading-frame root displacements (n, 2) of every frame of every clip."""
+    from .mirror import mirror_features
+
+    X, Y = [], []
+    for x in clips:
+        x = torch.as_tensor(np.asarray(x, dtype=np.float32))
+        if mirror:
+            x = mirror_features(x)
+        w = clip_contexts(x, context)
+        Rz = current_heading(w)
+        X.append(heading_frame_windows(w))
+        Y.append((Rz[:, :2, :2] @ x[:, SL_DP, None])[..., 0])
+    return torch.cat(X), torch.cat(Y)
+
+
+def clip_displacements(odo: PelvisOdometry, x: np.ndarray | Tensor) -> np.ndarray:
+    """(T, 190) one clip's features -> (T, 2) the odometry's world root displacement of
+    every frame, each from that frame's context alone (as the poser gets it live)."""
+    w = clip_contexts(x, odo.context)
+    with torch.no_grad():
+        d = odo(heading_frame_windows(w)) * odo.out_std
+    return (current_heading(w)[:, :2, :2].transpose(1, 2) @ d[..., None])[..., 0].numpy()
+
+
+def path_errors(odo: PelvisOdometry, clips: Sequence[np.ndarray], seconds: Sequence[int] = (2, 5, 10)) -> dict:
+    """RE over ``seconds`` (m, pooled over start points as ``metrics.root_error``) of the
+    path the odometry integrates alone from each clip's pelvis; None where no clip is long enough."""
+    from .features import FPS_MODEL
+    from .metrics import root_error
+
+    errs: dict[int, list[np.ndarray]] = {k: [] for k in seconds}
+    for x in clips:
+        pred = np.cumsum(clip_displacements(odo, x), axis=0)
+        true = np.cumsum(np.asarray(x, np.float64)[:, SL_DP], axis=0)
+        for k in seconds:
+            e = root_error(pred, true, k, FPS_MODEL)
+            if e is not None:
+                errs[k].append(e)
+    return {f"re{k}_m": round(float(np.concatenate(v).mean()), 4) if v else None for k, v in errs.items()}
+
+
+def train_odometry(train_clips: Sequence[np.ndarray], val_sets: dict[str, Sequence[np.ndarray]] | None = None,
+                   cfg: OdometryTraining | None = None, progress=print) -> PelvisOdometry:
+    """Fit the odometry to every frame of ``train_clips`` (and their mirror images); logs
+    the root errors of the path it integrates alone on each validation set every 1000
+    steps into ``cfg.log``."""
+    cfg = cfg or OdometryTraining()
+    torch.manual_seed(cfg.seed)
+    g = torch.Generator().manual_seed(cfg.seed)
+    X, Y = clip_targets(train_clips, cfg.context)
+    Xm, Ym = clip_targets(train_clips, cfg.context, mirror=True)
+    odo = PelvisOdometry(cfg.context, cfg.hidden)
+    odo.in_mean.copy_(X.mean(0))
+    odo.in_std.copy_(X.std(0).clamp(min=1e-3))
+    odo.out_std.copy_(Y.std(0).clamp(min=1e-3))
+    opt = torch.optim.AdamW(odo.parameters(), cfg.lr, weight_decay=cfg.weight_decay)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.steps, eta_min=cfg.lr * 0.05)
+    t0 = time.time()
+    for step in range(1, cfg.steps + 1):
+        i = torch.randint(0, X.shape[0], (cfg.batch,), generator=g)
+        flip = (torch.rand(cfg.batch, generator=g) < cfg.mirror)[:, None]
+        xb = torch.where(flip, Xm[i], X[i])
+        yb = torch.where(flip, Ym[i], Y[i])
+        xb = xb + cfg.input_noise * odo.in_std * torch.randn(xb.shape, generator=g)
+        loss = F.mse_loss(odo(xb), yb / odo.out_std)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+        if step % 1000 == 0 or step == cfg.steps:
+            odo.eval()
+            entry = {"step": step, "loss": float(loss.detach()), "sec": round(time.time() - t0, 1)}
+            for k, v in (val_sets or {}).items():
+                entry.update({f"{k}_{m}": e for m, e in path_errors(odo, v).items()})
+            odo.train()
+            cfg.log.append(entry)
+            if progress:
+                progress(entry)
+    return odo.eval()
+
+
+# --------------------------------------------------------------------------- files
+
+def save_odometry(path: str | os.PathLike, odo: PelvisOdometry, meta: dict | None = None) -> None:
+    from .denoiser import atomic_torch_save
+
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    atomic_torch_save({"format": ODOMETRY_FORMAT, "context": odo.context, "hidden": odo.hidden,
+                       "state_dict": odo.state_dict(), "meta": meta or {}}, path)
+
+
+def load_odometry(path: str | os.PathLike) -> PelvisOdometry:
+    obj = torch.load(path, map_location="cpu", weights_only=False)
+    if not isinstance(obj, dict) or obj.get("format") != ODOMETRY_FORMAT:
+        raise ValueError(f"{path} is not an imucap pelvis odometry file")
+    odo = PelvisOdometry(int(obj["context"]), int(obj["hidden"]))
+    odo.load_state_dict(obj["state_dict"])
+    odo.meta = obj.get("meta", {})
+    return odo.eval()
