@@ -83,6 +83,22 @@ def test_contact_detector_switch(capsys, data_dir, tiny_models):
     assert det["re2_m"] != own["re2_m"] and np.isfinite(det["re2_m"])
 
 
+def test_pelvis_odometry_switch(capsys, data_dir, tiny_models):
+    """Without both shanks the shipped pelvis odometry walks the root; --no-pelvis-odometry
+    goes back to the model's own displacement with the contact correction. With both shanks
+    it does not apply, so the switch changes nothing there."""
+    def run(sensors, *extra):
+        code, out, err = _run(capsys, "--data", str(data_dir), "--sensors", sensors, "--steps", "2",
+                              "--model", str(tiny_models["diffusion"]), "--json", *extra)
+        assert code == 0, err
+        return json.loads(out)
+
+    odo, own = run("pelvis,l_wrist,r_wrist"), run("pelvis,l_wrist,r_wrist", "--no-pelvis-odometry")
+    assert odo["pelvis_odometry"] is True and own["pelvis_odometry"] is False
+    assert odo["re2_m"] != own["re2_m"] and np.isfinite(odo["re2_m"])
+    assert run("l_shank,r_shank")["re2_m"] == run("l_shank,r_shank", "--no-pelvis-odometry")["re2_m"]
+
+
 def test_inpaint_noise_override(capsys, data_dir, tiny_models):
     """--inpaint-noise runs the diffusion poser with another noise mode than the model file's
     (here: the file has none, so the paper's fresh draws), without re-exporting the file; the

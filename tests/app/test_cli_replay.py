@@ -131,31 +131,32 @@ def test_replay_mirrors_as_recorded_else_as_the_model_file_says(recorded, tiny_m
     assert mirror_of(old, "--mirror") is True
 
 
-def test_replay_scales_strides_as_recorded(recorded, tiny_model, tmp_path, capsys):
-    """A session recorded before stride scaling existed replays without it; one that had it
-    replays with it; either way the flag overrides."""
+@pytest.mark.parametrize("key, flag", [("stride_scale", "stride-scale"), ("pelvis_odometry", "pelvis-odometry")])
+def test_replay_root_stages_as_recorded(recorded, tiny_model, tmp_path, capsys, key, flag):
+    """A session recorded before a root stage (stride scaling, pelvis odometry) existed
+    replays without it; one that had it replays with it; either way the flag overrides."""
     import shutil
 
     import h5py
 
-    def stride_of(path, *extra):
+    def stage_of(path, *extra):
         code, out, err = _run(capsys, "replay", str(path), "--model", str(tiny_model), "--steps", "2", "--json",
                               "--no-progress", *extra)
         assert code == 0, err
-        return json.loads(out)["stride_scale"]
+        return json.loads(out)[key]
 
     for recorded_as in (None, True):
         rec = tmp_path / f"rec_{recorded_as}.h5"
         shutil.copy(recorded.path, rec)
         with h5py.File(rec, "r+") as f:
             meta = json.loads(f.attrs["metadata"])
-            meta.pop("stride_scale", None)
+            meta.pop(key, None)
             if recorded_as is not None:
-                meta["stride_scale"] = recorded_as
+                meta[key] = recorded_as
             f.attrs["metadata"] = json.dumps(meta)
-        assert stride_of(rec) is bool(recorded_as)
-        assert stride_of(rec, "--stride-scale") is True
-        assert stride_of(rec, "--no-stride-scale") is False
+        assert stage_of(rec) is bool(recorded_as)
+        assert stage_of(rec, f"--{flag}") is True
+        assert stage_of(rec, f"--no-{flag}") is False
 
 
 def test_held_out_sensors_score_a_subset_against_what_they_measured(recorded, capsys):
