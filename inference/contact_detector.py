@@ -20,10 +20,8 @@ two sides alike.
 from __future__ import annotations
 
 import os
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -33,6 +31,7 @@ from torch import Tensor, nn
 from .features import SL_ACC, SL_CONTACT, SL_ROT
 from .rotations import matrix_about_axis, matrix_to_rot6d, rot6d_to_matrix
 from .skeleton import SEGMENT_INDEX, SITE_INDEX
+from .small_nets import fit, load_net, save_net, stack_context
 
 DETECTOR_FORMAT = "imucap-contact-detector-v1"
 CONTEXT = 9  # frames at 20 Hz (0.45 s, this one and the 8 before)
@@ -68,9 +67,7 @@ def context_windows(x: np.ndarray | Tensor, context: int = CONTEXT) -> Tensor:
     """(T, 190) one clip's features -> (T, context * 18): per frame, that frame and the
     ``context - 1`` before it (the first frame repeated before the start), heading-framed."""
     f = heading_frame_inputs(torch.as_tensor(np.asarray(x)[:, SHANK_INDEX], dtype=torch.float32))
-    pad = torch.cat([f[:1].expand(context - 1, -1), f], dim=0)
-    idx = torch.arange(f.shape[0])[:, None] + torch.arange(context)[None]
-    return pad[idx].reshape(f.shape[0], -1)
+    return stack_context(f, context).reshape(f.shape[0], -1)
 
 
 class ContactDetector(nn.Module):
@@ -139,54 +136,23 @@ def train_detector(train_clips: Sequence[np.ndarray], val_sets: dict[str, Sequen
     """Fit a detector to every frame of ``train_clips`` (and their mirror images); logs
     per-point accuracy on each validation set every 1000 steps into ``cfg.log``."""
     cfg = cfg or DetectorTraining()
-    torch.manual_seed(cfg.seed)
-    g = torch.Generator().manual_seed(cfg.seed)
     X, Y = clip_windows(train_clips, cfg.context)
-    Xm, Ym = clip_windows(train_clips, cfg.context, mirror=True)
     val = {k: clip_windows(v, cfg.context) for k, v in (val_sets or {}).items()}
+    torch.manual_seed(cfg.seed)  # the initial weights
     det = ContactDetector(cfg.context, cfg.hidden)
     det.in_mean.copy_(X.mean(0))
     det.in_std.copy_(X.std(0).clamp(min=1e-3))
-    opt = torch.optim.AdamW(det.parameters(), cfg.lr, weight_decay=cfg.weight_decay)
-    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.steps, eta_min=cfg.lr * 0.05)
-    t0 = time.time()
-    for step in range(1, cfg.steps + 1):
-        i = torch.randint(0, X.shape[0], (cfg.batch,), generator=g)
-        flip = (torch.rand(cfg.batch, generator=g) < cfg.mirror)[:, None]
-        xb = torch.where(flip, Xm[i], X[i])
-        yb = torch.where(flip, Ym[i], Y[i])
-        xb = xb + cfg.input_noise * det.in_std * torch.randn(xb.shape, generator=g)
-        loss = F.binary_cross_entropy_with_logits(det(xb), yb)
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        sched.step()
-        if step % 1000 == 0 or step == cfg.steps:
-            det.eval()
-            entry = {"step": step, "loss": float(loss.detach()), "sec": round(time.time() - t0, 1)}
-            entry.update({f"acc_{k}": [round(a, 3) for a in contact_accuracy(det, *v)] for k, v in val.items()})
-            det.train()
-            cfg.log.append(entry)
-            if progress:
-                progress(entry)
-    return det.eval()
+    scores = lambda: {f"acc_{k}": [round(a, 3) for a in contact_accuracy(det, *v)]  # noqa: E731
+                      for k, v in val.items()}
+    return fit(det, (X, Y), clip_windows(train_clips, cfg.context, mirror=True), cfg,
+               F.binary_cross_entropy_with_logits, scores, progress)
 
 
 # --------------------------------------------------------------------------- files
 
 def save_detector(path: str | os.PathLike, det: ContactDetector, meta: dict | None = None) -> None:
-    from .denoiser import atomic_torch_save
-
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    atomic_torch_save({"format": DETECTOR_FORMAT, "context": det.context, "hidden": det.hidden,
-                       "state_dict": det.state_dict(), "meta": meta or {}}, path)
+    save_net(path, DETECTOR_FORMAT, det, meta)
 
 
 def load_detector(path: str | os.PathLike) -> ContactDetector:
-    obj = torch.load(path, map_location="cpu", weights_only=False)
-    if not isinstance(obj, dict) or obj.get("format") != DETECTOR_FORMAT:
-        raise ValueError(f"{path} is not an imucap contact detector file")
-    det = ContactDetector(int(obj["context"]), int(obj["hidden"]))
-    det.load_state_dict(obj["state_dict"])
-    det.meta = obj.get("meta", {})
-    return det.eval()
+    return load_net(path, DETECTOR_FORMAT, ContactDetector, "contact detector")

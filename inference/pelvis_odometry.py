@@ -25,10 +25,8 @@ displacement in that frame (x forward, y left) that the poser turns back to the 
 from __future__ import annotations
 
 import os
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -38,6 +36,7 @@ from torch import Tensor, nn
 from .features import SL_ACC, SL_DP, SL_ROT
 from .rotations import matrix_about_axis, matrix_to_rot6d, rot6d_to_matrix
 from .skeleton import SEGMENT_INDEX, SITE_INDEX
+from .small_nets import fit, load_net, save_net, stack_context
 
 ODOMETRY_FORMAT = "imucap-pelvis-odometry-v1"
 # frames at 20 Hz (1 s: a stride of a slow walk). Chosen on clips held out of the training
@@ -79,10 +78,7 @@ def clip_contexts(x: np.ndarray | Tensor, context: int = CONTEXT) -> Tensor:
     """(T, 190) one clip's features -> (T, context, 9): per frame, its pelvis frames and
     the ``context - 1`` before it (the first frame repeated before the start, as the
     poser's standing history does)."""
-    f = torch.as_tensor(np.asarray(x)[:, PELVIS_INDEX], dtype=torch.float32)
-    pad = torch.cat([f[:1].expand(context - 1, -1), f], dim=0)
-    idx = torch.arange(f.shape[0])[:, None] + torch.arange(context)[None]
-    return pad[idx]
+    return stack_context(torch.as_tensor(np.asarray(x)[:, PELVIS_INDEX], dtype=torch.float32), context)
 
 
 class PelvisOdometry(nn.Module):
@@ -179,55 +175,23 @@ def train_odometry(train_clips: Sequence[np.ndarray], val_sets: dict[str, Sequen
     the root errors of the path it integrates alone on each validation set every 1000
     steps into ``cfg.log``."""
     cfg = cfg or OdometryTraining()
-    torch.manual_seed(cfg.seed)
-    g = torch.Generator().manual_seed(cfg.seed)
     X, Y = clip_targets(train_clips, cfg.context)
-    Xm, Ym = clip_targets(train_clips, cfg.context, mirror=True)
+    torch.manual_seed(cfg.seed)  # the initial weights
     odo = PelvisOdometry(cfg.context, cfg.hidden)
     odo.in_mean.copy_(X.mean(0))
     odo.in_std.copy_(X.std(0).clamp(min=1e-3))
     odo.out_std.copy_(Y.std(0).clamp(min=1e-3))
-    opt = torch.optim.AdamW(odo.parameters(), cfg.lr, weight_decay=cfg.weight_decay)
-    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.steps, eta_min=cfg.lr * 0.05)
-    t0 = time.time()
-    for step in range(1, cfg.steps + 1):
-        i = torch.randint(0, X.shape[0], (cfg.batch,), generator=g)
-        flip = (torch.rand(cfg.batch, generator=g) < cfg.mirror)[:, None]
-        xb = torch.where(flip, Xm[i], X[i])
-        yb = torch.where(flip, Ym[i], Y[i])
-        xb = xb + cfg.input_noise * odo.in_std * torch.randn(xb.shape, generator=g)
-        loss = F.mse_loss(odo(xb), yb / odo.out_std)
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        sched.step()
-        if step % 1000 == 0 or step == cfg.steps:
-            odo.eval()
-            entry = {"step": step, "loss": float(loss.detach()), "sec": round(time.time() - t0, 1)}
-            for k, v in (val_sets or {}).items():
-                entry.update({f"{k}_{m}": e for m, e in path_errors(odo, v).items()})
-            odo.train()
-            cfg.log.append(entry)
-            if progress:
-                progress(entry)
-    return odo.eval()
+    scores = lambda: {f"{k}_{m}": e for k, v in (val_sets or {}).items()  # noqa: E731
+                      for m, e in path_errors(odo, v).items()}
+    return fit(odo, (X, Y), clip_targets(train_clips, cfg.context, mirror=True), cfg,
+               lambda out, y: F.mse_loss(out, y / odo.out_std), scores, progress)
 
 
 # --------------------------------------------------------------------------- files
 
 def save_odometry(path: str | os.PathLike, odo: PelvisOdometry, meta: dict | None = None) -> None:
-    from .denoiser import atomic_torch_save
-
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    atomic_torch_save({"format": ODOMETRY_FORMAT, "context": odo.context, "hidden": odo.hidden,
-                       "state_dict": odo.state_dict(), "meta": meta or {}}, path)
+    save_net(path, ODOMETRY_FORMAT, odo, meta)
 
 
 def load_odometry(path: str | os.PathLike) -> PelvisOdometry:
-    obj = torch.load(path, map_location="cpu", weights_only=False)
-    if not isinstance(obj, dict) or obj.get("format") != ODOMETRY_FORMAT:
-        raise ValueError(f"{path} is not an imucap pelvis odometry file")
-    odo = PelvisOdometry(int(obj["context"]), int(obj["hidden"]))
-    odo.load_state_dict(obj["state_dict"])
-    odo.meta = obj.get("meta", {})
-    return odo.eval()
+    return load_net(path, ODOMETRY_FORMAT, PelvisOdometry, "pelvis odometry")
