@@ -51,7 +51,9 @@ def test_headless_json_contract(tiny_model, tmp_path, capsys):
     assert r.metadata["steps"] == 3 and r.metadata["sensors"] == ["pelvis", "l_wrist", "r_shank"]
     assert r.metadata["mirror"] is False  # the tiny file says nothing; replays need to know
     assert r.metadata["stride_scale"] is True  # on by default; replays do as recorded
-    assert out["stride"] == {"enabled": True, "shanks": False, "scale": None, "strides": 0}  # one shank worn
+    # one shank worn: no strides from the shanks; the pelvis odometry walks the root
+    assert out["stride"] == {"enabled": True, "shanks": False, "scale": None, "strides": 0, "odometry": True}
+    assert r.metadata["pelvis_odometry"] is True
     assert len(r.calibrations) == 1 and len(r.recon["t"]) >= out["frames"] - 25
     assert r.n_frames > 200
 
