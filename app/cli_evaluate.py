@@ -68,7 +68,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="scale the root path by the shanks' inertial strides when both shanks are measured "
                         "(inference/stride.py; default; NOTES.md 'Session 16')")
     p.add_argument("--pelvis-odometry", action=argparse.BooleanOptionalAction, default=True,
-                   help="without both shanks and insoles, the root's walk from the pelvis sensor "
+                   help="without both shanks, the root's walk from the pelvis sensor "
                         "(inference/pelvis_odometry.py; default; NOTES.md 'Session 17'); --no-pelvis-odometry "
                         "uses the model's own root displacement corrected by its contacts")
     p.add_argument("--against", default=None, metavar="SPEC",

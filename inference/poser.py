@@ -16,10 +16,10 @@ last 60 frames) and whose last frame holds the new measurement. Each step:
 4. with both shanks measured, scale the root displacement by the running ratio of the
    shanks' inertial strides to the reconstructed ones (``stride.StrideScale``;
    ``stride_scale=False`` to skip; NOTES.md "Session 15", "Session 16"): the reconstructed
-   stride is the unmeasured thigh's guess; without both shanks and without insoles, the
-   root displacement comes from the pelvis sensor's last second instead
+   stride is the unmeasured thigh's guess; without both shanks, the root displacement
+   comes from the pelvis sensor's last second instead
    (``pelvis_odometry.PelvisOdometry``; ``pelvis_odometry=None`` to skip; NOTES.md
-   "Session 17"): there the guessed legs' contacts cancel the walk;
+   "Session 17"): there the guessed legs cancel the walk, even planted on the insoles' contacts;
 5. integrate the root path and run FK for the outputs; the output root and the
    unmeasured orientations go through light speed-adaptive low-passes (``smoothing``,
    ``smoothing=False`` to skip): per-frame inference makes them wobble. Output only: the
@@ -300,8 +300,8 @@ class Poser:
         # contacts from both shank sensors when they are measured (contact_detector.py):
         # far more often right than a reconstruction model's own contact features
         self.contact_detector = None if self.kind == "floor" else _resolve_detector(contact_detector)
-        # without both shanks (and without insoles) the root's walk from the pelvis sensor
-        # (pelvis_odometry.py): the guessed legs' contacts cancel the walk there
+        # without both shanks the root's walk from the pelvis sensor (pelvis_odometry.py):
+        # the guessed legs cancel the walk there, insoles or not
         self.pelvis_odometry = None if self.kind == "floor" else _resolve_odometry(pelvis_odometry)
         # the floor is by definition the standing pose wherever nothing is measured
         self.knee_hinge = knee_hinge and self.kind != "floor"
@@ -447,8 +447,7 @@ class Poser:
             cps = contact_points(R, joints_rel, self._contact_offsets)
             if self.root_correction and not bool(m[SL_DP].any()):
                 odo = self.pelvis_odometry
-                if (odo is not None and not bool(m[SL_CONTACT].any()) and not bool(m[self._shank_idx].all())
-                        and bool(m[self._pelvis_idx].all())):
+                if odo is not None and not bool(m[self._shank_idx].all()) and bool(m[self._pelvis_idx].all()):
                     pelvis = win[0, -odo.context:, self._pelvis_idx] * self._std[self._pelvis_idx] \
                         + self._mean[self._pelvis_idx]
                     y[SL_DP] = odo.displacement(pelvis)

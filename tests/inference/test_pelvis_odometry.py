@@ -1,7 +1,6 @@
 """The pelvis odometry: its answer turns with the heading, its integrated path is scored
 right, it learns a real walk's pace from the pelvis alone, its file format, and that the
-poser walks the root with it only when the pelvis is measured and neither both shanks nor
-the insoles are."""
+poser walks the root with it only when the pelvis is measured and both shanks are not."""
 
 from __future__ import annotations
 
@@ -117,7 +116,8 @@ def test_file_round_trip(tmp_path):
     (("pelvis", "l_wrist", "r_wrist"), False, True),  # the paper's whole-body 3-site set
     (("pelvis", "l_shank"), False, True),  # one shank gives neither contacts nor strides
     (SIX, False, False),  # both shanks: contacts and strides from them
-    (("pelvis", "l_wrist", "r_wrist"), True, False),  # insoles measure the contacts
+    (("pelvis", "l_wrist", "r_wrist"), True, True),  # insoles' contacts on guessed legs walk worse
+    (SIX, True, False),
     (("head", "l_wrist", "r_wrist"), False, False),  # no pelvis sensor to walk from
 ])
 def test_poser_walks_from_the_pelvis_only_without_both_shanks(sites, insoles, expect_odometry):
