@@ -141,3 +141,13 @@ def test_poser_walks_from_the_pelvis_only_without_both_shanks(sites, insoles, ex
         assert np.allclose(np.diff(roots["odometry"][:, :2], axis=0), step[1:], atol=1e-4)
     else:
         assert np.array_equal(roots["odometry"], roots["none"])  # the odometry was not asked
+
+
+def test_missing_shipped_odometry_warns_and_keeps_the_models_root(monkeypatch, tmp_path):
+    from inference import poser
+
+    monkeypatch.setattr(poser, "PELVIS_ODOMETRY_WEIGHTS", tmp_path / "nope.pt")
+    with pytest.warns(UserWarning, match="nope.pt is missing: without both shanks"):
+        assert poser._resolve_odometry("default") is None
+    assert poser._resolve_odometry(None) is None
+    assert isinstance(poser._resolve_odometry(poser.WEIGHTS_DIR / "pelvis_odometry.pt"), PelvisOdometry)
