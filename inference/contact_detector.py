@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -31,7 +31,7 @@ from torch import Tensor, nn
 from .features import SL_ACC, SL_CONTACT, SL_ROT
 from .rotations import matrix_about_axis, matrix_to_rot6d, rot6d_to_matrix
 from .skeleton import SEGMENT_INDEX, SITE_INDEX
-from .small_nets import fit, load_net, save_net, stack_context
+from .small_nets import FitConfig, clip_tensors, fit, load_net, save_net, stack_context
 
 DETECTOR_FORMAT = "imucap-contact-detector-v1"
 CONTEXT = 9  # frames at 20 Hz (0.45 s, this one and the 8 before)
@@ -97,28 +97,15 @@ class ContactDetector(nn.Module):
 # --------------------------------------------------------------------------- training
 
 @dataclass
-class DetectorTraining:
-    steps: int = 6000
-    batch: int = 512
-    lr: float = 1e-3
-    weight_decay: float = 1e-4
-    input_noise: float = 0.05  # in normalised units: sensor noise and other bodies
-    mirror: float = 0.5  # share of batches' windows mirrored left <-> right
-    seed: int = 0
+class DetectorTraining(FitConfig):
     context: int = CONTEXT
     hidden: int = 128
-    log: list[dict] = field(default_factory=list)
 
 
 def clip_windows(clips: Sequence[np.ndarray], context: int = CONTEXT, mirror: bool = False) -> tuple[Tensor, Tensor]:
     """Inputs (n, context * 18) and contact labels (n, 4) of every frame of every clip."""
-    from .mirror import mirror_features
-
     X, Y = [], []
-    for x in clips:
-        x = torch.as_tensor(np.asarray(x, dtype=np.float32))
-        if mirror:
-            x = mirror_features(x)
+    for x in clip_tensors(clips, mirror):
         X.append(context_windows(x, context))
         Y.append(x[:, SL_CONTACT])
     return torch.cat(X), torch.cat(Y)

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -36,7 +36,7 @@ from torch import Tensor, nn
 from .features import SL_ACC, SL_DP, SL_ROT
 from .rotations import matrix_about_axis, matrix_to_rot6d, rot6d_to_matrix
 from .skeleton import SEGMENT_INDEX, SITE_INDEX
-from .small_nets import fit, load_net, save_net, stack_context
+from .small_nets import FitConfig, clip_tensors, fit, load_net, save_net, stack_context
 
 ODOMETRY_FORMAT = "imucap-pelvis-odometry-v1"
 # frames at 20 Hz (1 s: a stride of a slow walk). Chosen on clips held out of the training
@@ -64,10 +64,11 @@ def current_heading(pelvis: Tensor) -> Tensor:
     return matrix_about_axis(_UP.to(pelvis.dtype).expand(*yaw.shape, 3), -yaw)
 
 
-def heading_frame_windows(pelvis: Tensor) -> Tensor:
+def heading_frame_windows(pelvis: Tensor, Rz: Tensor | None = None) -> Tensor:
     """(..., C, 9) raw pelvis frames (oldest first, physical units) -> (..., C * 9) the
-    same turned into the frame facing the last frame's heading."""
-    Rz = current_heading(pelvis)[..., None, :, :]
+    same turned into the frame facing the last frame's heading (``Rz``: its
+    ``current_heading`` when the caller has it already)."""
+    Rz = (current_heading(pelvis) if Rz is None else Rz)[..., None, :, :]
     R = rot6d_to_matrix(pelvis[..., :6])
     rot = matrix_to_rot6d(Rz @ R)
     acc = (Rz @ pelvis[..., 6:9, None])[..., 0]
@@ -106,39 +107,27 @@ class PelvisOdometry(nn.Module):
         """(context, 9) raw pelvis features of the last frames (oldest first) -> (2,) this
         frame's root displacement in the world (metres)."""
         p = pelvis_frames.to(torch.float32)
-        d = self(heading_frame_windows(p)[None])[0] * self.out_std
         Rz = current_heading(p)  # world -> heading; its transpose turns back
+        d = self(heading_frame_windows(p, Rz)[None])[0] * self.out_std
         return Rz[:2, :2].T @ d
 
 
 # --------------------------------------------------------------------------- training
 
 @dataclass
-class OdometryTraining:
-    steps: int = 6000
-    batch: int = 512
-    lr: float = 1e-3
-    weight_decay: float = 1e-4
+class OdometryTraining(FitConfig):
     input_noise: float = 0.15  # in normalised units (0.3 did worse on the held-out training clips)
-    mirror: float = 0.5  # share of windows mirrored left <-> right
-    seed: int = 0
     context: int = CONTEXT
     hidden: int = 256
-    log: list[dict] = field(default_factory=list)
 
 
 def clip_targets(clips: Sequence[np.ndarray], context: int = CONTEXT, mirror: bool = False) -> tuple[Tensor, Tensor]:
     """Inputs (n, context * 9) and heading-frame root displacements (n, 2) of every frame of every clip."""
-    from .mirror import mirror_features
-
     X, Y = [], []
-    for x in clips:
-        x = torch.as_tensor(np.asarray(x, dtype=np.float32))
-        if mirror:
-            x = mirror_features(x)
+    for x in clip_tensors(clips, mirror):
         w = clip_contexts(x, context)
         Rz = current_heading(w)
-        X.append(heading_frame_windows(w))
+        X.append(heading_frame_windows(w, Rz))
         Y.append((Rz[:, :2, :2] @ x[:, SL_DP, None])[..., 0])
     return torch.cat(X), torch.cat(Y)
 
@@ -147,9 +136,10 @@ def clip_displacements(odo: PelvisOdometry, x: np.ndarray | Tensor) -> np.ndarra
     """(T, 190) one clip's features -> (T, 2) the odometry's world root displacement of
     every frame, each from that frame's context alone (as the poser gets it live)."""
     w = clip_contexts(x, odo.context)
+    Rz = current_heading(w)
     with torch.no_grad():
-        d = odo(heading_frame_windows(w)) * odo.out_std
-    return (current_heading(w)[:, :2, :2].transpose(1, 2) @ d[..., None])[..., 0].numpy()
+        d = odo(heading_frame_windows(w, Rz)) * odo.out_std
+    return (Rz[:, :2, :2].transpose(1, 2) @ d[..., None])[..., 0].numpy()
 
 
 def path_errors(odo: PelvisOdometry, clips: Sequence[np.ndarray], seconds: Sequence[int] = (2, 5, 10)) -> dict:

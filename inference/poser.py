@@ -437,9 +437,7 @@ class Poser:
             threshold = self.contact_threshold
             det = self.contact_detector
             if det is not None and not bool(m[SL_CONTACT].any()) and bool(m[self._shank_idx].all()):
-                shank = win[0, -det.context:, self._shank_idx] * self._std[self._shank_idx] \
-                    + self._mean[self._shank_idx]
-                prob, threshold = det.probabilities(shank), DETECTOR_THRESHOLD
+                prob, threshold = det.probabilities(self._recent(win, self._shank_idx, det.context)), DETECTOR_THRESHOLD
             contact = prob > threshold
             y[SL_CONTACT] = torch.where(m[SL_CONTACT], y[SL_CONTACT], contact.to(y.dtype))
 
@@ -448,9 +446,7 @@ class Poser:
             if self.root_correction and not bool(m[SL_DP].any()):
                 odo = self.pelvis_odometry
                 if odo is not None and not bool(m[self._shank_idx].all()) and bool(m[self._pelvis_idx].all()):
-                    pelvis = win[0, -odo.context:, self._pelvis_idx] * self._std[self._pelvis_idx] \
-                        + self._mean[self._pelvis_idx]
-                    y[SL_DP] = odo.displacement(pelvis)
+                    y[SL_DP] = odo.displacement(self._recent(win, self._pelvis_idx, odo.context))
                 else:
                     y[SL_DP] = correct_root_displacement(y[SL_DP], self._prev_cps, cps, contact)
             self._prev_cps = cps
@@ -476,6 +472,11 @@ class Poser:
             )
         self.index += 1
         return frame
+
+    def _recent(self, win: Tensor, idx: Tensor, n: int) -> Tensor:
+        """(n, len(idx)) the features ``idx`` of the window's last n frames in physical
+        units, oldest first: what a helper stage reads."""
+        return win[0, -n:, idx] * self._std[idx] + self._mean[idx]
 
     def _stride_scale(self, joints_rel: Tensor, f32: Tensor, m: Tensor, contact: Tensor,
                       dp: Tensor) -> float:

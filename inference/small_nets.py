@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
 
+import numpy as np
 import torch
 from torch import Tensor, nn
 
@@ -28,15 +29,31 @@ def stack_context(f: Tensor, context: int) -> Tensor:
     return pad[idx]
 
 
-class FitConfig(Protocol):
-    steps: int
-    batch: int
-    lr: float
-    weight_decay: float
-    input_noise: float
-    mirror: float
-    seed: int
-    log: list[dict]
+def clip_tensors(clips: Sequence[np.ndarray], mirror: bool = False) -> Iterator[Tensor]:
+    """Each clip's (T, 190) features as float32 tensors, or their mirror images: what
+    every helper's training windows are cut from."""
+    from .mirror import mirror_features
+
+    for x in clips:
+        x = torch.as_tensor(np.asarray(x, dtype=np.float32))
+        yield mirror_features(x) if mirror else x
+
+
+@dataclass
+class FitConfig:
+    """How ``fit`` trains a helper network; each network's own config subclasses this
+    with its defaults (and its ``context`` and ``hidden`` size)."""
+
+    steps: int = 6000
+    batch: int = 512
+    lr: float = 1e-3
+    weight_decay: float = 1e-4
+    input_noise: float = 0.05  # in normalised units: sensor noise and other bodies
+    mirror: float = 0.5  # share of windows mirrored left <-> right
+    seed: int = 0
+    context: int = 1
+    hidden: int = 128
+    log: list[dict] = field(default_factory=list)
 
 
 def fit(net: nn.Module, data: tuple[Tensor, Tensor], mirrored: tuple[Tensor, Tensor], cfg: FitConfig,
