@@ -229,7 +229,7 @@ class Pipeline:
         strides = 0 if est is None else len(est.strides)
         return {"enabled": est is not None, "shanks": all(s in self.active_sites for s in SHANK_SITES),
                 "scale": round(est.scale, 3) if strides else None, "strides": strides,
-                "odometry": getattr(self.poser, "pelvis_odometry", None) is not None and "pelvis" in self.active_sites}
+                "odometry": self.poser.pelvis_odometry is not None and "pelvis" in self.active_sites}
 
     # ------------------------------------------------------------------ the chain
     def _emit(self, method: str, *args: Any) -> None:
