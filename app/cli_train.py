@@ -192,7 +192,7 @@ def run_helper_stage(args: argparse.Namespace) -> int:
     final = cfg.log[-1]
     meta = {"steps": cfg.steps, "seed": cfg.seed, "train_frames": int(sum(len(c) for c in train_clips)),
             "data": [str(p) for p in args.data] if args.data else "inference.splits:train_set",
-            **{k: v for k, v in final.items() if k.startswith(kept)}}
+            **stage.meta, **{k: v for k, v in final.items() if k.startswith(kept)}}
     save(args.out / f"{name}.pt", stage, meta)
     print(json.dumps({name: str(args.out / f"{name}.pt"), **meta}))
     return 0

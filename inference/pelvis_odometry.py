@@ -14,7 +14,8 @@ side to side, and the size and rhythm of that bounce follow step length and cade
 a hand-fitted step model, which would also need the direction of travel, a small causal
 regressor learns the root's horizontal displacement of this frame from the last
 ``CONTEXT`` frames (1 s) of the pelvis's orientation and acceleration, on every frame of
-the training split and its mirror image.
+the training split and its mirror image, and of its forward walks played backwards (the
+split's few backward walks did not teach the direction: ``time_reversal``).
 
 Inputs per frame (9 numbers): the pelvis orientation (6D) and the pelvis-site
 acceleration, all turned about the vertical into the frame facing the *current*
@@ -37,6 +38,7 @@ from .features import SL_ACC, SL_DP, SL_ROT
 from .rotations import matrix_about_axis, matrix_to_rot6d, rot6d_to_matrix
 from .skeleton import SEGMENT_INDEX, SITE_INDEX
 from .small_nets import FitConfig, clip_tensors, fit, load_net, save_net, stack_context
+from .time_reversal import is_forward_walk, reverse_features
 
 ODOMETRY_FORMAT = "imucap-pelvis-odometry-v1"
 # frames at 20 Hz (1 s: a stride of a slow walk). Chosen on clips held out of the training
@@ -119,6 +121,19 @@ class OdometryTraining(FitConfig):
     input_noise: float = 0.15  # in normalised units (0.3 did worse on the held-out training clips)
     context: int = CONTEXT
     hidden: int = 256
+    reverse_walks: bool = True  # also train on the forward walks played backwards
+
+
+def heading_steps(x: np.ndarray | Tensor) -> np.ndarray:
+    """(T, 190) one clip's features -> (T, 2) its root steps in the frame facing the pelvis
+    (x forward, y left): the odometry's targets."""
+    return clip_targets([np.asarray(x)], 1)[1].numpy()
+
+
+def with_reversed_walks(clips: Sequence[np.ndarray]) -> tuple[list[np.ndarray], int]:
+    """The clips, then each forward walk among them played backwards; and how many were added."""
+    walks = [reverse_features(np.asarray(x)) for x in clips if is_forward_walk(x, heading_steps(x))]
+    return list(clips) + walks, len(walks)
 
 
 def clip_targets(clips: Sequence[np.ndarray], context: int = CONTEXT, mirror: bool = False) -> tuple[Tensor, Tensor]:
@@ -161,10 +176,14 @@ def path_errors(odo: PelvisOdometry, clips: Sequence[np.ndarray], seconds: Seque
 
 def train_odometry(train_clips: Sequence[np.ndarray], val_sets: dict[str, Sequence[np.ndarray]] | None = None,
                    cfg: OdometryTraining | None = None, progress=print) -> PelvisOdometry:
-    """Fit the odometry to every frame of ``train_clips`` (and their mirror images); logs
+    """Fit the odometry to every frame of ``train_clips`` (and their mirror images, and with
+    ``cfg.reverse_walks`` their forward walks played backwards: ``odo.meta``); logs
     the root errors of the path it integrates alone on each validation set every 1000
     steps into ``cfg.log``."""
     cfg = cfg or OdometryTraining()
+    reversed_walks = 0
+    if cfg.reverse_walks:
+        train_clips, reversed_walks = with_reversed_walks(train_clips)
     X, Y = clip_targets(train_clips, cfg.context)
     torch.manual_seed(cfg.seed)  # the initial weights
     odo = PelvisOdometry(cfg.context, cfg.hidden)
@@ -173,8 +192,10 @@ def train_odometry(train_clips: Sequence[np.ndarray], val_sets: dict[str, Sequen
     odo.out_std.copy_(Y.std(0).clamp(min=1e-3))
     scores = lambda: {f"{k}_{m}": e for k, v in (val_sets or {}).items()  # noqa: E731
                       for m, e in path_errors(odo, v).items()}
-    return fit(odo, (X, Y), clip_targets(train_clips, cfg.context, mirror=True), cfg,
-               lambda out, y: F.mse_loss(out, y / odo.out_std), scores, progress)
+    fit(odo, (X, Y), clip_targets(train_clips, cfg.context, mirror=True), cfg,
+        lambda out, y: F.mse_loss(out, y / odo.out_std), scores, progress)
+    odo.meta = {"reversed_walks": reversed_walks}
+    return odo
 
 
 # --------------------------------------------------------------------------- files
