@@ -73,6 +73,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="train the shank contact detector (writes OUT/contact_detector.pt)")
     p.add_argument("--pelvis-odometry", action="store_true",
                    help="train the pelvis odometry, the root's walk without shanks (writes OUT/pelvis_odometry.pt)")
+    p.add_argument("--reverse-walks", action="store_true",
+                   help="with --pelvis-odometry: also train on the forward walks played backwards (backward "
+                        "walks then go backward; forward walks came out less accurate, so not the shipped recipe)")
     p.add_argument("--data", nargs="+", type=Path, metavar="PATH",
                    help="with --contact-detector / --pelvis-odometry: motion files/folders to train on "
                         "(default: the issue's split)")
@@ -93,6 +96,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--out is required")
     if args.contact_detector and args.pelvis_odometry:
         raise ValueError("--contact-detector and --pelvis-odometry train different files: pick one")
+    if args.reverse_walks and not args.pelvis_odometry:
+        raise ValueError("--reverse-walks is an option of --pelvis-odometry")
     if args.contact_detector or args.pelvis_odometry:
         return run_helper_stage(args)
     if args.export is not None:
@@ -180,6 +185,8 @@ def run_helper_stage(args: argparse.Namespace) -> int:
         from inference.pelvis_odometry import train_odometry as fit
         name, kept = "pelvis_odometry", tuple(f"{k}_" for k in val)
     cfg = Config(steps=args.steps or Config.steps, seed=args.seed or 0)
+    if args.reverse_walks:
+        cfg.reverse_walks = True
     args.out.mkdir(parents=True, exist_ok=True)
     with open(args.out / "train.jsonl", "a") as log:
         def report(entry: dict) -> None:

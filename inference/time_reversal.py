@@ -1,4 +1,6 @@
-"""Motion features played backwards, to teach the pelvis odometry walking backwards.
+"""Motion features played backwards, to teach the pelvis odometry walking backwards
+(``OdometryTraining.reverse_walks``, ``imucap train --pelvis-odometry --reverse-walks``;
+not the shipped recipe: see the end).
 
 Why: a pelvis sensor tells a forward walk from a backward one only by the order of events
 within a stride (accelerations are the same played either way), and the training data has
@@ -15,7 +17,13 @@ frame; the synthesized accelerations (a second difference, then a centred moving
 the same numbers for the reversed positions; only the root step changes sign and moves by one
 frame. Runs, hops and everything else stay as they are: played backwards a flight phase
 takes off where it landed, and reversing every clip scored worse on clips held out of the
-training split than reversing the walks alone (NOTES.md "Session 18").
+training split than reversing the walks alone.
+
+What it buys and costs (NOTES.md "Session 18"): a held-out style's backward walk goes
+backward (proud: 5.1 of 6.5 m instead of 0.3), and clips held out of the training split
+score RE5 0.14 instead of 0.25 m; but forward walks come out ~10 % less accurate (the sad
+walks' RE10 0.75 -> 0.89 m over four seeds) and on the real x-IMU3 log in-place knee raises
+drift backwards. Most walking is forward, so the shipped odometry is trained without it.
 """
 
 from __future__ import annotations

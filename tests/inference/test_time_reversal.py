@@ -82,7 +82,7 @@ def test_forward_walks_played_backwards_teach_a_real_backward_walk(shared_data):
 
     cfgs = {rev: OdometryTraining(steps=800, batch=256, reverse_walks=rev) for rev in (False, True)}
     odos = {rev: train_odometry(train, None, cfg, progress=None) for rev, cfg in cfgs.items()}
-    assert odos[True].meta["reversed_walks"] >= 12 and odos[False].meta["reversed_walks"] == 0
+    assert odos[True].meta["reversed_walks"] >= 12 and "reversed_walks" not in odos[False].meta
     assert direction(odos[False], back) < 0  # the data has no backward walk: it goes forward
     assert direction(odos[True], back) > 0.9
     assert direction(odos[True], forward) > 0.9
