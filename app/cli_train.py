@@ -17,8 +17,9 @@ inference model file (``--fp16`` to halve it, ``--default-steps`` for the live p
 on the issue's training split (or ``--data PATH...``), reports its accuracy on the held-out
 sets (or ``--val PATH...``) and writes OUT/contact_detector.pt; copy that to
 inference/weights/ to ship it. ``--pelvis-odometry`` does the same for the pelvis odometry
-(inference/pelvis_odometry.py; OUT/pelvis_odometry.pt; its held-out figures are the root
-errors RE2/5/10 of the path it integrates alone from each clip's measured pelvis).
+(inference/pelvis_odometry.py; OUT/pelvis_odometry.pt, its forward and backward nets and
+their gate; its held-out figures are the root errors RE2/5/10 of the path it integrates
+alone from each clip's measured pelvis).
 """
 
 from __future__ import annotations
@@ -73,9 +74,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="train the shank contact detector (writes OUT/contact_detector.pt)")
     p.add_argument("--pelvis-odometry", action="store_true",
                    help="train the pelvis odometry, the root's walk without shanks (writes OUT/pelvis_odometry.pt)")
-    p.add_argument("--reverse-walks", action="store_true",
-                   help="with --pelvis-odometry: also train on the forward walks played backwards (backward "
-                        "walks then go backward; forward walks came out less accurate, so not the shipped recipe)")
     p.add_argument("--data", nargs="+", type=Path, metavar="PATH",
                    help="with --contact-detector / --pelvis-odometry: motion files/folders to train on "
                         "(default: the issue's split)")
@@ -96,8 +94,6 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--out is required")
     if args.contact_detector and args.pelvis_odometry:
         raise ValueError("--contact-detector and --pelvis-odometry train different files: pick one")
-    if args.reverse_walks and not args.pelvis_odometry:
-        raise ValueError("--reverse-walks is an option of --pelvis-odometry")
     if args.contact_detector or args.pelvis_odometry:
         return run_helper_stage(args)
     if args.export is not None:
@@ -182,11 +178,9 @@ def run_helper_stage(args: argparse.Namespace) -> int:
     else:
         from inference.pelvis_odometry import OdometryTraining as Config
         from inference.pelvis_odometry import save_odometry as save
-        from inference.pelvis_odometry import train_odometry as fit
+        from inference.pelvis_odometry import train_two_way as fit
         name, kept = "pelvis_odometry", tuple(f"{k}_" for k in val)
     cfg = Config(steps=args.steps or Config.steps, seed=args.seed or 0)
-    if args.reverse_walks:
-        cfg.reverse_walks = True
     args.out.mkdir(parents=True, exist_ok=True)
     with open(args.out / "train.jsonl", "a") as log:
         def report(entry: dict) -> None:

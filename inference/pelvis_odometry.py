@@ -14,8 +14,9 @@ side to side, and the size and rhythm of that bounce follow step length and cade
 a hand-fitted step model, which would also need the direction of travel, a small causal
 regressor learns the root's horizontal displacement of this frame from the last
 ``CONTEXT`` frames (1 s) of the pelvis's orientation and acceleration, on every frame of
-the training split and its mirror image (and, as an option not shipped, of its forward
-walks played backwards: ``time_reversal``).
+the training split and its mirror image. A second net, trained also on the split's forward
+walks played backwards (``time_reversal``), takes over while it says the subject walks
+backwards (``TwoWayOdometry``, the shipped file).
 
 Inputs per frame (9 numbers): the pelvis orientation (6D) and the pelvis-site
 acceleration, all turned about the vertical into the frame facing the *current*
@@ -27,24 +28,41 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from .features import SL_ACC, SL_DP, SL_ROT
+from .features import FPS_MODEL, SL_ACC, SL_DP, SL_ROT
 from .rotations import matrix_about_axis, matrix_to_rot6d, rot6d_to_matrix
 from .skeleton import SEGMENT_INDEX, SITE_INDEX
-from .small_nets import FitConfig, clip_tensors, fit, load_net, save_net, stack_context
+from .small_nets import (
+    FitConfig,
+    clip_tensors,
+    fit,
+    net_entry,
+    net_from_entry,
+    read_file,
+    save_file,
+    save_net,
+    stack_context,
+)
 from .time_reversal import is_forward_walk, reverse_features
 
 ODOMETRY_FORMAT = "imucap-pelvis-odometry-v1"
+TWO_WAY_FORMAT = "imucap-pelvis-odometry-two-way-v1"
 # frames at 20 Hz (1 s: a stride of a slow walk). Chosen on clips held out of the training
 # split (10 % by clip): RE2 / RE5 0.114 / 0.294 m at 10 frames, 0.108 / 0.271 at 15,
 # 0.099 / 0.245 at 20, 0.107 / 0.284 at 30, 0.100 / 0.268 at 40 (NOTES.md "Session 17")
 CONTEXT = 20
+# The two-way odometry's gate (``TwoWayOdometry``): the backward net's mean forward speed
+# over the last second. Picked on the clips held out of the training split: RE2 / RE5 at
+# 0.3 / 0.5 / 0.7 m/s 0.083 / 0.144, 0.089 / 0.187, 0.098 / 0.242 (the forward net alone
+# 0.099 / 0.245; NOTES.md "Session 18")
+GATE_M_S = 0.3
+GATE_FRAMES = 20
 
 
 def pelvis_feature_index() -> np.ndarray:
@@ -114,6 +132,61 @@ class PelvisOdometry(nn.Module):
         return Rz[:2, :2].T @ d
 
 
+
+def _heading_answers(net: PelvisOdometry, windows: Tensor) -> tuple[Tensor, Tensor]:
+    """(n, context, 9) raw pelvis windows -> each one's answer in the frame facing its last
+    frame's heading (n, 2) (metres), and that turn (n, 3, 3)."""
+    Rz = current_heading(windows)
+    return net(heading_frame_windows(windows, Rz)) * net.out_std, Rz
+
+
+def _to_world(d: Tensor, Rz: Tensor) -> Tensor:
+    return (Rz[..., :2, :2].transpose(-1, -2) @ d[..., None])[..., 0]
+
+
+class TwoWayOdometry(nn.Module):
+    """The odometry as shipped: a net trained on the split as it is (``forward_net``), and a
+    second trained also on its forward walks played backwards (``backward_net``,
+    ``time_reversal``), whose answer is taken only while it says the subject walks backwards:
+    its mean forward speed over the last ``gate_frames`` frames below ``-gate_m_s``.
+
+    Why two: the second alone walks a backward walk backwards but every forward walk ~10 %
+    worse, and on the real x-IMU3 log it took knee raises in place for backward steps; the
+    first alone walked a held-out style's backward walk in place. Gated, the backward
+    walks go backward and forward walks are the first net's (NOTES.md "Session 18")."""
+
+    def __init__(self, forward_net: PelvisOdometry, backward_net: PelvisOdometry,
+                 gate_m_s: float = GATE_M_S, gate_frames: int = GATE_FRAMES) -> None:
+        super().__init__()
+        self.forward_net, self.backward_net = forward_net, backward_net
+        self.gate_m_s, self.gate_frames = float(gate_m_s), int(gate_frames)
+        self.meta: dict = {}
+
+    @property
+    def context(self) -> int:
+        """Frames each answer reads: the backward net's windows for the whole gate."""
+        return max(self.forward_net.context, self.backward_net.context + self.gate_frames - 1)
+
+    def walking_backwards(self, forward_steps: Tensor) -> Tensor:
+        """(..., gate_frames) the backward net's forward steps (m per frame) -> (...) the gate."""
+        return forward_steps.mean(-1) * FPS_MODEL < -self.gate_m_s
+
+    @torch.no_grad()
+    def displacement(self, pelvis_frames: Tensor) -> Tensor:
+        """(context, 9) raw pelvis features of the last frames (oldest first) -> (2,) this
+        frame's root displacement in the world (metres)."""
+        p = pelvis_frames.to(torch.float32)
+        cb = self.backward_net.context
+        windows = p.unfold(0, cb, 1).transpose(1, 2)[-self.gate_frames:]  # (gate, cb, 9)
+        d, Rz = _heading_answers(self.backward_net, windows)
+        if bool(self.walking_backwards(d[:, 0])):
+            return _to_world(d[-1], Rz[-1])
+        return self.forward_net.displacement(p[-self.forward_net.context:])
+
+
+Odometry = PelvisOdometry | TwoWayOdometry
+
+
 # --------------------------------------------------------------------------- training
 
 @dataclass
@@ -121,8 +194,8 @@ class OdometryTraining(FitConfig):
     input_noise: float = 0.15  # in normalised units (0.3 did worse on the held-out training clips)
     context: int = CONTEXT
     hidden: int = 256
-    # also train on the forward walks played backwards: backward walks then go backward, but
-    # forward walks and the real x-IMU3 log came out worse (NOTES.md "Session 18"), so off
+    # also train on the forward walks played backwards (the backward net of TwoWayOdometry):
+    # backward walks then go backward, but forward walks come out worse on their own
     reverse_walks: bool = False
 
 
@@ -149,20 +222,33 @@ def clip_targets(clips: Sequence[np.ndarray], context: int = CONTEXT, mirror: bo
     return torch.cat(X), torch.cat(Y)
 
 
-def clip_displacements(odo: PelvisOdometry, x: np.ndarray | Tensor) -> np.ndarray:
+def _clip_answers(net: PelvisOdometry, x: Tensor, pad: int = 0) -> tuple[Tensor, Tensor]:
+    """Every frame's heading-frame answer and turn, as ``_heading_answers``, for a clip
+    with ``pad`` copies of its first frame before it."""
+    x = torch.cat([x[:1].expand(pad, -1), x]) if pad else x
+    return _heading_answers(net, clip_contexts(x, net.context))
+
+
+def clip_displacements(odo: Odometry, x: np.ndarray | Tensor) -> np.ndarray:
     """(T, 190) one clip's features -> (T, 2) the odometry's world root displacement of
-    every frame, each from that frame's context alone (as the poser gets it live)."""
-    w = clip_contexts(x, odo.context)
-    Rz = current_heading(w)
+    every frame, each from that frame's context alone (as the poser gets it live, the
+    clip's first frame standing in for the history before it)."""
+    x = torch.as_tensor(np.asarray(x, dtype=np.float32))
     with torch.no_grad():
-        d = odo(heading_frame_windows(w, Rz)) * odo.out_std
-    return (Rz[:, :2, :2].transpose(1, 2) @ d[..., None])[..., 0].numpy()
+        if isinstance(odo, PelvisOdometry):
+            return _to_world(*_clip_answers(odo, x)).numpy()
+        g = odo.gate_frames
+        d, Rz = _clip_answers(odo.forward_net, x)
+        db, Rzb = _clip_answers(odo.backward_net, x, pad=g - 1)
+        back = odo.walking_backwards(db[:, 0].unfold(0, g, 1))
+        d = torch.where(back[:, None], db[g - 1:], d)
+        Rz = torch.where(back[:, None, None], Rzb[g - 1:], Rz)
+        return _to_world(d, Rz).numpy()
 
 
-def path_errors(odo: PelvisOdometry, clips: Sequence[np.ndarray], seconds: Sequence[int] = (2, 5, 10)) -> dict:
+def path_errors(odo: Odometry, clips: Sequence[np.ndarray], seconds: Sequence[int] = (2, 5, 10)) -> dict:
     """RE over ``seconds`` (m, pooled over start points as ``metrics.root_error``) of the
     path the odometry integrates alone from each clip's pelvis; None where no clip is long enough."""
-    from .features import FPS_MODEL
     from .metrics import root_error
 
     errs: dict[int, list[np.ndarray]] = {k: [] for k in seconds}
@@ -201,11 +287,45 @@ def train_odometry(train_clips: Sequence[np.ndarray], val_sets: dict[str, Sequen
     return odo
 
 
+def train_two_way(train_clips: Sequence[np.ndarray], val_sets: dict[str, Sequence[np.ndarray]] | None = None,
+                  cfg: OdometryTraining | None = None, progress=print) -> TwoWayOdometry:
+    """The shipped recipe: the forward net on the clips as they are, then the backward net
+    with their forward walks also played backwards (``cfg``'s other fields for both), gated.
+    The pair's root errors on each validation set are the last entry of ``cfg.log``."""
+    cfg = cfg or OdometryTraining()
+    nets = []
+    for stage, reverse in (("forward", False), ("backward", True)):
+        part = replace(cfg, reverse_walks=reverse, log=[])
+        report = (lambda e, stage=stage: progress({"stage": stage, **e})) if progress else None
+        nets.append(train_odometry(train_clips, val_sets, part, report))
+    odo = TwoWayOdometry(*nets)
+    odo.meta = dict(nets[1].meta)
+    scores = {f"{k}_{m}": e for k, v in (val_sets or {}).items() for m, e in path_errors(odo, v).items()}
+    entry = {"step": cfg.steps, "stage": "two-way", **scores}
+    cfg.log.append(entry)
+    if progress:
+        progress(entry)
+    return odo
+
+
 # --------------------------------------------------------------------------- files
 
-def save_odometry(path: str | os.PathLike, odo: PelvisOdometry, meta: dict | None = None) -> None:
-    save_net(path, ODOMETRY_FORMAT, odo, meta)
+def save_odometry(path: str | os.PathLike, odo: Odometry, meta: dict | None = None) -> None:
+    if isinstance(odo, PelvisOdometry):
+        return save_net(path, ODOMETRY_FORMAT, odo, meta)
+    save_file(path, {"format": TWO_WAY_FORMAT, "forward": net_entry(odo.forward_net),
+                     "backward": net_entry(odo.backward_net), "gate_m_s": odo.gate_m_s,
+                     "gate_frames": odo.gate_frames, "meta": meta or {}})
 
 
-def load_odometry(path: str | os.PathLike) -> PelvisOdometry:
-    return load_net(path, ODOMETRY_FORMAT, PelvisOdometry, "pelvis odometry")
+def load_odometry(path: str | os.PathLike) -> Odometry:
+    """Either kind of odometry file (a single net, or the shipped two-way pair)."""
+    obj = read_file(path, (ODOMETRY_FORMAT, TWO_WAY_FORMAT), "pelvis odometry")
+    if obj["format"] == ODOMETRY_FORMAT:
+        odo = net_from_entry(obj, PelvisOdometry)
+    else:
+        odo = TwoWayOdometry(net_from_entry(obj["forward"], PelvisOdometry),
+                             net_from_entry(obj["backward"], PelvisOdometry),
+                             obj["gate_m_s"], obj["gate_frames"]).eval()
+    odo.meta = obj.get("meta", {})
+    return odo

@@ -18,8 +18,9 @@ last 60 frames) and whose last frame holds the new measurement. Each step:
    ``stride_scale=False`` to skip; NOTES.md "Session 15", "Session 16"): the reconstructed
    stride is the unmeasured thigh's guess; without both shanks, the root displacement
    comes from the pelvis sensor's last second instead
-   (``pelvis_odometry.PelvisOdometry``; ``pelvis_odometry=None`` to skip; NOTES.md
-   "Session 17"): there the guessed legs cancel the walk, even planted on the insoles' contacts;
+   (``pelvis_odometry.TwoWayOdometry``; ``pelvis_odometry=None`` to skip; NOTES.md
+   "Session 17", "Session 18"): there the guessed legs cancel the walk, even planted on the
+   insoles' contacts;
 5. integrate the root path and run FK for the outputs; the output root and the
    unmeasured orientations go through light speed-adaptive low-passes (``smoothing``,
    ``smoothing=False`` to skip): per-frame inference makes them wobble. Output only: the
@@ -64,7 +65,7 @@ from .diffusion import Schedule, inpaint, paper_steps, parse_steps
 from .features import FPS_MODEL, N_FEATURES, SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
 from .joint_constraints import constrain_knees
 from .mirror import MirrorAveraged
-from .pelvis_odometry import PELVIS_INDEX, PelvisOdometry, load_odometry
+from .pelvis_odometry import PELVIS_INDEX, Odometry, PelvisOdometry, TwoWayOdometry, load_odometry
 from .regressor import regress
 from .rotations import matrix_to_rot6d, rot6d_to_matrix
 from .skeleton import N_CONTACTS, N_SEGMENTS, SEGMENT_INDEX, SITE_INDEX
@@ -126,15 +127,15 @@ def _resolve_detector(spec: ContactDetector | str | os.PathLike | None) -> Conta
                           "`imucap train --contact-detector --out DIR`)")
 
 
-def _resolve_odometry(spec: PelvisOdometry | str | os.PathLike | None) -> PelvisOdometry | None:
+def _resolve_odometry(spec: Odometry | str | os.PathLike | None) -> Odometry | None:
     """"default" = the shipped pelvis odometry if it is installed (else the model's own
     root displacement, with a warning), None = none, a path = that file."""
-    return _resolve_stage(spec, PelvisOdometry, PELVIS_ODOMETRY_WEIGHTS, load_odometry,
+    return _resolve_stage(spec, (PelvisOdometry, TwoWayOdometry), PELVIS_ODOMETRY_WEIGHTS, load_odometry,
                           "without both shanks the root follows the model's own displacement (train one with "
                           "`imucap train --pelvis-odometry --out DIR`)")
 
 
-def _resolve_stage(spec, cls: type, path: Path, loader, missing: str):
+def _resolve_stage(spec, cls: type | tuple[type, ...], path: Path, loader, missing: str):
     """A helper stage of the poser (contact detector, pelvis odometry) from its spec."""
     if spec is None or isinstance(spec, cls):
         return spec
@@ -269,7 +270,7 @@ class Poser:
         contact_detector: ContactDetector | str | os.PathLike | None = "default",
         mirror: bool | None = None,
         stride_scale: bool = True,
-        pelvis_odometry: PelvisOdometry | str | os.PathLike | None = "default",
+        pelvis_odometry: Odometry | str | os.PathLike | None = "default",
     ) -> None:
         self.model = model
         self.kind = "floor" if model is None else model.kind

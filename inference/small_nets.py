@@ -91,21 +91,40 @@ def fit(net: nn.Module, data: tuple[Tensor, Tensor], mirrored: tuple[Tensor, Ten
     return net.eval()
 
 
-def save_net(path: str | os.PathLike, fmt: str, net: nn.Module, meta: dict | None = None) -> None:
-    """One file: the format tag, the constructor's context and hidden size, weights, meta."""
+def net_entry(net: nn.Module) -> dict:
+    """What rebuilds a helper network: its constructor's context and hidden size, and weights."""
+    return {"context": net.context, "hidden": net.hidden, "state_dict": net.state_dict()}
+
+
+def net_from_entry(entry: dict, cls: type) -> nn.Module:
+    net = cls(int(entry["context"]), int(entry["hidden"]))
+    net.load_state_dict(entry["state_dict"])
+    return net.eval()
+
+
+def save_file(path: str | os.PathLike, obj: dict) -> None:
     from .denoiser import atomic_torch_save
 
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    atomic_torch_save({"format": fmt, "context": net.context, "hidden": net.hidden,
-                       "state_dict": net.state_dict(), "meta": meta or {}}, path)
+    atomic_torch_save(obj, path)
+
+
+def read_file(path: str | os.PathLike, formats: tuple[str, ...], what: str) -> dict:
+    """A helper-stage file's contents; a clear error for any other file."""
+    obj = torch.load(path, map_location="cpu", weights_only=False)
+    if not isinstance(obj, dict) or obj.get("format") not in formats:
+        raise ValueError(f"{path} is not an imucap {what} file")
+    return obj
+
+
+def save_net(path: str | os.PathLike, fmt: str, net: nn.Module, meta: dict | None = None) -> None:
+    """One file: the format tag, the constructor's context and hidden size, weights, meta."""
+    save_file(path, {"format": fmt, **net_entry(net), "meta": meta or {}})
 
 
 def load_net(path: str | os.PathLike, fmt: str, cls: type, what: str):
     """The network ``save_net`` wrote, in eval mode; a clear error for any other file."""
-    obj = torch.load(path, map_location="cpu", weights_only=False)
-    if not isinstance(obj, dict) or obj.get("format") != fmt:
-        raise ValueError(f"{path} is not an imucap {what} file")
-    net = cls(int(obj["context"]), int(obj["hidden"]))
-    net.load_state_dict(obj["state_dict"])
+    obj = read_file(path, (fmt,), what)
+    net = net_from_entry(obj, cls)
     net.meta = obj.get("meta", {})
-    return net.eval()
+    return net

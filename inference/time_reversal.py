@@ -1,6 +1,5 @@
 """Motion features played backwards, to teach the pelvis odometry walking backwards
-(``OdometryTraining.reverse_walks``, ``imucap train --pelvis-odometry --reverse-walks``;
-not the shipped recipe: see the end).
+(``OdometryTraining.reverse_walks``: the backward net of ``pelvis_odometry.TwoWayOdometry``).
 
 Why: a pelvis sensor tells a forward walk from a backward one only by the order of events
 within a stride (accelerations are the same played either way), and the training data has
@@ -23,7 +22,8 @@ What it buys and costs (NOTES.md "Session 18"): a held-out style's backward walk
 backward (proud: 5.1 of 6.5 m instead of 0.3), and clips held out of the training split
 score RE5 0.14 instead of 0.25 m; but forward walks come out ~10 % less accurate (the sad
 walks' RE10 0.75 -> 0.89 m over four seeds) and on the real x-IMU3 log in-place knee raises
-drift backwards. Most walking is forward, so the shipped odometry is trained without it.
+drift backwards. So a net trained this way answers only while it says the subject walks
+backwards, and a net trained without it answers otherwise (``TwoWayOdometry``).
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ import pytest
 
 from app.cli import main
 from inference.contact_detector import load_detector
-from inference.pelvis_odometry import load_odometry
+from inference.pelvis_odometry import TwoWayOdometry, load_odometry
 
 pytestmark = pytest.mark.data
 
@@ -30,31 +30,16 @@ def test_train_helper_stage_cli(shared_data, tmp_path, capsys, flag, name, load,
     assert stage.meta[scored] and out[scored] == stage.meta[scored]
     if name == "contact_detector":
         assert len(stage.meta["acc_val"]) == 4
-    else:
-        assert stage.meta["val_re2_m"] > 0
+    else:  # the shipped pair: both walks are forward walks, so both are also played backwards
+        assert stage.meta["val_re2_m"] > 0 and stage.meta["reversed_walks"] == 2
+        assert isinstance(stage, TwoWayOdometry)
     log = [json.loads(line) for line in (tmp_path / "run" / "train.jsonl").read_text().splitlines()]
     assert log[-1]["step"] == 30
+    if name == "pelvis_odometry":
+        assert [e.get("stage") for e in log] == ["forward", "backward", "two-way"]
 
 
 def test_one_helper_stage_at_a_time(tmp_path, capsys):
     assert main(["train", "--pelvis-odometry", "--contact-detector", "--out", str(tmp_path / "x")]) != 0
     assert "pick one" in capsys.readouterr().err
 
-
-@pytest.mark.parametrize("reverse", [False, True])
-def test_odometry_cli_plays_the_forward_walks_backwards_on_request(shared_data, tmp_path, capsys, reverse):
-    """Two forward walks: with ``--reverse-walks`` both are also trained played backwards,
-    and the file says so; without it the file's meta is as before."""
-    d1 = shared_data / "bandai" / "d1"
-    rc = main(["train", "--pelvis-odometry", "--out", str(tmp_path / "run"), "--steps", "20", "--no-progress",
-               *(["--reverse-walks"] if reverse else []),
-               "--data", str(d1 / "dataset-1_walk_normal_001.bvh.gz"), str(d1 / "dataset-1_walk_happy_001.bvh.gz"),
-               "--val", str(d1 / "dataset-1_walk_sad_001.bvh.gz")])
-    assert rc == 0
-    meta = load_odometry(tmp_path / "run" / "pelvis_odometry.pt").meta
-    assert meta.get("reversed_walks") == (2 if reverse else None)
-
-
-def test_reverse_walks_belongs_to_the_odometry(tmp_path, capsys):
-    assert main(["train", "--contact-detector", "--reverse-walks", "--out", str(tmp_path / "x")]) != 0
-    assert "--reverse-walks is an option of --pelvis-odometry" in capsys.readouterr().err

@@ -18,7 +18,11 @@ from inference.pelvis_odometry import (
     PELVIS_INDEX,
     OdometryTraining,
     PelvisOdometry,
+    TwoWayOdometry,
     clip_contexts,
+    clip_displacements,
+    current_heading,
+    heading_frame_windows,
     load_odometry,
     path_errors,
     save_odometry,
@@ -100,6 +104,51 @@ def test_learns_the_pace_of_a_real_walk_from_the_pelvis(shared_data):
     assert cfg.log[-1]["held_re2_m"] == err["re2_m"]
 
 
+def _two_way(seed=0, context=5, gate_frames=4) -> TwoWayOdometry:
+    torch.manual_seed(seed)
+    nets = [PelvisOdometry(context=context, hidden=16) for _ in range(2)]
+    for n in nets:
+        torch.nn.init.normal_(n.net[0].weight, std=0.5)
+        n.out_std.fill_(0.05)
+    return TwoWayOdometry(*nets, gate_frames=gate_frames).eval()
+
+
+def test_two_way_live_answers_are_the_offline_path():
+    """Frame by frame from the poser's recent frames (the first frame standing in for the
+    history) the pair answers what ``clip_displacements`` gives for the clip, on frames
+    where the gate opens and where it does not."""
+    odo = _two_way()
+    x = _walk(5, turn_deg_per_s=30.0)
+    pelvis = torch.as_tensor(x[:, PELVIS_INDEX])
+    g = odo.gate_frames
+    db = clip_displacements(odo.backward_net, x)  # world frame; the gate reads the heading frame
+    speeds = []
+    for t in range(len(x)):
+        past = torch.cat([pelvis[:1].expand(odo.context, -1), pelvis[: t + 1]])[-odo.context:]
+        w = past.unfold(0, odo.backward_net.context, 1).transpose(1, 2)[-g:]
+        Rz = current_heading(w)
+        net = odo.backward_net
+        with torch.no_grad():
+            speeds.append(float((net(heading_frame_windows(w, Rz)) * net.out_std)[:, 0].mean()))
+    mid = np.sort(speeds)[len(speeds) // 2 - 1: len(speeds) // 2 + 1].mean()  # between two frames' values
+    odo.gate_m_s = -float(mid) * FPS_MODEL  # the gate opens on about half the frames
+    live = np.stack([odo.displacement(torch.cat([pelvis[:1].expand(odo.context, -1), pelvis[: t + 1]])[-odo.context:])
+                     .numpy() for t in range(len(x))])
+    offline = clip_displacements(odo, x)
+    assert np.allclose(live, offline, atol=1e-5)
+    opened = np.array(speeds) * FPS_MODEL < -odo.gate_m_s
+    assert 0.2 < opened.mean() < 0.8
+    assert np.allclose(offline[opened], db[opened], atol=1e-5)
+    assert np.allclose(offline[~opened], clip_displacements(odo.forward_net, x)[~opened], atol=1e-5)
+
+
+@pytest.mark.parametrize("backward_step, goes_back", [(-0.05, True), (0.05, False)])
+def test_two_way_takes_the_backward_net_only_when_it_walks_backwards(backward_step, goes_back):
+    odo = TwoWayOdometry(_steady(0.04), _steady(backward_step))
+    path = np.cumsum(clip_displacements(odo, _walk(2)), axis=0)  # the synthetic walk faces +x
+    assert (path[-1, 0] < -1.0) if goes_back else path[-1, 0] == pytest.approx(0.04 * len(path), rel=1e-4)
+
+
 def test_file_round_trip(tmp_path):
     odo = PelvisOdometry(context=7, hidden=16)
     torch.nn.init.normal_(odo.net[0].weight)
@@ -108,6 +157,13 @@ def test_file_round_trip(tmp_path):
     back = load_odometry(tmp_path / "o.pt")
     frames = torch.as_tensor(_walk(4)[:7, PELVIS_INDEX])
     assert torch.equal(back.displacement(frames), odo.displacement(frames)) and back.meta == {"note": "x"}
+    pair = _two_way(seed=3)
+    save_odometry(tmp_path / "pair.pt", pair, {"reversed_walks": 7})
+    back2 = load_odometry(tmp_path / "pair.pt")
+    assert isinstance(back2, TwoWayOdometry) and back2.meta == {"reversed_walks": 7}
+    assert (back2.gate_m_s, back2.gate_frames, back2.context) == (pair.gate_m_s, pair.gate_frames, 8)
+    frames = torch.as_tensor(_walk(4)[:8, PELVIS_INDEX])
+    assert torch.equal(back2.displacement(frames), pair.displacement(frames))
     torch.save({"format": "something else"}, tmp_path / "bad.pt")
     with pytest.raises(ValueError, match="not an imucap pelvis odometry"):
         load_odometry(tmp_path / "bad.pt")
