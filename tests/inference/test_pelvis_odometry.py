@@ -207,4 +207,4 @@ def test_missing_shipped_odometry_warns_and_keeps_the_models_root(monkeypatch, t
     with pytest.warns(UserWarning, match="nope.pt is missing: without both shanks"):
         assert poser._resolve_odometry("default") is None
     assert poser._resolve_odometry(None) is None
-    assert isinstance(poser._resolve_odometry(poser.WEIGHTS_DIR / "pelvis_odometry.pt"), PelvisOdometry)
+    assert isinstance(poser._resolve_odometry(poser.WEIGHTS_DIR / "pelvis_odometry.pt"), TwoWayOdometry)  # shipped
