@@ -36,6 +36,24 @@ BANDAI = JointMap(
     roll_quarters={"spine1": 1, "l_collar": 3, "r_collar": 3, "r_thigh": 2},
 )
 
+# CMU's 31-joint BVH as cgspeed converted the CMU database from its Acclaim files: one BVH
+# joint per ASF bone, so ``{Side}Hand`` is the Acclaim ``wrist`` bone (pronation, a twist
+# about the forearm), ``{Side}FingerBase`` the ``hand`` and ``{Side}HandIndex1`` the
+# ``fingers``. As for ASF below, our forearm takes the wrist bone's orientation. Told
+# apart from the layout ``imucap export`` writes (``CMU_BVH``: the same names with our
+# meaning) by the finger joints only the conversion has.
+CMU_CGSPEED = JointMap(
+    name="cmu31-cgspeed",
+    segments=_sides({
+        "pelvis": "Hips", "spine1": "LowerBack", "spine2": "Spine", "spine3": "Spine1", "neck": "Neck",
+        "head": "Head", "collar": "{Side}Shoulder", "upperarm": "{Side}Arm", "forearm": "{Side}ForeArm",
+        "hand": "{Side}FingerBase", "fingers": "{Side}HandIndex1", "thigh": "{Side}UpLeg", "shank": "{Side}Leg",
+        "foot": "{Side}Foot", "toes": "{Side}ToeBase",
+    }),
+    orient=_sides({"forearm": "{Side}Hand"}),
+)
+
+# The CMU names with our segments' meaning, as ``imucap export`` writes them (app/export_bvh.py)
 CMU_BVH = JointMap(
     name="cmu31",
     segments=_sides({
@@ -75,7 +93,7 @@ ASF = JointMap(
     orient=_sides({"forearm": "{s}wrist"}),
 )
 
-BVH_MAPS = (BANDAI, CMU_BVH, MIXAMO)
+BVH_MAPS = (BANDAI, CMU_CGSPEED, CMU_BVH, MIXAMO)
 
 
 def _strip_prefix(name: str) -> str:
@@ -91,7 +109,9 @@ def match_joint_map(names: list[str], path: str, maps: tuple[JointMap, ...] = BV
         if not missing:
             if len(plain) != len(names) or any(plain[k] != k for k in jm.required()):
                 segs = {s: plain[n] for s, n in jm.segments.items()}
-                return JointMap(name=jm.name, segments=segs, split=jm.split, roll_quarters=jm.roll_quarters)
+                orient = {s: plain[n] for s, n in jm.orient.items()}
+                return JointMap(name=jm.name, segments=segs, split=jm.split, roll_quarters=jm.roll_quarters,
+                                orient=orient)
             return jm
         if best is None or len(missing) < best[0]:
             best = (len(missing), jm, missing)

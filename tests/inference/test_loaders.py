@@ -302,24 +302,34 @@ _CMU = [
 ]
 
 
-def test_cmu_31_joint_bvh(tmp_path):
+_CMU_END = {"Head": (0, 1.6, 0), "LeftHandIndex1": (0.5, 0, 0), "RightHandIndex1": (-0.5, 0, 0),
+            "LThumb": (0.3, 0, 0.3), "RThumb": (-0.3, 0, 0.3), "LeftToeBase": (0, 0, 1.0), "RightToeBase": (0, 0, 1.0)}
+
+
+def _cmu_motion(tmp_path, T: int = 40, left_wrist_twist_deg: np.ndarray | None = None):
+    """A CMU 31-joint BVH walking along +Z, optionally turning only its LeftHand joint (the
+    Acclaim wrist bone) about the forearm's line (X in this T-pose), and read back."""
     global _JOINTS, _END
     saved = (_JOINTS, _END)
-    _JOINTS, _END = _CMU, {"Head": (0, 1.6, 0), "LeftHandIndex1": (0.5, 0, 0), "RightHandIndex1": (-0.5, 0, 0),
-                           "LThumb": (0.3, 0, 0.3), "RThumb": (-0.3, 0, 0.3), "LeftToeBase": (0, 0, 1.0),
-                           "RightToeBase": (0, 0, 1.0)}
+    _JOINTS, _END = _CMU, _CMU_END
     try:
         assert len(_CMU) == 31
-        T = 40
         f = np.zeros((T, 6 + 3 * 30))
         f[:, 1] = 17.0
         f[:, 2] = np.linspace(0, 30, T)  # walking along +Z (CMU files face +Z)
+        if left_wrist_twist_deg is not None:
+            hand = [j[0] for j in _CMU].index("LeftHand")  # the file lists joints depth first
+            f[:, 6 + 3 * (hand - 1) + 1] = left_wrist_twist_deg  # its Xrotation channel
         p = tmp_path / "cmu.bvh"
         _write_bvh(p, f)
-        m = load_motion(p)
+        return load_motion(p)
     finally:
         _JOINTS, _END = saved
-    assert m.meta["skeleton"] == "cmu31"
+
+
+def test_cmu_31_joint_bvh(tmp_path):
+    m = _cmu_motion(tmp_path)
+    assert m.meta["skeleton"] == "cmu31-cgspeed"
     assert m.meta["units"] == "cmu"  # 0.056444 m per unit puts this body near 1.7 m
     assert 1.4 < m.body.height < 2.1
     # zero rotation is a T-pose with the legs 20 deg apart: ours shows exactly that
@@ -328,6 +338,28 @@ def test_cmu_31_joint_bvh(tmp_path):
     assert ang[SEGMENT_INDEX["l_thigh"]] == pytest.approx(np.degrees(np.arctan2(2.5, 6.9)), abs=0.01)
     travel = m.root[-1] - m.root[0]
     assert m.rot[0, 0, :, 0] @ travel / np.linalg.norm(travel) > 0.99
+
+
+def test_cmu_forearm_carries_the_wrist_joints_pronation(tmp_path):
+    """cgspeed's BVH keeps one joint per Acclaim bone, so its LeftHand is the wrist bone: as
+    for ASF, our forearm shows that joint's twist about its own bone, the wrist stays where
+    it was, the hand (LeftFingerBase) does not twist, and the forearm runs to its end."""
+    twist = 25 * np.sin(np.arange(40) / 6)
+    m = _cmu_motion(tmp_path, left_wrist_twist_deg=twist)
+    up, fore, hand = (SEGMENT_INDEX[n] for n in ("l_upperarm", "l_forearm", "l_hand"))
+    local = np.einsum("tji,tjk->tik", m.rot[:, up], m.rot[:, fore])
+    bone = m.body.offsets[hand] / np.linalg.norm(m.body.offsets[hand])
+    np.testing.assert_allclose(local @ bone, np.broadcast_to(bone, (40, 3)), atol=1e-6)
+    angle = np.degrees(np.arccos(np.clip((np.trace(local, axis1=1, axis2=2) - 1) / 2, -1, 1)))
+    np.testing.assert_allclose(angle, np.abs(twist), atol=1e-3)
+    np.testing.assert_allclose(np.einsum("tji,tjk->tik", m.rot[:, fore], m.rot[:, hand]),
+                               np.broadcast_to(np.eye(3), (40, 3, 3)), atol=1e-6)
+    joints = m.joints()
+    wrist = joints[:, hand] - joints[:, fore]
+    np.testing.assert_allclose(wrist, np.broadcast_to(wrist[0], wrist.shape), atol=1e-6)
+    assert np.linalg.norm(m.body.offsets[hand]) == pytest.approx((3.5 + 0.6) * 0.056444, rel=1e-6)  # CMU units
+    # the right arm did not move
+    assert np.degrees(matrix_angle_between(m.rot[:, SEGMENT_INDEX["r_forearm"]], np.eye(3))).max() < 1e-6
 
 
 def test_retarget_template_maps_equal_joint_angles_to_equal_orientations(tmp_path):
@@ -359,3 +391,15 @@ def test_retarget_template_maps_equal_joint_angles_to_equal_orientations(tmp_pat
     other_rig = replace(a, names=[*a.names[:-1], "elsewhere"])
     with pytest.raises(ValueError, match="same rig"):
         retarget(b, ASF, asf_b.scale, W, template=other_rig)
+
+
+def test_prefixed_joint_names_keep_the_forearm_orientation_source():
+    """A namespace prefix ('rig:LeftHand') is matched without it, and the bone that orients
+    our forearm is looked up under the file's own name too."""
+    from inference.loaders.joint_maps import match_joint_map
+
+    names = [f"rig:{j[0]}" for j in _CMU]
+    jm = match_joint_map(names, "x.bvh")
+    assert jm.name == "cmu31-cgspeed"
+    assert jm.orient == {"l_forearm": "rig:LeftHand", "r_forearm": "rig:RightHand"}
+    assert jm.segments["l_hand"] == "rig:LeftFingerBase" and jm.required() <= set(names)
