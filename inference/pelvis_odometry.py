@@ -126,11 +126,8 @@ class PelvisOdometry(nn.Module):
     def displacement(self, pelvis_frames: Tensor) -> Tensor:
         """(context, 9) raw pelvis features of the last frames (oldest first) -> (2,) this
         frame's root displacement in the world (metres)."""
-        p = pelvis_frames.to(torch.float32)
-        Rz = current_heading(p)  # world -> heading; its transpose turns back
-        d = self(heading_frame_windows(p, Rz)[None])[0] * self.out_std
-        return Rz[:2, :2].T @ d
-
+        d, Rz = _heading_answers(self, pelvis_frames.to(torch.float32)[None])
+        return _to_world(d[0], Rz[0])
 
 
 def _heading_answers(net: PelvisOdometry, windows: Tensor) -> tuple[Tensor, Tensor]:
