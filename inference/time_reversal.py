@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .features import SL_CONTACT, SL_DP
+from .features import FPS_MODEL, SL_CONTACT, SL_DP
 
 
 def reverse_features(x: np.ndarray) -> np.ndarray:
@@ -47,7 +47,7 @@ def reverse_features(x: np.ndarray) -> np.ndarray:
 
 def is_forward_walk(x: np.ndarray, heading_steps: np.ndarray, min_forward: float = 0.9,
                     speed_m_s: tuple[float, float] = (0.5, 1.8), max_flight: float = 0.05,
-                    fps: float = 20.0) -> bool:
+                    fps: float = FPS_MODEL) -> bool:
     """Whether a clip walks forward: at least ``min_forward`` of its path in the direction
     the pelvis faces (``heading_steps``: (T, 2) root steps in the frame facing the pelvis),
     at a walking pace, with no more than ``max_flight`` of its frames off the ground (runs

@@ -1,6 +1,8 @@
 """The pelvis odometry: its answer turns with the heading, its integrated path is scored
-right, it learns a real walk's pace from the pelvis alone, its file format, and that the
-poser walks the root with it only when the pelvis is measured and both shanks are not."""
+right, it learns a real walk's pace from the pelvis alone, the shipped pair's gate (its
+live answers equal the offline path; the backward net only while it walks backwards), the
+file formats, and that the poser walks the root with it only when the pelvis is measured
+and both shanks are not."""
 
 from __future__ import annotations
 
