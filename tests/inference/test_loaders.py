@@ -306,12 +306,16 @@ _CMU_END = {"Head": (0, 1.6, 0), "LeftHandIndex1": (0.5, 0, 0), "RightHandIndex1
             "LThumb": (0.3, 0, 0.3), "RThumb": (-0.3, 0, 0.3), "LeftToeBase": (0, 0, 1.0), "RightToeBase": (0, 0, 1.0)}
 
 
-def _cmu_motion(tmp_path, T: int = 40, left_wrist_twist_deg: np.ndarray | None = None):
+def _cmu_motion(tmp_path, T: int = 40, left_wrist_twist_deg: np.ndarray | None = None,
+                finger_base: tuple[float, float, float] | None = None):
     """A CMU 31-joint BVH walking along +Z, optionally turning only its LeftHand joint (the
-    Acclaim wrist bone) about the forearm's line (X in this T-pose), and read back."""
+    Acclaim wrist bone) about the forearm's line (X in this T-pose), and read back.
+    ``finger_base``: the LeftFingerBase offset from LeftHand (cgspeed's files have 0 0 0)."""
     global _JOINTS, _END
     saved = (_JOINTS, _END)
-    _JOINTS, _END = _CMU, _CMU_END
+    joints = [(n, par, finger_base if finger_base is not None and n.endswith("FingerBase") and n[0] == "L" else off)
+              for n, par, off in _CMU]
+    _JOINTS, _END = joints, _CMU_END
     try:
         assert len(_CMU) == 31
         f = np.zeros((T, 6 + 3 * 30))
@@ -340,12 +344,14 @@ def test_cmu_31_joint_bvh(tmp_path):
     assert m.rot[0, 0, :, 0] @ travel / np.linalg.norm(travel) > 0.99
 
 
-def test_cmu_forearm_carries_the_wrist_joints_pronation(tmp_path):
+@pytest.mark.parametrize("finger_base", [(0.6, 0.0, 0.0), (0.0, 0.0, 0.0)])
+def test_cmu_forearm_carries_the_wrist_joints_pronation(tmp_path, finger_base):
     """cgspeed's BVH keeps one joint per Acclaim bone, so its LeftHand is the wrist bone: as
     for ASF, our forearm shows that joint's twist about its own bone, the wrist stays where
-    it was, the hand (LeftFingerBase) does not twist, and the forearm runs to its end."""
+    it was, the hand (LeftFingerBase) does not twist, and the forearm runs to its end. The
+    conversion's own files put LeftFingerBase at LeftHand (offset 0 0 0): the same holds."""
     twist = 25 * np.sin(np.arange(40) / 6)
-    m = _cmu_motion(tmp_path, left_wrist_twist_deg=twist)
+    m = _cmu_motion(tmp_path, left_wrist_twist_deg=twist, finger_base=finger_base)
     up, fore, hand = (SEGMENT_INDEX[n] for n in ("l_upperarm", "l_forearm", "l_hand"))
     local = np.einsum("tji,tjk->tik", m.rot[:, up], m.rot[:, fore])
     bone = m.body.offsets[hand] / np.linalg.norm(m.body.offsets[hand])
@@ -357,7 +363,8 @@ def test_cmu_forearm_carries_the_wrist_joints_pronation(tmp_path):
     joints = m.joints()
     wrist = joints[:, hand] - joints[:, fore]
     np.testing.assert_allclose(wrist, np.broadcast_to(wrist[0], wrist.shape), atol=1e-6)
-    assert np.linalg.norm(m.body.offsets[hand]) == pytest.approx((3.5 + 0.6) * 0.056444, rel=1e-6)  # CMU units
+    forearm = (3.5 + finger_base[0]) * 0.056444  # CMU units
+    assert np.linalg.norm(m.body.offsets[hand]) == pytest.approx(forearm, rel=1e-6)
     # the right arm did not move
     assert np.degrees(matrix_angle_between(m.rot[:, SEGMENT_INDEX["r_forearm"]], np.eye(3))).max() < 1e-6
 
