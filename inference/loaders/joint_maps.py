@@ -36,6 +36,15 @@ BANDAI = JointMap(
     roll_quarters={"spine1": 1, "l_collar": 3, "r_collar": 3, "r_thigh": 2},
 )
 
+# The CMU names with our segments' meaning, as ``imucap export`` writes them (app/export_bvh.py)
+_CMU_SEGMENTS = {
+    "pelvis": "Hips", "spine1": "LowerBack", "spine2": "Spine", "spine3": "Spine1", "neck": "Neck",
+    "head": "Head", "collar": "{Side}Shoulder", "upperarm": "{Side}Arm", "forearm": "{Side}ForeArm",
+    "hand": "{Side}Hand", "fingers": "{Side}FingerBase", "thigh": "{Side}UpLeg", "shank": "{Side}Leg",
+    "foot": "{Side}Foot", "toes": "{Side}ToeBase",
+}
+CMU_BVH = JointMap(name="cmu31", segments=_sides(_CMU_SEGMENTS))
+
 # CMU's 31-joint BVH as cgspeed converted the CMU database from its Acclaim files: one BVH
 # joint per ASF bone, so ``{Side}Hand`` is the Acclaim ``wrist`` bone (pronation, a twist
 # about the forearm), ``{Side}FingerBase`` the ``hand`` and ``{Side}HandIndex1`` the
@@ -44,24 +53,8 @@ BANDAI = JointMap(
 # meaning) by the finger joints only the conversion has.
 CMU_CGSPEED = JointMap(
     name="cmu31-cgspeed",
-    segments=_sides({
-        "pelvis": "Hips", "spine1": "LowerBack", "spine2": "Spine", "spine3": "Spine1", "neck": "Neck",
-        "head": "Head", "collar": "{Side}Shoulder", "upperarm": "{Side}Arm", "forearm": "{Side}ForeArm",
-        "hand": "{Side}FingerBase", "fingers": "{Side}HandIndex1", "thigh": "{Side}UpLeg", "shank": "{Side}Leg",
-        "foot": "{Side}Foot", "toes": "{Side}ToeBase",
-    }),
+    segments=_sides({**_CMU_SEGMENTS, "hand": "{Side}FingerBase", "fingers": "{Side}HandIndex1"}),
     orient=_sides({"forearm": "{Side}Hand"}),
-)
-
-# The CMU names with our segments' meaning, as ``imucap export`` writes them (app/export_bvh.py)
-CMU_BVH = JointMap(
-    name="cmu31",
-    segments=_sides({
-        "pelvis": "Hips", "spine1": "LowerBack", "spine2": "Spine", "spine3": "Spine1", "neck": "Neck",
-        "head": "Head", "collar": "{Side}Shoulder", "upperarm": "{Side}Arm", "forearm": "{Side}ForeArm",
-        "hand": "{Side}Hand", "fingers": "{Side}FingerBase", "thigh": "{Side}UpLeg", "shank": "{Side}Leg",
-        "foot": "{Side}Foot", "toes": "{Side}ToeBase",
-    }),
 )
 
 # Mixamo-style and most game skeletons
