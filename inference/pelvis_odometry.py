@@ -199,7 +199,9 @@ class OdometryTraining(FitConfig):
 def heading_steps(x: np.ndarray | Tensor) -> np.ndarray:
     """(T, 190) one clip's features -> (T, 2) its root steps in the frame facing the pelvis
     (x forward, y left): the odometry's targets."""
-    return clip_targets([np.asarray(x)], 1)[1].numpy()
+    x = torch.as_tensor(np.asarray(x, dtype=np.float32))
+    Rz = current_heading(clip_contexts(x, 1))
+    return (Rz[:, :2, :2] @ x[:, SL_DP, None])[..., 0].numpy()
 
 
 def with_reversed_walks(clips: Sequence[np.ndarray]) -> tuple[list[np.ndarray], int]:

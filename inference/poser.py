@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import functools
 import os
+import types
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -65,7 +66,7 @@ from .diffusion import Schedule, inpaint, paper_steps, parse_steps
 from .features import FPS_MODEL, N_FEATURES, SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
 from .joint_constraints import constrain_knees
 from .mirror import MirrorAveraged
-from .pelvis_odometry import PELVIS_INDEX, Odometry, PelvisOdometry, TwoWayOdometry, load_odometry
+from .pelvis_odometry import PELVIS_INDEX, Odometry, load_odometry
 from .regressor import regress
 from .rotations import matrix_to_rot6d, rot6d_to_matrix
 from .skeleton import N_CONTACTS, N_SEGMENTS, SEGMENT_INDEX, SITE_INDEX
@@ -130,12 +131,12 @@ def _resolve_detector(spec: ContactDetector | str | os.PathLike | None) -> Conta
 def _resolve_odometry(spec: Odometry | str | os.PathLike | None) -> Odometry | None:
     """"default" = the shipped pelvis odometry if it is installed (else the model's own
     root displacement, with a warning), None = none, a path = that file."""
-    return _resolve_stage(spec, (PelvisOdometry, TwoWayOdometry), PELVIS_ODOMETRY_WEIGHTS, load_odometry,
+    return _resolve_stage(spec, Odometry, PELVIS_ODOMETRY_WEIGHTS, load_odometry,
                           "without both shanks the root follows the model's own displacement (train one with "
                           "`imucap train --pelvis-odometry --out DIR`)")
 
 
-def _resolve_stage(spec, cls: type | tuple[type, ...], path: Path, loader, missing: str):
+def _resolve_stage(spec, cls: type | types.UnionType, path: Path, loader, missing: str):
     """A helper stage of the poser (contact detector, pelvis odometry) from its spec."""
     if spec is None or isinstance(spec, cls):
         return spec
