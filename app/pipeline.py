@@ -29,15 +29,15 @@ import numpy as np
 from calibration import Calibration, Calibrator
 from drivers.base import Sample
 from drivers.hub import Hub, HubFrame
-from inference.features import N_FEATURES, SL_ACC, SL_CONTACT, SL_ROT, observation_mask
-from inference.resample import STEP, StreamingResampler
-from inference.rotations import matrix_to_rot6d
-from inference.signals import SiteSignals
-from inference.skeleton import N_CONTACTS, N_SITES, SITE_INDEX, SITE_SEGMENT_INDEX, SITES
-from inference.stride import SHANK_SITES
+from inference.body.rotations import matrix_to_rot6d
+from inference.body.skeleton import N_CONTACTS, N_SITES, SITE_INDEX, SITE_SEGMENT_INDEX, SITES
+from inference.features.layout import N_FEATURES, SL_ACC, SL_CONTACT, SL_ROT, observation_mask
+from inference.poser.stride import SHANK_SITES
+from inference.signals.resample import STEP, StreamingResampler
+from inference.signals.site_signals import SiteSignals
 
 if TYPE_CHECKING:  # the poser pulls in torch; recorders and replay readers need not
-    from inference.poser import PoseFrame, Poser
+    from inference.poser.poser import PoseFrame, Poser
 
 MAX_FILLED_GAP = 6  # 60 Hz frames; a longer hole restarts the resampler instead of inpainting it
 _NR = N_SITES * 9  # packed rest payload: R_WB (13*9) | observed (13) | contacts (4) | insole present (1)

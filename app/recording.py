@@ -35,13 +35,12 @@ from typing import Any
 import h5py
 import numpy as np
 
+from app.pipeline import LivePose, Sink
 from calibration import Calibration
 from calibration.core import quat_of
 from drivers.hub import HubFrame
-from inference.rotations import quat_to_matrix
-from inference.skeleton import N_CONTACTS, N_SEGMENTS, N_SITES, SITES
-
-from .pipeline import LivePose, Sink
+from inference.body.rotations import quat_to_matrix
+from inference.body.skeleton import N_CONTACTS, N_SEGMENTS, N_SITES, SITES
 
 FORMAT = "imucap-session"
 VERSION = 1
@@ -277,7 +276,7 @@ def read_recording(path: str | os.PathLike) -> Recording:
 def replay(path: str | os.PathLike, poser, calibration: Calibration | None = None) -> list[LivePose]:
     """Run a recording's raw stream through the pipeline again (with its first calibration
     unless one is given): offline re-reconstruction with another model or steps."""
-    from .pipeline import Pipeline
+    from app.pipeline import Pipeline
 
     rec = read_recording(path)
     cal = calibration or (rec.calibrations[0][1] if rec.calibrations else None)

@@ -22,15 +22,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from app.pipeline import LivePose, Pipeline
+from app.recording import Recording
 from calibration import Calibration
 from drivers.hub import HubFrame
-from inference.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX, SITES, parse_sites
-
-from .pipeline import LivePose, Pipeline
-from .recording import Recording
+from inference.body.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX, SITES, parse_sites
 
 if TYPE_CHECKING:
-    from inference.poser import Poser
+    from inference.poser.poser import Poser
 
 
 def resolve_sensors(rec: Recording, sensors: str | Sequence[str] | None) -> tuple[str, ...]:
@@ -163,7 +162,7 @@ def compare_to_recorded(rec: Recording, poses: Sequence[LivePose]) -> dict[str, 
     between replayed poses and the recorded live ones at the same session times: how far
     a re-run (another model, fewer sensors) is from what was seen live. None when no
     frame times match."""
-    from inference.metrics import global_angle_error
+    from inference.metrics.errors import global_angle_error
 
     r = rec.recon
     if not poses or len(r["t"]) == 0:
@@ -186,7 +185,7 @@ def held_out_errors(poses: Sequence[LivePose], measured: Sequence[LivePose], sit
     calibrated measurement), over the frames both replays produced at the same time and
     in which the site delivered. A real-data check that needs no motion capture, only a
     session recorded with more sensors than the set under test."""
-    from inference.rotations import matrix_angle_between
+    from inference.body.rotations import matrix_angle_between
 
     by_t = {round(lp.t, 6): lp for lp in measured}
     pairs = [(lp, by_t[round(lp.t, 6)]) for lp in poses if round(lp.t, 6) in by_t]

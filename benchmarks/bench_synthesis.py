@@ -12,8 +12,8 @@ import json
 import os
 import time
 
-from inference.feature_codec import features_from_motion
-from inference.synthesis import NoiseModel, synthesize
+from inference.features.codec import features_from_motion
+from inference.signals.synthesis import NoiseModel, synthesize
 from sim_devices.motions import generate
 
 

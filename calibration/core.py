@@ -37,9 +37,9 @@ from typing import Any
 
 import numpy as np
 
-from inference.body import tpose
-from inference.rotations import matrix_angle_between, matrix_to_quat, quat_to_matrix
-from inference.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX, parse_sites
+from inference.body.body import tpose
+from inference.body.rotations import matrix_angle_between, matrix_to_quat, quat_to_matrix
+from inference.body.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX, parse_sites
 
 GRAVITY = np.array([0.0, 0.0, -9.81])
 FORMAT = "imucap-calibration"

@@ -22,13 +22,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from inference.body import contact_points, forward_kinematics, tpose
-from inference.motion import Motion
-from inference.resample import moving_average
-from inference.rotations import matrix_about_axis, matrix_to_quat, quat_slerp, quat_to_matrix, so3_exp
-from inference.signals import SiteSignals
-from inference.skeleton import SITES
-from inference.synthesis import GRAVITY, NoiseModel, angular_velocity, synthesize
+from inference.body.body import contact_points, forward_kinematics, tpose
+from inference.body.motion import Motion
+from inference.body.rotations import matrix_about_axis, matrix_to_quat, quat_slerp, quat_to_matrix, so3_exp
+from inference.body.skeleton import SITES
+from inference.signals.resample import moving_average
+from inference.signals.site_signals import SiteSignals
+from inference.signals.synthesis import GRAVITY, NoiseModel, angular_velocity, synthesize
 
 from .live import CalibrationSchedule
 

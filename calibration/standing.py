@@ -29,9 +29,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from inference.body import npose_rotations
-from inference.rotations import matrix_about_axis, quat_to_matrix
-from inference.skeleton import parse_sites
+from inference.body.body import npose_rotations
+from inference.body.rotations import matrix_about_axis, quat_to_matrix
+from inference.body.skeleton import parse_sites
 
 from .core import (
     Calibration,

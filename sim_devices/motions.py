@@ -32,11 +32,11 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from inference.amass_frames import global_to_amass_poses
-from inference.body import Body, contact_points, forward_kinematics, global_from_local
-from inference.motion import Motion
-from inference.rotations import axis_angle_to_matrix
-from inference.skeleton import N_SEGMENTS, SEGMENT_INDEX
+from inference.body.body import Body, contact_points, forward_kinematics, global_from_local
+from inference.body.motion import Motion
+from inference.body.rotations import axis_angle_to_matrix
+from inference.body.skeleton import N_SEGMENTS, SEGMENT_INDEX
+from inference.loaders.amass_frames import global_to_amass_poses
 
 KINDS: tuple[str, ...] = ("walk", "jog", "squat", "lunge", "jump", "arm_raises", "stand", "tpose", "npose")
 DEFAULT_SPEED = {"walk": 1.3, "jog": 2.8}

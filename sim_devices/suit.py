@@ -13,7 +13,7 @@ import uuid
 from dataclasses import dataclass
 from typing import Any
 
-from inference.signals import SiteSignals
+from inference.signals.site_signals import SiteSignals
 
 from .devices import INSOLE_PROTOCOLS, DeviceFaults, SimDevice, make_sim_device
 
@@ -71,7 +71,7 @@ class SimulatedSuit:
         cls, motion: Any, assignment: dict[str, str], noise: Any = None, seed: int = 0, **kw: Any
     ) -> SimulatedSuit:
         """Synthesize the signals of ``motion`` for the assigned sites (and insoles)."""
-        from inference.synthesis import synthesize
+        from inference.signals.synthesis import synthesize
 
         sites = [s for s in assignment if s != INSOLES]
         if INSOLES in assignment:

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from drivers.ximu3.log import G
-from inference.signals import SiteSignals
+from inference.signals.site_signals import SiteSignals
 
 INERTIAL_HEADER = ("Timestamp (us),Gyroscope X (deg/s),Gyroscope Y (deg/s),Gyroscope Z (deg/s),"
                    "Accelerometer X (g),Accelerometer Y (g),Accelerometer Z (g)")

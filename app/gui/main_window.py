@@ -18,11 +18,10 @@ import pyqtgraph as pg
 import pyqtgraph.opengl as gl
 from PySide6 import QtCore, QtWidgets
 
-from inference.body import contact_points
-from inference.skeleton import CONTACTS, PARENTS
-
-from ..cli_demo import DemoConfig, DemoSession
-from ..pipeline import stride_text
+from app.cli.demo import DemoConfig, DemoSession
+from app.pipeline import stride_text
+from inference.body.body import contact_points
+from inference.body.skeleton import CONTACTS, PARENTS
 
 _BONES = np.array([(i, PARENTS[i]) for i in range(1, len(PARENTS))], dtype=int)
 PRESETS: dict[str, tuple[str, ...]] = {

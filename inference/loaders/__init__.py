@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..motion import Motion, MotionFormatError
+from inference.body.motion import Motion, MotionFormatError
 
 MOTION_SUFFIXES = (".bvh", ".bvh.gz", ".amc", ".amc.gz", ".npz")
 
@@ -27,15 +27,15 @@ def load_motion(path: str | Path) -> Motion:
         raise FileNotFoundError(f"{path}: no such motion file")
     kind = _kind(path)
     if kind == "bvh":
-        from .bvh import load_bvh
+        from inference.loaders.bvh import load_bvh
 
         return load_bvh(path)
     if kind == "amc":
-        from .asf_amc import load_amc
+        from inference.loaders.asf_amc import load_amc
 
         return load_amc(path)
     if kind == "npz":
-        from .amass import load_amass
+        from inference.loaders.amass import load_amass
 
         return load_amass(path)
     raise MotionFormatError(str(path), f"unknown motion format; supported: {', '.join(MOTION_SUFFIXES)}")

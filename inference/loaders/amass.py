@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..amass_frames import amass_poses_to_global
-from ..body import Body
-from ..motion import Motion, MotionFormatError
+from inference.body.body import Body
+from inference.body.motion import Motion, MotionFormatError
+from inference.loaders.amass_frames import amass_poses_to_global
 
 
 def load_amass(path: str | Path, height: float | None = None) -> Motion:

@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..motion import Motion, MotionFormatError
-from ..rotations import euler_to_matrix, matrix_about_axis
-from .joint_maps import ASF, match_joint_map
-from .retarget import SourceSkeleton, retarget, world_map
-from .text import read_text_lines
+from inference.body.motion import Motion, MotionFormatError
+from inference.body.rotations import euler_to_matrix, matrix_about_axis
+from inference.loaders.joint_maps import ASF, match_joint_map
+from inference.loaders.retarget import SourceSkeleton, retarget, world_map
+from inference.loaders.text import read_text_lines
 
 INCH = 0.0254
 _AXES = {"x": np.array([1.0, 0.0, 0.0]), "y": np.array([0.0, 1.0, 0.0]), "z": np.array([0.0, 0.0, 1.0])}

@@ -10,11 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..motion import Motion, MotionFormatError
-from ..rotations import euler_to_matrix
-from .joint_maps import match_joint_map
-from .retarget import SourceSkeleton, detect_up_axis, pick_scale, retarget, world_map
-from .text import read_text_lines
+from inference.body.motion import Motion, MotionFormatError
+from inference.body.rotations import euler_to_matrix
+from inference.loaders.joint_maps import match_joint_map
+from inference.loaders.retarget import SourceSkeleton, detect_up_axis, pick_scale, retarget, world_map
+from inference.loaders.text import read_text_lines
 
 # units a BVH may be in; chosen by the resulting body height (BVH does not say)
 BVH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "inch": 0.0254, "cmu": 0.056444}

@@ -5,8 +5,8 @@ refused with the joints it lacks, rather than guessed at."""
 
 from __future__ import annotations
 
-from ..motion import MotionFormatError
-from .retarget import JointMap
+from inference.body.motion import MotionFormatError
+from inference.loaders.retarget import JointMap
 
 
 def _sides(template: dict[str, str]) -> dict[str, str]:

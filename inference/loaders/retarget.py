@@ -25,10 +25,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..body import MAIN_CHILD, Body, anthropometric_offsets
-from ..motion import Motion
-from ..rotations import quat_about_axis, quat_between_vectors, quat_to_matrix, triad
-from ..skeleton import N_SEGMENTS, PARENTS, SEGMENT_INDEX, SEGMENTS
+from inference.body.body import MAIN_CHILD, Body, anthropometric_offsets
+from inference.body.motion import Motion
+from inference.body.rotations import quat_about_axis, quat_between_vectors, quat_to_matrix, triad
+from inference.body.skeleton import N_SEGMENTS, PARENTS, SEGMENT_INDEX, SEGMENTS
 
 # our T-pose bone directions, the target of step 1 (unit vectors, our world frame)
 _ANTHRO = anthropometric_offsets(1.0)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import gzip
 from pathlib import Path
 
-from ..motion import MotionFormatError
+from inference.body.motion import MotionFormatError
 
 
 def read_text_lines(path: str | Path) -> list[str]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from inference.signals import SiteSignals
+from inference.signals.site_signals import SiteSignals
 
 from .analytic import spinning_signals
 from .base import DeviceFaults, InsoleSource, SignalSource, SimDevice

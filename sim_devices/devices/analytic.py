@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from inference.signals import SiteSignals
+from inference.signals.site_signals import SiteSignals
 
 G = 9.80665
 

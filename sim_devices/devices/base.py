@@ -20,7 +20,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from inference.signals import SiteSignals
+from inference.signals.site_signals import SiteSignals
 
 
 @dataclass

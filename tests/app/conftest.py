@@ -16,9 +16,9 @@ import pytest
 from app.pipeline import LivePose, Pipeline, frames_from_signals
 from app.recording import Recorder
 from calibration import Calibrator, Protocol, synthesize_session
-from inference.body import Body
-from inference.poser import make_poser
-from inference.synthesis import NoiseModel
+from inference.body.body import Body
+from inference.poser.poser import make_poser
+from inference.signals.synthesis import NoiseModel
 from sim_devices.motions import generate
 
 REC_SITES = ("pelvis", "head", "l_wrist", "r_wrist", "l_shank", "r_shank")

@@ -8,9 +8,9 @@ import json
 import numpy as np
 import torch
 
-import app.cli_bench as cli_bench
-from app.cli import main
-from inference.denoiser import LoadedModel, ModelConfig, build_model
+import app.cli.bench as cli_bench
+from app.cli.main import main
+from inference.model.denoiser import LoadedModel, ModelConfig, build_model
 
 
 def _tiny_paper():

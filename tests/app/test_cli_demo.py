@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 import torch
 
-from app.cli import main
-from app.cli_demo import assignment_for, resolve_demo_model
+from app.cli.demo import assignment_for, resolve_demo_model
+from app.cli.main import main
 from app.recording import read_recording
-from inference.denoiser import ModelConfig, build_model, save_model
-from inference.features import N_FEATURES
+from inference.features.layout import N_FEATURES
+from inference.model.denoiser import ModelConfig, build_model, save_model
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +59,7 @@ def test_headless_json_contract(tiny_model, tmp_path, capsys):
 
 
 def test_missing_weights_fall_back_to_floor_loudly(monkeypatch, tmp_path):
-    from inference import poser
+    from inference.poser import poser
 
     monkeypatch.setitem(poser.DEFAULT_WEIGHTS, "diffusion", tmp_path / "nope.pt")
     model, label, warning = resolve_demo_model("diffusion")

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 import torch
 
-from app.cli import main
-from app.export_bvh import write_motion_bvh
-from inference import poser as poser_mod
-from inference.denoiser import ModelConfig, build_model, save_model
-from inference.evaluation import synthetic_motion
+from app.cli.main import main
+from app.export.bvh import write_motion_bvh
+from inference.evaluation.runner import synthetic_motion
 from inference.loaders import load_motion
-from inference.training import feature_stats
+from inference.model.denoiser import ModelConfig, build_model, save_model
+from inference.poser import poser as poser_mod
+from inference.training.loop import feature_stats
 
 KEYS = {"clips", "frames", "ga_deg", "la_deg", "jpe_cm", "jitter_ratio", "re2_m", "re5_m", "re10_m",
         "model", "sensors", "steps", "insoles"}
@@ -32,7 +32,7 @@ def data_dir(tmp_path_factory):
 @pytest.fixture(scope="module")
 def tiny_models(tmp_path_factory, data_dir):
     d = tmp_path_factory.mktemp("models")
-    from inference.feature_codec import features_from_motion
+    from inference.features.codec import features_from_motion
 
     mean, std = feature_stats([features_from_motion(load_motion(data_dir / "walk_a.bvh"))])
     paths = {}
@@ -194,8 +194,8 @@ def test_unknown_site_is_rejected(capsys, data_dir):
 
 
 def test_repair_truth_puts_back_a_broken_foot_before_scoring(capsys, tmp_path):
-    from inference.rotations import axis_angle_to_matrix
-    from inference.skeleton import SEGMENT_INDEX
+    from inference.body.rotations import axis_angle_to_matrix
+    from inference.body.skeleton import SEGMENT_INDEX
 
     m = synthetic_motion(seconds=2.6, seed=1)
     n = m.n_frames

@@ -12,16 +12,16 @@ import json
 import numpy as np
 import pytest
 
-from app.cli import main
-from app.cli_import import site_for
+from app.cli.importing import site_for
+from app.cli.main import main
 from app.recording import read_recording
 from app.replay import replay_recording
 from calibration.standing import forward_from_knees, forward_from_shanks, still_start
-from inference.motion import Motion
-from inference.poser import Poser, resolve_model
-from inference.rotations import matrix_about_axis, matrix_angle_between
-from inference.skeleton import SEGMENT_INDEX, SITE_INDEX, SITE_SEGMENT_INDEX
-from inference.synthesis import NoiseModel, synthesize
+from inference.body.motion import Motion
+from inference.body.rotations import matrix_about_axis, matrix_angle_between
+from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX, SITE_SEGMENT_INDEX
+from inference.poser.poser import Poser, resolve_model
+from inference.signals.synthesis import NoiseModel, synthesize
 from sim_devices.motions import generate
 from sim_devices.ximu3_log import write_ximu3_log
 

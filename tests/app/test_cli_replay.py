@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 import torch
 
-from app.cli import main
-from app.export_hdf5 import read_hdf5
-from app.export_opensim import read_mot
+from app.cli.main import main
+from app.export.hdf5_file import read_hdf5
+from app.export.opensim import read_mot
 from app.recording import read_recording
-from inference.denoiser import ModelConfig, build_model, save_model
-from inference.features import N_FEATURES
+from inference.features.layout import N_FEATURES
 from inference.loaders import load_motion
+from inference.model.denoiser import ModelConfig, build_model, save_model
 
 
 @pytest.fixture(scope="module")
@@ -109,7 +109,7 @@ def test_replay_mirrors_as_recorded_else_as_the_model_file_says(recorded, tiny_m
 
     import h5py
 
-    from inference.denoiser import retag_model
+    from inference.model.denoiser import retag_model
 
     tagged = tmp_path / "tagged.pt"
     retag_model(tiny_model, tagged, {"mirror": True})
@@ -161,7 +161,7 @@ def test_replay_root_stages_as_recorded(recorded, tiny_model, tmp_path, capsys, 
 
 def test_held_out_sensors_score_a_subset_against_what_they_measured(recorded, capsys):
     from app.replay import held_out_errors, replay_recording
-    from inference.poser import make_poser
+    from inference.poser.poser import make_poser
 
     code, out, err = _run(capsys, "replay", str(recorded.path), "--model", "floor", "--sensors",
                           "pelvis,head,l_wrist,r_wrist", "--held-out", "--json", "--no-progress")

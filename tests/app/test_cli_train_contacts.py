@@ -7,9 +7,9 @@ import json
 
 import pytest
 
-from app.cli import main
-from inference.contact_detector import load_detector
-from inference.pelvis_odometry import TwoWayOdometry, load_odometry
+from app.cli.main import main
+from inference.poser.contact_detector import load_detector
+from inference.poser.pelvis_odometry import TwoWayOdometry, load_odometry
 
 pytestmark = pytest.mark.data
 

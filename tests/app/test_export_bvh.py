@@ -6,12 +6,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from app.export_bvh import BVH_NAMES, bvh_text, write_motion_bvh
-from inference.body import Body
-from inference.evaluation import synthetic_motion
+from app.export.bvh import BVH_NAMES, bvh_text, write_motion_bvh
+from inference.body.body import Body
+from inference.body.rotations import matrix_angle_between
+from inference.evaluation.runner import synthetic_motion
 from inference.loaders import load_motion
-from inference.metrics import global_angle_error
-from inference.rotations import matrix_angle_between
+from inference.metrics.errors import global_angle_error
 
 
 def _motion(body: Body):

@@ -7,11 +7,11 @@ import csv
 
 import numpy as np
 
-from app.export_csv import continuous_quaternions, csv_columns, write_csv
-from app.exporters import body_for_recording, motion_from_recording
+from app.export.csv_file import continuous_quaternions, csv_columns, write_csv
+from app.export.formats import body_for_recording, motion_from_recording
 from app.recording import read_recording
-from inference.rotations import axis_angle_to_matrix, matrix_to_quat, quat_to_matrix
-from inference.skeleton import CONTACTS, SEGMENTS
+from inference.body.rotations import axis_angle_to_matrix, matrix_to_quat, quat_to_matrix
+from inference.body.skeleton import CONTACTS, SEGMENTS
 
 
 def test_header_rows_and_round_trip(recorded, tmp_path):

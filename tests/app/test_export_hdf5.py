@@ -9,12 +9,12 @@ import h5py
 import numpy as np
 import pytest
 
-from app.export_hdf5 import read_hdf5, write_hdf5
-from app.exporters import body_for_recording, motion_from_recording
+from app.export.formats import body_for_recording, motion_from_recording
+from app.export.hdf5_file import read_hdf5, write_hdf5
 from app.recording import read_recording
-from inference.body import forward_kinematics
-from inference.rotations import quat_to_matrix
-from inference.skeleton import CONTACTS, PARENTS, SEGMENTS
+from inference.body.body import forward_kinematics
+from inference.body.rotations import quat_to_matrix
+from inference.body.skeleton import CONTACTS, PARENTS, SEGMENTS
 
 
 def test_datasets_and_attributes(recorded, tmp_path):

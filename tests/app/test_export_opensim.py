@@ -8,13 +8,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.export_opensim import M_OS, coordinate_names, opensim_coordinates, read_mot, write_mot
-from app.exporters import body_for_recording, motion_from_recording
+from app.export.formats import body_for_recording, motion_from_recording
+from app.export.opensim import M_OS, coordinate_names, opensim_coordinates, read_mot, write_mot
 from app.recording import read_recording
-from inference.body import Body, forward_kinematics, global_from_local, npose_rotations, tpose
-from inference.rotations import axis_angle_to_matrix, euler_to_matrix
-from inference.skeleton import SEGMENT_INDEX as I
-from inference.skeleton import SEGMENTS
+from inference.body.body import Body, forward_kinematics, global_from_local, npose_rotations, tpose
+from inference.body.rotations import axis_angle_to_matrix, euler_to_matrix
+from inference.body.skeleton import SEGMENT_INDEX as I
+from inference.body.skeleton import SEGMENTS
 
 
 def _coords(R, root=None):
@@ -27,7 +27,7 @@ def _coords(R, root=None):
 def _with_local(base, **local):
     """Global orientations from `base` (24,3,3) globals with some segments' parent-relative
     rotations replaced (children follow)."""
-    from inference.body import local_from_global
+    from inference.body.body import local_from_global
 
     L = local_from_global(base[None])[0].copy()
     for seg, Rl in local.items():

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.exporters import (
+from app.export.formats import (
     ExportMotion,
     body_for_recording,
     check_export_path,
@@ -16,10 +16,10 @@ from app.exporters import (
     motion_from_recording,
 )
 from app.recording import read_recording
-from inference.body import Body, forward_kinematics
+from inference.body.body import Body, forward_kinematics
+from inference.body.rotations import matrix_angle_between
+from inference.body.skeleton import SEGMENT_INDEX
 from inference.loaders import load_motion
-from inference.rotations import matrix_angle_between
-from inference.skeleton import SEGMENT_INDEX
 
 
 def test_motion_from_recording_is_the_recorded_reconstruction(recorded):

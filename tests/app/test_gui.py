@@ -21,7 +21,7 @@ if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
 pytest.importorskip("pytestqt")
 pytest.importorskip("OpenGL")
 
-from app.cli_demo import DemoConfig, DemoSession  # noqa: E402
+from app.cli.demo import DemoConfig, DemoSession  # noqa: E402
 from app.recording import read_recording  # noqa: E402
 from calibration import Protocol  # noqa: E402
 

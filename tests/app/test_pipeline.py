@@ -9,13 +9,13 @@ import pytest
 
 from app.pipeline import CallbackSink, ListSource, LivePipeline, Pipeline, frames_from_signals, stride_text
 from calibration import Calibrator, Protocol, synthesize_session
-from inference.features import SL_ACC
-from inference.metrics import global_angle_error
-from inference.poser import make_poser
-from inference.resample import moving_average
-from inference.rotations import matrix_angle_between
-from inference.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX
-from inference.synthesis import NoiseModel, kinematics
+from inference.body.rotations import matrix_angle_between
+from inference.body.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX
+from inference.features.layout import SL_ACC
+from inference.metrics.errors import global_angle_error
+from inference.poser.poser import make_poser
+from inference.signals.resample import moving_average
+from inference.signals.synthesis import NoiseModel, kinematics
 from sim_devices.devices import SignalSource
 from sim_devices.motions import generate
 

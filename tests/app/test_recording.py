@@ -18,8 +18,8 @@ import pytest
 from app.pipeline import Pipeline, frames_from_signals
 from app.recording import Recorder, read_recording, replay
 from calibration import Calibrator, Protocol, synthesize_session
-from inference.poser import make_poser
-from inference.synthesis import NoiseModel
+from inference.poser.poser import make_poser
+from inference.signals.synthesis import NoiseModel
 from sim_devices.motions import generate
 
 REPO = Path(__file__).resolve().parents[2]

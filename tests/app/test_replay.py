@@ -11,9 +11,9 @@ import pytest
 
 from app.recording import read_recording
 from app.replay import compare_to_recorded, replay_recording, resolve_insoles, resolve_sensors
-from inference.poser import make_poser
-from inference.rotations import matrix_angle_between
-from inference.skeleton import SEGMENT_INDEX, SITE_INDEX
+from inference.body.rotations import matrix_angle_between
+from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX
+from inference.poser.poser import make_poser
 
 
 def _rot(poses):

@@ -18,10 +18,10 @@ from calibration import (
     stillness,
     synthesize_session,
 )
-from inference.resample import moving_average
-from inference.rotations import matrix_angle_between, quat_to_matrix
-from inference.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX
-from inference.synthesis import NoiseModel, kinematics
+from inference.body.rotations import matrix_angle_between, quat_to_matrix
+from inference.body.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX
+from inference.signals.resample import moving_average
+from inference.signals.synthesis import NoiseModel, kinematics
 from sim_devices.motions import generate
 
 FPS = 60

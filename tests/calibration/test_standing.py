@@ -9,10 +9,10 @@ import pytest
 
 from calibration import CalibrationError
 from calibration.standing import calibrate_standing, forward_from_knees, forward_from_shanks, still_start
-from inference.motion import Motion
-from inference.rotations import matrix_angle_between
-from inference.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX
-from inference.synthesis import NoiseModel, synthesize
+from inference.body.motion import Motion
+from inference.body.rotations import matrix_angle_between
+from inference.body.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX
+from inference.signals.synthesis import NoiseModel, synthesize
 from sim_devices.motions import generate
 
 SITES = ("pelvis", "l_thigh", "r_thigh", "l_shank", "r_shank", "l_foot", "r_foot")

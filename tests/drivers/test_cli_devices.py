@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from app.cli import main
+from app.cli.main import main
 from sim_devices.devices import make_sim_device, spinning_signals
 
 

@@ -104,7 +104,7 @@ def test_device_clock_used_for_session_time():
 
 
 def test_injected_resampler_interpolates():
-    resample = pytest.importorskip("inference.resample")
+    resample = pytest.importorskip("inference.signals.resample")
     hub = Hub(
         {"pelvis": _dev()},
         latency=0.0,

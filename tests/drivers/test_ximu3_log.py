@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from drivers.ximu3 import LogError, read_device_log, read_log
-from inference.rotations import quat_to_matrix
-from inference.synthesis import NoiseModel, synthesize
+from inference.body.rotations import quat_to_matrix
+from inference.signals.synthesis import NoiseModel, synthesize
 from sim_devices.motions import generate
 from sim_devices.ximu3_log import write_ximu3_log
 

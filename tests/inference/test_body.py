@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 import torch
 
-from inference.body import (
+from inference.body.body import (
     Body,
     contact_points,
     estimate_height,
@@ -13,8 +13,8 @@ from inference.body import (
     site_positions,
     tpose,
 )
-from inference.rotations import quat_to_matrix, random_quat
-from inference.skeleton import PARENTS, SEGMENT_INDEX
+from inference.body.rotations import quat_to_matrix, random_quat
+from inference.body.skeleton import PARENTS, SEGMENT_INDEX
 
 
 def random_rotations(n, seed=0):
@@ -78,7 +78,7 @@ def test_sites_are_distal_on_limbs_and_npose_lowers_arms():
     R = npose_rotations(1)[0]
     j = forward_kinematics(R, np.zeros(3), b.offsets)
     s = site_positions(R, j, b)
-    from inference.skeleton import SITE_INDEX
+    from inference.body.skeleton import SITE_INDEX
 
     wrist, elbow, hand = s[SITE_INDEX["l_wrist"]], j[SEGMENT_INDEX["l_forearm"]], j[SEGMENT_INDEX["l_hand"]]
     # the wrist sensor sits in the distal part of the forearm

@@ -10,7 +10,10 @@ import numpy as np
 import pytest
 import torch
 
-from inference.contact_detector import (
+from inference.evaluation.runner import SIX, synthetic_motion
+from inference.features.codec import features_from_motion
+from inference.features.layout import SL_CONTACT, observation_mask
+from inference.poser.contact_detector import (
     CONTEXT,
     SHANK_INDEX,
     ContactDetector,
@@ -22,11 +25,8 @@ from inference.contact_detector import (
     save_detector,
     train_detector,
 )
-from inference.evaluation import SIX, synthetic_motion
-from inference.feature_codec import features_from_motion
-from inference.features import SL_CONTACT, observation_mask
-from inference.poser import Poser
-from inference.training import rotate_yaw
+from inference.poser.poser import Poser
+from inference.training.loop import rotate_yaw
 
 
 def _walks(seeds, **kw):
@@ -95,7 +95,7 @@ def test_poser_uses_the_detector_only_when_both_shanks_are_measured(sites, insol
     mask = observation_mask(list(sites), insoles)
     never = Poser(None, contact_detector=_biased(-20.0))
     assert never.contact_detector is None  # the floor keeps the standing pose's contacts
-    from inference.denoiser import LoadedModel, ModelConfig, build_model
+    from inference.model.denoiser import LoadedModel, ModelConfig, build_model
 
     cfg = ModelConfig(layers=1, d_model=32, heads=2, ff=64, mask_input=True)
     torch.manual_seed(0)
@@ -117,7 +117,7 @@ def test_heading_frame_keeps_the_shanks_relative_yaw():
     """Turning one shank against the other changes the inputs (the turn is information)."""
     x = torch.as_tensor(_walks([0])[0][:, SHANK_INDEX])
     a = heading_frame_inputs(x)
-    from inference.rotations import matrix_to_rot6d, rot6d_to_matrix
+    from inference.body.rotations import matrix_to_rot6d, rot6d_to_matrix
 
     Rl = rot6d_to_matrix(x[:, :6])
     c, s = math.cos(0.5), math.sin(0.5)
@@ -128,7 +128,7 @@ def test_heading_frame_keeps_the_shanks_relative_yaw():
 
 
 def test_missing_shipped_detector_warns_and_keeps_the_models_contacts(monkeypatch, tmp_path):
-    from inference import poser
+    from inference.poser import poser
 
     monkeypatch.setattr(poser, "CONTACT_DETECTOR_WEIGHTS", tmp_path / "nope.pt")
     with pytest.warns(UserWarning, match="nope.pt is missing"):

@@ -8,8 +8,11 @@ import numpy as np
 import pytest
 import torch
 
-from inference.body import Body, tpose
-from inference.dataset import (
+from inference.body.body import Body, tpose
+from inference.body.motion import Motion
+from inference.body.rotations import axis_angle_to_matrix
+from inference.features.layout import N_FEATURES, SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
+from inference.training.dataset import (
     FeatureDataset,
     Normalizer,
     build_dataset,
@@ -17,9 +20,6 @@ from inference.dataset import (
     decode_features,
     motion_to_features,
 )
-from inference.features import N_FEATURES, SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
-from inference.motion import Motion
-from inference.rotations import axis_angle_to_matrix
 
 
 def moving_motion(T: int = 240, fps: float = 60.0, speed: float = 1.0, height: float = 1.75) -> Motion:
@@ -127,7 +127,7 @@ def test_energy_per_window_draws_every_window_by_its_clip_energy():
 
 
 def test_train_set_refuses_an_unknown_energy_weighting():
-    from inference.splits import train_set
+    from inference.training.splits import train_set
 
     with pytest.raises(ValueError, match="energy_per"):
         train_set(progress=False, energy_per="frame")  # refused before any data is read

@@ -7,7 +7,8 @@ from dataclasses import replace
 import numpy as np
 import torch
 
-from inference.denoiser import (
+from inference.features.layout import N_FEATURES, WINDOW, observation_mask
+from inference.model.denoiser import (
     Denoiser,
     ModelConfig,
     build_model,
@@ -16,8 +17,7 @@ from inference.denoiser import (
     save_model,
     timestep_embedding,
 )
-from inference.features import N_FEATURES, WINDOW, observation_mask
-from inference.regressor import MaskConfig, Regressor, random_observation_mask, regress
+from inference.model.regressor import MaskConfig, Regressor, random_observation_mask, regress
 
 
 def _inputs(b=2, seed=0):
@@ -138,8 +138,8 @@ def test_bfloat16_model_runs():
 
 
 def test_freeze_for_cpu_same_outputs():
-    from inference.denoiser import freeze_for_cpu
-    from inference.diffusion import inpaint, paper_steps
+    from inference.model.denoiser import freeze_for_cpu
+    from inference.model.diffusion import inpaint, paper_steps
 
     torch.manual_seed(0)
     m = Denoiser(ModelConfig.tiny()).eval()
@@ -157,7 +157,7 @@ def test_freeze_for_cpu_same_outputs():
 def test_skip_parameterisation_passes_clean_input_through_and_round_trips(tmp_path):
     """With skip=True a clean window (t = 0) comes back exactly; at the top level the
     output is the network's alone. The flag survives save/load."""
-    from inference.denoiser import Denoiser, ModelConfig, load_model, save_model
+    from inference.model.denoiser import Denoiser, ModelConfig, load_model, save_model
 
     torch.manual_seed(0)
     cfg = ModelConfig(layers=1, d_model=32, heads=2, ff=64, dropout=0.0, skip=True)
@@ -181,8 +181,8 @@ def test_skip_parameterisation_passes_clean_input_through_and_round_trips(tmp_pa
 def test_mask_input_model_reads_the_mask_traced_or_not():
     """mask_input: the same window with a different known/unknown mask gives a different
     prediction; the frozen trace and inpainting pass the mask the same way."""
-    from inference.denoiser import freeze_for_cpu
-    from inference.diffusion import inpaint, paper_steps, wants_mask
+    from inference.model.denoiser import freeze_for_cpu
+    from inference.model.diffusion import inpaint, paper_steps, wants_mask
 
     torch.manual_seed(0)
     m = Denoiser(replace(ModelConfig.tiny(), mask_input=True)).eval()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from inference.diffusion import (
+from inference.model.diffusion import (
     PAPER_STEPS_10D,
     Schedule,
     cosine_alpha_bar,

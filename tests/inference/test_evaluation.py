@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from inference.evaluation import (
+from inference.evaluation.runner import (
     SIX,
     clip_input,
     compare_rows,
@@ -16,9 +16,9 @@ from inference.evaluation import (
     report_markdown,
     synthetic_motion,
 )
-from inference.feature_codec import features_from_motion
-from inference.features import SL_CONTACT, observation_mask
-from inference.metrics import ClipMetrics
+from inference.features.codec import features_from_motion
+from inference.features.layout import SL_CONTACT, observation_mask
+from inference.metrics.errors import ClipMetrics
 
 KEYS = {"clips", "frames", "ga_deg", "la_deg", "jpe_cm", "jitter_ratio", "re2_m", "re5_m", "re10_m"}
 
@@ -60,12 +60,12 @@ def test_floor_evaluation_and_short_clip_nulls():
 
 
 def test_face_forward_turns_the_start_to_plus_x():
-    from inference.evaluation import face_forward
+    from inference.evaluation.runner import face_forward
 
     m = synthetic_motion(seconds=1.0, seed=3, turn_deg_per_s=50.0)
     from dataclasses import replace
 
-    from inference.rotations import matrix_about_axis
+    from inference.body.rotations import matrix_about_axis
 
     Rz = matrix_about_axis(np.array([0.0, 0.0, 1.0]), 2.5)
     turned = replace(m, rot=Rz @ m.rot, root=m.root @ Rz.T + [4.0, -3.0, 0.0])

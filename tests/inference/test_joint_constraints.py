@@ -3,9 +3,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from inference.joint_constraints import KNEE_AXIS, KNEES, constrain_knees, hinge_angle
-from inference.rotations import matrix_about_axis, so3_exp
-from inference.skeleton import N_SEGMENTS
+from inference.body.rotations import matrix_about_axis, so3_exp
+from inference.body.skeleton import N_SEGMENTS
+from inference.poser.joint_constraints import KNEE_AXIS, KNEES, constrain_knees, hinge_angle
 
 
 def _random_rotations(rng, n):

@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from inference.body.rotations import matrix_angle_between
+from inference.body.skeleton import SEGMENT_INDEX
 from inference.loaders import MotionFormatError, find_motion_files, load_motion
 from inference.loaders.bvh import parse_bvh
-from inference.rotations import matrix_angle_between
-from inference.skeleton import SEGMENT_INDEX
 
 # Bandai-like skeleton, Y-up, cm, standing T-pose at zero rotation:
 # (name, parent, offset)

@@ -5,8 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from inference.body import Body, forward_kinematics
-from inference.metrics import (
+from inference.body.body import Body, forward_kinematics
+from inference.body.rotations import matrix_about_axis
+from inference.body.skeleton import N_SEGMENTS, SEGMENT_INDEX
+from inference.metrics.errors import (
     EVAL_SEGMENTS,
     ClipMetrics,
     evaluate_clip,
@@ -18,8 +20,6 @@ from inference.metrics import (
     root_error,
     summarize,
 )
-from inference.rotations import matrix_about_axis
-from inference.skeleton import N_SEGMENTS, SEGMENT_INDEX
 
 Z = np.array([0.0, 0.0, 1.0])
 
@@ -172,9 +172,9 @@ def test_paired_difference_rejects_unpaired_clips_and_pooled_ratios():
 
 
 def test_ga_is_also_given_over_the_frames_whose_truth_a_body_can_make():
-    from inference.body import tpose
-    from inference.rotations import axis_angle_to_matrix
-    from inference.skeleton import SEGMENT_INDEX
+    from inference.body.body import tpose
+    from inference.body.rotations import axis_angle_to_matrix
+    from inference.body.skeleton import SEGMENT_INDEX
 
     T = 10
     R_true = tpose(T)

@@ -6,20 +6,20 @@ import numpy as np
 import pytest
 import torch
 
-from inference.denoiser import ModelConfig, build_model, freeze_for_cpu
-from inference.features import N_FEATURES, SL_CONTACT, SL_DP, WINDOW, observation_mask
-from inference.mirror import MirrorAveraged, mirror_features, mirror_points
+from inference.features.layout import N_FEATURES, SL_CONTACT, SL_DP, WINDOW, observation_mask
+from inference.features.mirror import MirrorAveraged, mirror_features, mirror_points
+from inference.model.denoiser import ModelConfig, build_model, freeze_for_cpu
 
 
 def test_mirror_features_equal_the_features_of_the_mirrored_motion():
     """Reflect a walk physically (world y -> -y, left <-> right, on the mirrored body) and
     derive its features from scratch: they must equal mirror_features of the original's,
     orientations, accelerations, root motion and contacts alike."""
-    from inference.body import Body
-    from inference.evaluation import synthetic_motion
-    from inference.feature_codec import features_from_motion
-    from inference.motion import Motion
-    from inference.skeleton import SEGMENTS
+    from inference.body.body import Body
+    from inference.body.motion import Motion
+    from inference.body.skeleton import SEGMENTS
+    from inference.evaluation.runner import synthetic_motion
+    from inference.features.codec import features_from_motion
 
     m = synthetic_motion(seconds=3.0)
     M = np.diag([1.0, -1.0, 1.0])

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 import torch
 
-from inference.evaluation import SIX, synthetic_motion
-from inference.feature_codec import features_from_motion
-from inference.features import FPS_MODEL, SL_DP, observation_mask
-from inference.pelvis_odometry import (
+from inference.evaluation.runner import SIX, synthetic_motion
+from inference.features.codec import features_from_motion
+from inference.features.layout import FPS_MODEL, SL_DP, observation_mask
+from inference.poser.pelvis_odometry import (
     CONTEXT,
     PELVIS_INDEX,
     OdometryTraining,
@@ -30,8 +30,8 @@ from inference.pelvis_odometry import (
     save_odometry,
     train_odometry,
 )
-from inference.poser import Poser
-from inference.training import rotate_yaw
+from inference.poser.poser import Poser
+from inference.training.loop import rotate_yaw
 
 
 def _walk(seed=0, **kw) -> np.ndarray:
@@ -180,7 +180,7 @@ def test_file_round_trip(tmp_path):
     (("head", "l_wrist", "r_wrist"), False, False),  # no pelvis sensor to walk from
 ])
 def test_poser_walks_from_the_pelvis_only_without_both_shanks(sites, insoles, expect_odometry):
-    from inference.denoiser import LoadedModel, ModelConfig, build_model
+    from inference.model.denoiser import LoadedModel, ModelConfig, build_model
 
     x = _walk(5)
     mask = observation_mask(list(sites), insoles)
@@ -203,7 +203,7 @@ def test_poser_walks_from_the_pelvis_only_without_both_shanks(sites, insoles, ex
 
 
 def test_missing_shipped_odometry_warns_and_keeps_the_models_root(monkeypatch, tmp_path):
-    from inference import poser
+    from inference.poser import poser
 
     monkeypatch.setattr(poser, "PELVIS_ODOMETRY_WEIGHTS", tmp_path / "nope.pt")
     with pytest.warns(UserWarning, match="nope.pt is missing: without both shanks"):

@@ -3,19 +3,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from inference.body import Body, tpose
-from inference.dataset import FeatureDataset, motion_to_features
-from inference.motion import Motion
-from inference.plausibility import (
+from inference.body.body import Body, tpose
+from inference.body.motion import Motion
+from inference.body.rotations import axis_angle_to_matrix, matrix_about_axis
+from inference.body.skeleton import SEGMENT_INDEX
+from inference.metrics.plausibility import (
     REPAIR_MARGIN_S,
     ankle_angles,
     implausible_feature_frames,
     implausible_frames,
     repair_feet,
 )
-from inference.rotations import axis_angle_to_matrix, matrix_about_axis
-from inference.skeleton import SEGMENT_INDEX
-from inference.splits import drop_implausible_clips
+from inference.training.dataset import FeatureDataset, motion_to_features
+from inference.training.splits import drop_implausible_clips
 
 
 def squat_then_flipped_foot(T: int = 120, flip_from: int = 90) -> Motion:

@@ -8,14 +8,14 @@ import pytest
 import torch
 from torch import nn
 
-from inference import poser as poser_mod
-from inference.body import Body, contact_points, forward_kinematics, npose_rotations
-from inference.denoiser import LoadedModel, ModelConfig, build_model
-from inference.evaluation import SIX, clip_input, synthetic_motion
-from inference.features import N_FEATURES, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, observation_mask
-from inference.poser import Poser, correct_root_displacement, reconstruct_offline, standing_features
-from inference.skeleton import SEGMENT_INDEX
-from inference.training import feature_stats
+from inference.body.body import Body, contact_points, forward_kinematics, npose_rotations
+from inference.body.skeleton import SEGMENT_INDEX
+from inference.evaluation.runner import SIX, clip_input, synthetic_motion
+from inference.features.layout import N_FEATURES, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, observation_mask
+from inference.model.denoiser import LoadedModel, ModelConfig, build_model
+from inference.poser import poser as poser_mod
+from inference.poser.poser import Poser, correct_root_displacement, reconstruct_offline, standing_features
+from inference.training.loop import feature_stats
 
 
 @pytest.fixture(scope="module")
@@ -288,10 +288,10 @@ def test_noise_mode_fixed_reuses_one_draw_per_frame(noise):
     """fixed: every frame's inpainting starts from the same noise (the generator is reseeded),
     so the output is a deterministic function of the window; fresh: new noise each frame.
     The model file's meta picks the default, as `imucap train --export --noise` writes it."""
-    from app import cli_train
+    from app.cli import train as cli_train
 
     assert cli_train.NOISE_MODES == poser_mod.NOISE_MODES and cli_train.HISTORY_MODES == poser_mod.HISTORY_MODES
-    from inference.diffusion import INPAINT_MODES
+    from inference.model.diffusion import INPAINT_MODES
 
     assert cli_train.INPAINT_MODES == INPAINT_MODES
     lm = _loaded("diffusion")
@@ -313,8 +313,8 @@ def test_mirror_averaging_makes_the_live_output_the_same_for_a_motion_and_its_mi
     off (each is its own, non-symmetric stage), a mirror-averaged poser fed a sequence's
     mirror image returns the mirror image of what it returns for the sequence; a plain one
     does not, so the averaging is what makes it so."""
-    from inference.mirror import mirror_features, mirror_tables
-    from inference.skeleton import SEGMENTS
+    from inference.body.skeleton import SEGMENTS
+    from inference.features.mirror import mirror_features, mirror_tables
 
     lm = _loaded("diffusion")
     lm.meta = {"noise": "mean", "history": "measured", "inpaint_mode": "replace-ddim"}

@@ -56,7 +56,7 @@ def test_hdm05_retarget_reproduces_source_joint_positions(shared_data):
     j = m.joints()
     pairs = {"l_shank": "ltibia", "r_foot": "rfoot", "l_forearm": "lradius", "r_upperarm": "rhumerus",
              "l_hand": "lhand"}
-    from inference.skeleton import SEGMENT_INDEX
+    from inference.body.skeleton import SEGMENT_INDEX
 
     for ours, theirs in pairs.items():
         d_ours = np.linalg.norm(j[:, SEGMENT_INDEX[ours]] - j[:, 0], axis=-1)
@@ -70,8 +70,8 @@ def test_hdm05_forearm_pronates_with_the_wrist_bone(shared_data):
     relative to the upper arm, is the AMC's wrist angle, frame by frame."""
     from scipy.spatial.transform import Rotation
 
+    from inference.body.skeleton import SEGMENT_INDEX
     from inference.loaders.asf_amc import find_asf, parse_amc
-    from inference.skeleton import SEGMENT_INDEX
 
     f = next(p for p in find_motion_files(shared_data / "hdm05" / "dg") if "throw" in p.name)
     amc = parse_amc(f, parse_asf(find_asf(f)))
@@ -99,9 +99,9 @@ def test_left_right_and_spine_conventions_agree_across_datasets(shared_data):
     side 180 deg, spine 90 deg). After retargeting, every dataset must say the same thing
     when a person walks upright: pelvis-relative orientations of the trunk and legs stay
     near our standing pose. A rolled segment would sit at 90-180 deg here."""
-    from inference.body import npose_rotations
-    from inference.rotations import matrix_angle_between
-    from inference.skeleton import SEGMENT_INDEX
+    from inference.body.body import npose_rotations
+    from inference.body.rotations import matrix_angle_between
+    from inference.body.skeleton import SEGMENT_INDEX
 
     files = [shared_data / "bandai" / "d1" / "dataset-1_walk_normal_001.bvh.gz",
              shared_data / "bandai" / "d2" / "dataset-2_walk_feminine_002.bvh.gz"]
@@ -120,11 +120,11 @@ def test_left_right_and_spine_conventions_agree_across_datasets(shared_data):
 def test_shank_strides_of_a_real_walk_come_from_the_shanks_alone(shared_data):
     """The stride estimator on a real walk, through the sensor noise model and the model's
     20 Hz input: told a path 1.25x too long, it scales by ~0.8 (no model involved)."""
-    from inference.evaluation import clip_input, evaluation_noise
-    from inference.features import SL_ACC, SL_CONTACT, SL_ROT
-    from inference.rotations import rot6d_to_matrix
-    from inference.skeleton import SEGMENT_INDEX, SITE_INDEX
-    from inference.stride import SHANK_SITES, StrideScale
+    from inference.body.rotations import rot6d_to_matrix
+    from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX
+    from inference.evaluation.runner import clip_input, evaluation_noise
+    from inference.features.layout import SL_ACC, SL_CONTACT, SL_ROT
+    from inference.poser.stride import SHANK_SITES, StrideScale
 
     m = load_motion(shared_data / "bandai" / "d1" / "dataset-1_walk_proud_001.bvh.gz")
     inp = clip_input(m, list(SHANK_SITES), insoles=True, noise=evaluation_noise(), seed=3)

@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from inference.resample import STEP, StreamingResampler, downsample, moving_average, to_grid
-from inference.rotations import axis_angle_to_quat, quat_to_matrix
+from inference.body.rotations import axis_angle_to_quat, quat_to_matrix
+from inference.signals.resample import STEP, StreamingResampler, downsample, moving_average, to_grid
 
 
 def _stream(acc: np.ndarray, rest: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[int]]:

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy.spatial.transform import Rotation, Slerp
 
-from inference import rotations as rot
+from inference.body import rotations as rot
 
 RNG_SEED = 1234
 TB_ORDERS = ["XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX"]

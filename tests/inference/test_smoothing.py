@@ -3,7 +3,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from inference.smoothing import OneEuroConfig, VectorOneEuro, smoothing_gain
+from inference.poser.smoothing import OneEuroConfig, VectorOneEuro, smoothing_gain
 
 
 def _run(f: VectorOneEuro, xs: np.ndarray) -> np.ndarray:
@@ -52,8 +52,8 @@ def test_reset_restarts_from_the_next_sample():
 
 
 def test_rotation_filter_smooths_unmeasured_and_passes_measured():
-    from inference.rotations import so3_exp, so3_log
-    from inference.smoothing import RotationOneEuro
+    from inference.body.rotations import so3_exp, so3_log
+    from inference.poser.smoothing import RotationOneEuro
 
     rng = np.random.default_rng(1)
     n = 200

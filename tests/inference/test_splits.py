@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from inference.dataset import FeatureDataset
-from inference.splits import balance_sources
+from inference.training.dataset import FeatureDataset
+from inference.training.splits import balance_sources
 
 from .test_dataset import moving_motion
 

@@ -11,11 +11,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from inference.body import Body
-from inference.resample import downsample
-from inference.rotations import matrix_about_axis
-from inference.skeleton import SEGMENT_INDEX, SITE_INDEX
-from inference.stride import SHANK_SITES, StrideScale, StrideScaleConfig
+from inference.body.body import Body
+from inference.body.rotations import matrix_about_axis
+from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX
+from inference.poser.stride import SHANK_SITES, StrideScale, StrideScaleConfig
+from inference.signals.resample import downsample
 
 FPS = 60.0
 

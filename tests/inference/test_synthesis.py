@@ -6,18 +6,18 @@ import numpy as np
 import pytest
 import torch
 
-from inference.amass_frames import (
+from inference.body.body import Body, forward_kinematics, npose_rotations, tpose
+from inference.body.motion import Motion
+from inference.body.rotations import axis_angle_to_matrix, quat_to_matrix
+from inference.body.skeleton import PARENTS, SITE_SEGMENT_INDEX, SITES
+from inference.loaders.amass_frames import (
     SMPL_TO_OURS,
     amass_poses_to_global,
     global_to_amass_poses,
     ours_to_smpl_rest,
     smpl_rest_to_ours,
 )
-from inference.body import Body, forward_kinematics, npose_rotations, tpose
-from inference.motion import Motion
-from inference.rotations import axis_angle_to_matrix, quat_to_matrix
-from inference.skeleton import PARENTS, SITE_SEGMENT_INDEX, SITES
-from inference.synthesis import NoiseModel, body_mass, kinetic_energy, synthesize
+from inference.signals.synthesis import NoiseModel, body_mass, kinetic_energy, synthesize
 
 FPS = 60.0
 EDGE = 12  # frames at each clip end touched by the moving-average edge padding
@@ -189,7 +189,7 @@ def test_amass_frames_round_trip():
 
 def test_chunked_synthesis_equals_whole_clip(monkeypatch):
     """synthesize() works in time chunks for memory; the result must not depend on them."""
-    import inference.synthesis as syn
+    import inference.signals.synthesis as syn
 
     m = _walking_like(T=250)
     whole = synthesize(m, NoiseModel.typical(), rng=5)

@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from inference.evaluation import synthetic_motion
-from inference.feature_codec import features_from_motion
-from inference.features import N_FEATURES, SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT
-from inference.motion import Motion
-from inference.time_reversal import is_forward_walk, reverse_features
+from inference.body.motion import Motion
+from inference.evaluation.runner import synthetic_motion
+from inference.features.codec import features_from_motion
+from inference.features.layout import N_FEATURES, SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT
+from inference.features.time_reversal import is_forward_walk, reverse_features
 
 
 def test_reversed_features_are_those_of_the_motion_played_backwards():
@@ -68,7 +68,7 @@ def test_forward_walks_played_backwards_teach_a_real_backward_walk(shared_data):
     backward walk *forward* (7.1 of 5.6 m the wrong way when written); with those walks
     also played backwards it goes backward, and the forward walk still goes forward."""
     from inference.loaders import load_motion
-    from inference.pelvis_odometry import OdometryTraining, clip_displacements, train_odometry
+    from inference.poser.pelvis_odometry import OdometryTraining, clip_displacements, train_odometry
 
     d1 = shared_data / "bandai" / "d1"
     files = sorted(f for f in d1.glob("dataset-1_walk_*_00[12].bvh.gz") if "_sad_" not in f.name)

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 import torch
 
-from inference.denoiser import ModelConfig, build_model, load_model
-from inference.features import SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT
-from inference.mirror import mirror_features, mirror_points
-from inference.rotations import matrix_to_rot6d, rot6d_to_matrix
-from inference.training import (
+from inference.body.rotations import matrix_to_rot6d, rot6d_to_matrix
+from inference.features.layout import SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT
+from inference.features.mirror import mirror_features, mirror_points
+from inference.model.denoiser import ModelConfig, build_model, load_model
+from inference.training.loop import (
     EMA,
     LossWeights,
     StepContext,
@@ -87,8 +87,8 @@ def test_swing_compares_the_legs_amplitude_not_their_positions():
 
 
 def test_swing_is_asked_for_only_where_pelvis_and_shanks_are_known():
-    from inference.features import observation_mask
-    from inference.training import sites_known_share
+    from inference.features.layout import observation_mask
+    from inference.training.loop import sites_known_share
 
     n = 10
     legs = torch.as_tensor(observation_mask(["pelvis", "l_shank", "r_shank", "head"]))
@@ -131,7 +131,7 @@ def _augmentation_batch_and_loss(option: str):
     """A fixed batch (with heel/toe points) and ``loss(batch, value)``: the unweighted loss
     terms of a tiny eval-mode model with ``option`` = value and no yaw turn, drawn from the
     same generators every call, so an augmentation can be compared with its hand-made twin."""
-    from inference.diffusion import Schedule
+    from inference.model.diffusion import Schedule
 
     ds = synthetic_dataset(3, 70, seed=0)
     batch = ds.sample(np.random.default_rng(0), 4, 61)
@@ -151,7 +151,7 @@ def _augmentation_batch_and_loss(option: str):
 def test_mirror_augmentation_mirrors_the_window_and_its_body(tmp_path):
     """augment_mirror = 1 on a batch must score exactly what no mirroring scores on the
     mirrored batch (features, bone offsets and heel/toe points all mirrored)."""
-    from inference.skeleton import CONTACTS, SEGMENTS
+    from inference.body.skeleton import CONTACTS, SEGMENTS
 
     batch, loss = _augmentation_batch_and_loss("augment_mirror")
     flipped = dict(batch, x=mirror_features(torch.as_tensor(batch["x"])).numpy(),
@@ -167,8 +167,8 @@ def test_mirror_augmentation_mirrors_the_window_and_its_body(tmp_path):
 def test_mirror_average_trains_the_averaged_model_the_poser_runs():
     """mirror_average: the loss is the mirror-averaged model's (what the poser runs with a
     file that says ``mirror``), not the plain model's, and gradients reach the weights."""
-    from inference.diffusion import Schedule
-    from inference.mirror import MirrorAveraged
+    from inference.features.mirror import MirrorAveraged
+    from inference.model.diffusion import Schedule
 
     ds = synthetic_dataset(3, 70, seed=0)
     batch = ds.sample(np.random.default_rng(0), 4, 61)
@@ -195,8 +195,8 @@ def test_scale_features_equal_the_features_of_the_scaled_motion():
     """Derive the features of a walk on a 1.15x body from scratch: orientations, gravity-free
     accelerations, root displacement and height must be scale_features of the original's.
     Contact labels are kept by design; the 0.3 m/s threshold moves only borderline frames."""
-    from inference.evaluation import synthetic_motion
-    from inference.feature_codec import features_from_motion
+    from inference.evaluation.runner import synthetic_motion
+    from inference.features.codec import features_from_motion
 
     m = synthetic_motion(seconds=3.0)
     x = features_from_motion(m)
@@ -278,7 +278,7 @@ def test_resume_reproduces_uninterrupted_run(tmp_path, kind):
     assert all(math.isfinite(e["loss"]) for e in log if e["event"] == "train")
     lm = load_model(tmp_path / "part" / "model.pt")
     assert lm.kind == kind and lm.step == 4 and lm.norm_std.shape == (190,)
-    from app.cli import main
+    from app.cli.main import main
 
     assert main(["train", "--out", str(tmp_path / "part"), "--export", str(tmp_path / "ship.pt"), "--fp16",
                  "--default-steps", "10", "--history", "measured", "--noise", "fixed",
@@ -287,7 +287,7 @@ def test_resume_reproduces_uninterrupted_run(tmp_path, kind):
     assert shipped.meta["default_steps"] == "10" and shipped.step == 4
     assert shipped.meta["history"] == "measured" and shipped.meta["noise"] == "fixed"
     assert shipped.meta["contact_threshold"] == 0.8 and shipped.meta["mirror"] is True
-    from inference.poser import CONTACT_THRESHOLD, Poser
+    from inference.poser.poser import CONTACT_THRESHOLD, Poser
 
     assert Poser(shipped, freeze=False).mirror and not Poser(lm, freeze=False).mirror
     assert not Poser(shipped, freeze=False, mirror=False).mirror
@@ -309,7 +309,7 @@ def test_torchrun_two_processes(tmp_path):
     out = tmp_path / "run"
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2",
-           "-m", "app.cli", "train", "--config", str(cfg_path), "--out", str(out), "--no-progress"]
+           "-m", "app.cli.main", "train", "--config", str(cfg_path), "--out", str(out), "--no-progress"]
     r = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-3000:]  # torchrun fails if any rank fails
     ck = torch.load(out / "last.pt", weights_only=False)
@@ -328,7 +328,7 @@ def test_conditioned_diffusion_training_sees_known_entries_clean(tmp_path):
     """cond_prob: windows are noised only where unobserved; with the history always known
     the model must be handed frames 0..N-2 exactly, and the shipped file says to inpaint
     the same way."""
-    from inference.diffusion import Schedule
+    from inference.model.diffusion import Schedule
 
     cfg = _cfg(cond_prob=1.0, augment_yaw=False, mask={"p_history_known": 1.0, "p_burst": 0.0,
                                                         "p_frame_drop": 0.0})
@@ -358,7 +358,7 @@ def test_conditioned_diffusion_training_sees_known_entries_clean(tmp_path):
 def test_mean_start_trains_the_top_level_on_zeros():
     """mean_start 1: every window drawn at t = T holds zeros in its unknown entries (what a
     poser with noise "mean" shows the model first); windows at other levels keep their noise."""
-    from inference.diffusion import Schedule
+    from inference.model.diffusion import Schedule
 
     cfg = _cfg(cond_prob=1.0, augment_yaw=False, t_focus=0.5, infer_steps="1000,400",
                mean_start=1.0, mask={"p_history_known": 1.0, "p_burst": 0.0, "p_frame_drop": 0.0})
@@ -445,7 +445,7 @@ def test_deeper_model_starts_from_a_shallower_ones_outputs(tmp_path):
     """--init into a diffusion model with more layers (same width): the trained layers are
     copied and the extra ones start as identities, so the deeper model's outputs equal the
     trained one's before it learns anything; the extra layers then train."""
-    from inference.denoiser import deepened_state_dict
+    from inference.model.denoiser import deepened_state_dict
 
     train(_cfg(steps=2), tmp_path / "base", progress=False)
     src = torch.load(tmp_path / "base" / "last.pt", weights_only=False)
@@ -471,7 +471,7 @@ def test_deeper_model_starts_from_a_shallower_ones_outputs(tmp_path):
 
 
 def test_last_frame_terms_see_only_the_last_frame():
-    from inference.training import motion_losses
+    from inference.training.loop import motion_losses
 
     torch.manual_seed(0)
     B, N = 2, 5
@@ -490,7 +490,7 @@ def test_last_frame_terms_see_only_the_last_frame():
 
 
 def test_t_focus_draws_the_live_levels():
-    from inference.training import training_levels
+    from inference.training.loop import training_levels
 
     gen = torch.Generator().manual_seed(0)
     uniform = training_levels(_cfg(), 4000, gen, 1000)
@@ -503,7 +503,7 @@ def test_t_focus_draws_the_live_levels():
 
 
 def test_cli_init_and_stop_after(tmp_path, capsys):
-    from app.cli import main
+    from app.cli.main import main
 
     base = tmp_path / "base.json"
     base.write_text(json.dumps(_cfg(steps=2).to_dict()))
@@ -528,8 +528,8 @@ def test_shipped_configs_parse(path):
 
 
 def test_retag_changes_a_model_files_poser_defaults_and_not_its_weights(tmp_path, capsys):
-    from app.cli import main
-    from inference.denoiser import save_model
+    from app.cli.main import main
+    from inference.model.denoiser import save_model
 
     torch.manual_seed(0)
     net = build_model("regressor", ModelConfig.tiny())

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from inference.amass_frames import amass_poses_to_global
-from inference.body import estimate_height
-from inference.synthesis import synthesize
+from inference.body.body import estimate_height
+from inference.loaders.amass_frames import amass_poses_to_global
+from inference.signals.synthesis import synthesize
 from sim_devices.motions import KINDS, generate, write_amass_npz
 
 

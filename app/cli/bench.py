@@ -1,0 +1,157 @@
+"""`imucap bench`: per-frame latency of the live loop (``Poser.step``: shift, inpaint,
+root correction, FK) with the default model and steps, and of the paper-size model
+(8 layers / 512 / FF 2048, 30 steps, random weights: latency does not depend on their
+values) measured in the same run, so the two figures share the machine's load.
+
+    imucap bench [--json] [--frames N] [--paper-frames N] [--threads N] [--model SPEC]
+                 [--steps K] [--random-weights] [--no-paper] [--mirror/--no-mirror]
+
+The input is a generated walking clip observed at the paper's 6 sites, fed one 20 Hz frame
+at a time, after a warm-up. benchmarks/bench_poser.py calls the same function. When the
+poser mirror-averages (the model file says so, or ``--mirror``), the same loop without it
+is timed too, under ``without_mirror``, so its cost is a ratio from one run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+import numpy as np
+
+
+def bench_poser(model, steps=None, frames: int = 200, warmup: int = 10, label: str = "",
+                seed: int = 0, mirror: bool | None = None) -> dict:
+    """Time ``frames`` calls of ``Poser.step`` (after ``warmup`` untimed ones) for a
+    LoadedModel (or None: the floor baseline). Returns p50_ms, p99_ms, mean_ms, max_ms,
+    steps (model calls per frame), model, frames, threads, mirror (mirror averaging: each
+    call a batch of two windows; None = the model file's own setting)."""
+    import torch
+
+    from inference.evaluation.runner import SIX, clip_input, synthetic_motion
+    from inference.poser.poser import Poser
+
+    motion = synthetic_motion(seconds=max(2.0, (frames + warmup) / 20.0 + 0.5), seed=seed)
+    inp = clip_input(motion, SIX)
+    poser = Poser(model, body=motion.body, steps=steps, seed=seed, mirror=mirror)
+    n = inp.features.shape[0]
+    for i in range(warmup):
+        poser.step(inp.features[i % n], inp.mask[i % n])
+    times = np.empty(frames)
+    for i in range(frames):
+        k = (warmup + i) % n
+        t0 = time.perf_counter()
+        poser.step(inp.features[k], inp.mask[k])
+        times[i] = time.perf_counter() - t0
+    ms = times * 1e3
+    kind = poser.kind
+    return {
+        "p50_ms": round(float(np.percentile(ms, 50)), 3), "p99_ms": round(float(np.percentile(ms, 99)), 3),
+        "mean_ms": round(float(ms.mean()), 3), "max_ms": round(float(ms.max()), 3),
+        "steps": len(poser.steps) if kind == "diffusion" else (1 if kind == "regressor" else 0),
+        "model": label or kind, "frames": int(frames), "threads": torch.get_num_threads(),
+        "mirror": poser.mirror,
+    }
+
+
+def paper_model():
+    """A randomly initialised paper-size denoiser (8/512/2048, 8 heads)."""
+    import torch
+
+    from inference.features.layout import N_FEATURES
+    from inference.model.denoiser import Denoiser, LoadedModel, ModelConfig
+
+    cfg = ModelConfig.paper()
+    cfg.dropout = 0.0
+    torch.manual_seed(0)
+    return LoadedModel(model=Denoiser(cfg).eval(), kind="diffusion", config=cfg,
+                       norm_mean=np.zeros(N_FEATURES, np.float32), norm_std=np.ones(N_FEATURES, np.float32))
+
+
+def _config_label(model) -> str:
+    if model is None:
+        return "floor"
+    c = model.config
+    return f"{model.kind} {c.layers}/{c.d_model}/{c.ff}"
+
+
+def run_bench(model_spec: str = "diffusion", steps=None, frames: int = 200, paper_frames: int = 10,
+              threads: int = 0, random_weights: bool = False, paper: bool = True, warmup: int = 10,
+              mirror: bool | None = None) -> dict:
+    """The `imucap bench` measurement (see the module docstring); returns its JSON object."""
+    import torch
+
+    from inference.features.layout import N_FEATURES
+    from inference.model.denoiser import LoadedModel, ModelConfig, build_model
+    from inference.model.diffusion import even_steps, parse_steps
+    from inference.poser.poser import default_weights, resolve_model
+
+    if threads > 0:
+        torch.set_num_threads(threads)
+    weights: str
+    if random_weights:
+        torch.manual_seed(0)
+        model = LoadedModel(model=build_model("diffusion", ModelConfig()).eval(), kind="diffusion",
+                            config=ModelConfig(), norm_mean=np.zeros(N_FEATURES, np.float32),
+                            norm_std=np.ones(N_FEATURES, np.float32))
+        weights = "random (default ModelConfig)"
+    else:
+        model = resolve_model(model_spec)
+        weights = str(default_weights(model_spec)) if model_spec in ("diffusion", "regressor") else model_spec
+    st = parse_steps(steps) if steps is not None else None
+    out = bench_poser(model, st, frames, warmup, label=_config_label(model), mirror=mirror)
+    out["weights"] = weights
+    if out["mirror"]:
+        # what the mirror averaging costs, measured in the same run
+        out["without_mirror"] = bench_poser(model, st, frames, warmup, label=_config_label(model), mirror=False)
+    if paper:
+        out["paper"] = bench_poser(paper_model(), even_steps(30), paper_frames, min(warmup, 2),
+                                   label="diffusion 8/512/2048 (paper, random weights)")
+    out["threads"] = torch.get_num_threads()
+    return out
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("bench", help="per-frame latency of the live poser (default and paper-size model)",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.add_argument("--frames", type=int, default=200, help="timed frames of the default model (default 200)")
+    p.add_argument("--paper-frames", type=int, default=10,
+                   help="timed frames of the paper-size model (default 10; ~1-3 s each on 2 cores)")
+    p.add_argument("--threads", type=int, default=1,
+                   help="torch threads (default 1, the live loop's setting; 0 = torch's default)")
+    p.add_argument("--model", default="diffusion", help="diffusion | regressor | floor | PATH.pt")
+    p.add_argument("--steps", default=None, help="diffusion steps (default: the model's own)")
+    p.add_argument("--mirror", action=argparse.BooleanOptionalAction, default=None,
+                   help="mirror averaging on/off (default: the model file's own)")
+    p.add_argument("--random-weights", action="store_true",
+                   help="time a randomly initialised default-size model (no weights needed)")
+    p.add_argument("--warmup", type=int, default=10, help="untimed frames before timing (default 10)")
+    p.add_argument("--no-paper", action="store_true", help="skip the paper-size model")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.frames < 1 or args.paper_frames < 1:
+        raise ValueError("--frames and --paper-frames must be at least 1")
+    res = run_bench(args.model, args.steps, args.frames, args.paper_frames, args.threads, args.random_weights,
+                    not args.no_paper, max(0, args.warmup), args.mirror)
+    if args.json:
+        print(json.dumps(res))
+    else:
+        def line(r: dict) -> str:
+            return (f"{r['model']}: {r['steps']} steps{', mirror-averaged' if r['mirror'] else ''}, "
+                    f"p50 {r['p50_ms']:.1f} ms, p99 {r['p99_ms']:.1f} ms over {r['frames']} frames, "
+                    f"{r['threads']} threads")
+
+        print(line(res))
+        for key in ("without_mirror", "paper"):
+            if key in res:
+                print(line(res[key]))
+    sys.stdout.flush()
+    return 0
+
+
+__all__ = ["bench_poser", "paper_model", "run_bench", "register", "run"]

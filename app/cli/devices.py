@@ -1,0 +1,258 @@
+"""`imucap devices`: list attached devices, probe one by URL, run a simulated one."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from typing import Any
+
+# USB ids we recognise -> (what it is, backend scheme)
+KNOWN_USB: dict[tuple[int, int | None], tuple[str, str]] = {
+    (0x2639, None): ("Xsens MTi (USB)", "xbus"),
+    (0x0403, 0xD38B): ("Xsens USB-serial converter", "xbus"),
+    (0x054C, 0x0CE6): ("Sony DualSense", "dualsense"),
+    (0x054C, 0x0DF2): ("Sony DualSense Edge", "dualsense"),
+    (0x10C4, 0xEA60): ("CP210x USB-UART (BNO08x RVC boards)", "bno08x-rvc"),
+    (0x1A86, 0x7523): ("CH340 USB-UART (BNO08x RVC boards)", "bno08x-rvc"),
+}
+
+
+def _known(vid: int | None, pid: int | None) -> tuple[str, str] | None:
+    if vid is None:
+        return None
+    return KNOWN_USB.get((vid, pid)) or KNOWN_USB.get((vid, None))
+
+
+def discover() -> list[dict[str, Any]]:
+    """Everything we can see, each with the URL that would open it (if any)."""
+    found: list[dict[str, Any]] = []
+    try:
+        from serial.tools import list_ports
+
+        for p in list_ports.comports():
+            k = _known(p.vid, p.pid)
+            url = f"{k[1]}://{p.device}" if k and k[1] != "dualsense" else None
+            found.append(
+                {
+                    "kind": "serial",
+                    "path": p.device,
+                    "usb": _usb(p.vid, p.pid),
+                    "what": k[0] if k else p.description,
+                    "url": url,
+                }
+            )
+    except Exception as exc:  # discovery must never take the command down
+        found.append({"kind": "serial", "error": str(exc)})
+    try:
+        import hid
+
+        for d in hid.enumerate():
+            k = _known(d.get("vendor_id"), d.get("product_id"))
+            if k is None:
+                continue
+            serial = d.get("serial_number") or ""
+            found.append(
+                {
+                    "kind": "hid",
+                    "path": d.get("path", b"").decode(errors="replace"),
+                    "usb": _usb(d.get("vendor_id"), d.get("product_id")),
+                    "what": k[0],
+                    "url": "dualsense://" + (f"?serial={serial}" if serial else ""),
+                }
+            )
+    except Exception as exc:
+        found.append({"kind": "hid", "error": str(exc)})
+    try:
+        import usb.core
+
+        for d in usb.core.find(find_all=True) or []:
+            k = _known(d.idVendor, d.idProduct)
+            if k is not None:
+                found.append(
+                    {
+                        "kind": "usb",
+                        "path": f"bus {d.bus} address {d.address}",
+                        "usb": _usb(d.idVendor, d.idProduct),
+                        "what": k[0],
+                        "url": None,
+                        "note": f"opened through its {k[1]} interface (serial port or HID)",
+                    }
+                )
+    except Exception as exc:  # no libusb backend, no permission: say so, go on
+        found.append({"kind": "usb", "error": str(exc)})
+    try:
+        import can
+
+        for cfg in can.detect_available_configs(interfaces=["socketcan"]):
+            found.append(
+                {
+                    "kind": "can",
+                    "path": f"{cfg['interface']}/{cfg['channel']}",
+                    "what": "CAN interface",
+                    "url": f"xsens-can://{cfg['interface']}/{cfg['channel']}",
+                }
+            )
+    except Exception as exc:
+        found.append({"kind": "can", "error": str(exc)})
+    return found
+
+
+def _usb(vid: int | None, pid: int | None) -> str | None:
+    return None if vid is None else f"{vid:04x}:{(pid or 0):04x}"
+
+
+def cmd_list(args: argparse.Namespace) -> int:
+    found = discover()
+    if args.json:
+        print(json.dumps({"devices": found}, indent=2))
+        return 0
+    if not [f for f in found if "error" not in f]:
+        print("no devices found (serial, HID, USB, CAN); try `imucap devices simulate`")
+    for f in found:
+        if "error" in f:
+            print(f"[{f['kind']}] not available: {f['error']}", file=sys.stderr)
+        else:
+            url = f.get("url") or f.get("note") or "no backend"
+            print(f"[{f['kind']}] {f['path']}  {f.get('usb') or ''}  {f['what']}  -> {url}")
+    # say what was looked at and came back empty, so "nothing listed" is not ambiguous
+    for kind in ("serial", "hid", "usb", "can"):
+        if not any(f["kind"] == kind for f in found):
+            print(f"[{kind}] none found")
+    return 0
+
+
+def probe(url: str, seconds: float) -> dict[str, Any]:
+    """Open ``url``, read for ``seconds``, summarise (the DESIGN.md contract)."""
+    import drivers
+
+    dev = drivers.open_device(url)
+    n = 0
+    first = None
+    t_first = t_last = None
+    try:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            s = dev.read(min(0.2, max(0.0, end - time.monotonic())))
+            if s is None:
+                continue
+            n += 1
+            if first is None:
+                first = s.as_json()
+                t_first = s.t
+            t_last = s.t
+    finally:
+        dev.close()
+    rate = (n - 1) / (t_last - t_first) if n > 1 and t_last and t_first is not None and t_last > t_first else 0.0
+    st = dev.stats
+    return {
+        "url": url,
+        "samples": n,
+        "rate_hz": round(rate, 2),
+        "errors": st.errors,
+        "first": first,
+        "stats": st.as_dict(),
+        "events": [{"t": e.t, "kind": e.kind, "detail": e.detail} for e in dev.events],
+    }
+
+
+def cmd_probe(args: argparse.Namespace) -> int:
+    out = probe(args.url, args.seconds)
+    if args.json:
+        print(json.dumps(out))
+    else:
+        print(f"{out['samples']} samples at {out['rate_hz']} Hz, {out['errors']} errors")
+        if out["first"]:
+            print("first:", json.dumps(out["first"]))
+    return 0 if out["samples"] > 0 else 1
+
+
+def _signals(args: argparse.Namespace, sites: list[str]):
+    if args.motion != "spin":
+        try:
+            from inference.signals.synthesis import NoiseModel, synthesize
+            from sim_devices.motions import generate
+        except ImportError as exc:
+            print(f"motion synthesis unavailable ({exc}); using the analytic spinning signals", file=sys.stderr)
+        else:
+            motion = generate(args.motion, seconds=max(6.0, min(args.seconds or 30.0, 60.0)), seed=args.seed)
+            noise = NoiseModel.typical() if args.noise == "typical" else None
+            return synthesize(motion, noise=noise, rng=args.seed, sites=tuple(sites))
+    from sim_devices.devices import spinning_signals
+
+    return spinning_signals(sites, seconds=30.0)
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    from sim_devices.devices import INSOLE_PROTOCOLS, DeviceFaults, make_sim_device
+
+    site = "insoles" if args.protocol in INSOLE_PROTOCOLS else args.site
+    sites = ["l_foot", "r_foot"] if site == "insoles" else [site]
+    sig = _signals(args, sites)
+    disconnects = [(float(a), float(b)) for a, b in (x.split(":") for x in args.disconnect)]
+    faults = DeviceFaults(
+        loss_rate=args.loss, loss_burst=args.burst, corrupt_rate=args.corrupt, disconnects=disconnects, seed=args.seed
+    )
+    kw: dict[str, Any] = {}
+    if args.protocol in ("xbus", "bno08x-rvc") and args.link:
+        kw["link_path"] = args.link
+    if args.protocol == "xsens-can":
+        kw.update(interface=args.can_interface, channel=args.can_channel)
+    if args.protocol == "moticon-udp" and args.port:
+        kw["port"] = args.port
+    sim = make_sim_device(args.protocol, sig, site, faults=faults, **kw)
+    sim.start()
+    print(sim.url, flush=True)
+    if args.protocol == "xsens-can" and args.can_interface == "virtual":
+        print(
+            "note: python-can's virtual bus is per process; use --can-interface udp_multicast "
+            "(or socketcan with a vcan device) to reach another process",
+            file=sys.stderr,
+        )
+    try:
+        end = None if not args.seconds else time.monotonic() + args.seconds
+        while end is None or time.monotonic() < end:
+            time.sleep(0.2)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        sim.stop()
+    print(json.dumps({"url": sim.url, **sim.stats}), file=sys.stderr)
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("devices", help="list, probe and simulate IMU devices")
+    sub = p.add_subparsers(dest="devices_command", required=True)
+
+    pl = sub.add_parser("list", help="find serial, HID, USB and CAN devices we know how to open")
+    pl.add_argument("--json", action="store_true")
+    pl.set_defaults(func=cmd_list)
+
+    pp = sub.add_parser("probe", help="open a device URL, read for a while, report")
+    pp.add_argument("url", help="e.g. xbus:///dev/ttyUSB0?baud=115200")
+    pp.add_argument("--seconds", type=float, default=2.0)
+    pp.add_argument("--json", action="store_true")
+    pp.set_defaults(func=cmd_probe)
+
+    ps = sub.add_parser("simulate", help="run a simulated device; prints the URL to open")
+    ps.add_argument(
+        "--protocol", required=True, choices=["xbus", "bno08x-rvc", "xsens-can", "dualsense", "moticon-udp"]
+    )
+    ps.add_argument("--site", default="pelvis", help="sensor site whose signals are replayed")
+    ps.add_argument("--motion", default="walk", help="procedural motion kind, or 'spin' (analytic)")
+    ps.add_argument("--noise", choices=["none", "typical"], default="typical")
+    ps.add_argument("--seconds", type=float, default=0.0, help="stop after this long (0 = until Ctrl-C)")
+    ps.add_argument("--loss", type=float, default=0.0, help="probability per packet of a loss burst")
+    ps.add_argument("--burst", type=float, default=3.0, help="mean loss burst length, packets")
+    ps.add_argument("--corrupt", type=float, default=0.0, help="probability per packet of a flipped byte")
+    ps.add_argument(
+        "--disconnect", action="append", default=[], metavar="AT:FOR", help="unplug at AT s for FOR s (repeatable)"
+    )
+    ps.add_argument("--link", help="path of the serial port link to create (xbus, bno08x-rvc)")
+    ps.add_argument("--port", type=int, help="UDP port to send to (moticon-udp)")
+    ps.add_argument("--can-interface", default="virtual")
+    ps.add_argument("--can-channel", default="imucap")
+    ps.add_argument("--seed", type=int, default=0)
+    ps.set_defaults(func=cmd_simulate)

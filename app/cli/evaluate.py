@@ -1,0 +1,255 @@
+"""`imucap evaluate`: reconstruct motion files from synthesized sensor signals with the
+live poser and score the result against the truth (GA, LA, JPE, jitter, RE2/5/10).
+
+    imucap evaluate --data PATH... --sensors pelvis,head,l_wrist,r_wrist,l_shank,r_shank
+                    [--insoles] [--steps K] [--model diffusion|regressor|floor|PATH.pt] [--against SPEC]
+                    [--noise/--no-noise] [--inpaint-noise fresh|fixed|mean] [--limit N] [--seed S]
+                    [--threads N] --json
+                    [--report FILE.md] [--export-dir DIR]
+
+Signals carry the sensor noise model (white noise, bias, orientation error; calibrated,
+so no mounting/heading rotation) unless --no-noise. With --json, stdout holds exactly one
+JSON object (clips, frames, ga_deg, la_deg, jpe_cm, jitter_ratio, re2_m, re5_m, re10_m,
+model, sensors, insoles, steps, ...); progress goes to stderr. A metric that needs a
+longer clip than any given is null.
+
+--against SPEC scores a second model on the same clips, sensors and noise, and adds
+``against``: its figures and, for GA, LA and JPE, --model minus it with a percentile
+bootstrap interval over clips (a lead whose interval holds 0 is not settled by the clips).
+
+--report FILE.md also evaluates the standard table (6 sites, 6 sites + insoles, 3 sites
+pelvis+wrists, 2 sites shanks) x (diffusion, regressor, floor) and writes it as markdown;
+a model whose weights are missing gets a row saying so instead of stopping the table.
+Below it, the diffusion model's GA minus each baseline's on the same clips, with a bootstrap
+interval over clips, says which leads the clip sample settles (``comparisons`` in the JSON).
+--export-dir DIR writes <clip>.recon.bvh and <clip>.truth.bvh (20 Hz, metres, Y up; see
+app/export_bvh.py) for the main evaluation.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+import time
+from pathlib import Path
+
+from app.cli.train import NOISE_MODES
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("evaluate", help="score reconstructions of motion files from synthesized sensors",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--data", nargs="+", required=True, metavar="PATH", help="motion files or folders (BVH, AMC, npz)")
+    p.add_argument("--sensors", default="pelvis,head,l_wrist,r_wrist,l_shank,r_shank",
+                   help="comma separated sensor sites (default: the paper's 6)")
+    p.add_argument("--insoles", action="store_true", help="also observe the 4 foot contacts (pressure insoles)")
+    p.add_argument("--steps", default=None,
+                   help="diffusion steps: K (evenly spaced), 'paper' (10D list) or a list 1000,500,0; "
+                        "default: the model's own")
+    p.add_argument("--model", default="diffusion",
+                   help="diffusion | regressor | floor (shipped weights / baseline) or a model file PATH.pt")
+    p.add_argument("--noise", action=argparse.BooleanOptionalAction, default=True,
+                   help="sensor noise model on the synthesized signals (default on)")
+    p.add_argument("--inpaint-noise", choices=NOISE_MODES, default=None,
+                   help="diffusion only: how inpainting starts each frame (fresh draw, one fixed draw, or the "
+                        "prior's mean); default: the model file's own")
+    p.add_argument("--smoothing", action=argparse.BooleanOptionalAction, default=True,
+                   help="the poser's 1-Euro output filters (root, unmeasured orientations); --no-smoothing "
+                        "scores the raw per-frame reconstructions")
+    p.add_argument("--mirror", action=argparse.BooleanOptionalAction, default=None,
+                   help="average each denoiser answer with the answer for the mirror-image window "
+                        "(default: what the model file says)")
+    p.add_argument("--contact-detector", action=argparse.BooleanOptionalAction, default=True,
+                   help="contacts for the root correction from the shank contact detector when both shanks are "
+                        "measured (default); --no-contact-detector uses the model's own contact outputs")
+    p.add_argument("--stride-scale", action=argparse.BooleanOptionalAction, default=True,
+                   help="scale the root path by the shanks' inertial strides when both shanks are measured "
+                        "(inference/stride.py; default; NOTES.md 'Session 16')")
+    p.add_argument("--pelvis-odometry", action=argparse.BooleanOptionalAction, default=True,
+                   help="without both shanks, the root's walk from the pelvis sensor "
+                        "(inference/pelvis_odometry.py; default; NOTES.md 'Session 17'); --no-pelvis-odometry "
+                        "uses the model's own root displacement corrected by its contacts")
+    p.add_argument("--against", default=None, metavar="SPEC",
+                   help="also score this model (same forms as --model) on the same clips and sensors, and "
+                        "report --model minus it per metric with a bootstrap interval over clips")
+    p.add_argument("--repair-truth", action="store_true",
+                   help="put back feet the motion-capture solver broke (ankle past 90 deg) before synthesizing and "
+                        "scoring (inference.plausibility.repair_feet); off by default so figures stay comparable")
+    p.add_argument("--limit", type=int, default=None, help="only the first N motion files (sorted)")
+    p.add_argument("--seed", type=int, default=0, help="seed of sensor noise and inpainting noise")
+    # default 1: the live loop is one small model call per step, and with more threads two
+    # evaluations at once spin in OpenMP barriers (~15x slower, seen in session 2)
+    p.add_argument("--threads", type=int, default=1, help="torch threads (0 = torch's default)")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.add_argument("--report", type=Path, default=None, metavar="FILE.md",
+                   help="also write the markdown table over the standard sensor sets x models")
+    p.add_argument("--export-dir", type=Path, default=None, metavar="DIR",
+                   help="write <clip>.recon.bvh and <clip>.truth.bvh per clip")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(func=run)
+
+
+def _safe(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("_") or "clip"
+
+
+def _steps_label(poser_steps: list[int], kind: str) -> int:
+    """Model calls per frame: the step count for diffusion, 1 for the regressor, 0 for floor."""
+    if kind == "diffusion":
+        return len(poser_steps)
+    return 1 if kind == "regressor" else 0
+
+
+def run(args: argparse.Namespace) -> int:
+    import torch
+
+    from inference.body.skeleton import parse_sites
+    from inference.evaluation.runner import (
+        REPORT_MODELS,
+        REPORT_SETS,
+        compare_rows,
+        comparison_markdown,
+        evaluate_motions,
+        evaluation_noise,
+        load_motions,
+        report_markdown,
+    )
+    from inference.features.layout import FPS_MODEL
+    from inference.metrics.errors import paired_difference
+    from inference.model.diffusion import parse_steps
+    from inference.poser.poser import default_steps, mirror_for, noise_mode_for, resolve_model
+
+    if args.threads > 0:
+        torch.set_num_threads(args.threads)
+    sites = parse_sites(args.sensors)
+    if args.limit is not None and args.limit < 1:
+        raise ValueError("--limit must be at least 1")
+    steps = parse_steps(args.steps) if args.steps is not None else None
+    noise = evaluation_noise() if args.noise else None
+    progress = not args.no_progress
+    t0 = time.time()
+    motions = load_motions(args.data, args.limit)
+    print(f"evaluate: {len(motions)} clip(s) loaded", file=sys.stderr)
+    repaired = None
+    if args.repair_truth:
+        from inference.metrics.plausibility import repair_feet
+
+        fixes = [repair_feet(m) for m in motions]
+        motions = [m for m, _ in fixes]
+        repaired = {"clips": sum(r.changed > 0 for _, r in fixes), "twisted_frames": sum(r.twisted for _, r in fixes),
+                    "interpolated_frames": sum(r.interpolated for _, r in fixes),
+                    "left_broken_frames": sum(r.left_broken for _, r in fixes),
+                    "source_frames": sum(m.n_frames for m in motions)}
+        print(f"evaluate: feet repaired in {repaired['clips']} clip(s)", file=sys.stderr)
+
+    models: dict[str, object] = {}
+
+    def get_model(spec: str):
+        if spec not in models:
+            models[spec] = resolve_model(spec)
+        return models[spec]
+
+    def one(spec: str, set_sites, insoles: bool, keep: bool = False, label: str = ""):
+        model = get_model(spec)
+        kind = "floor" if model is None else model.kind
+        st = (steps if steps is not None else default_steps(model)) if kind == "diffusion" else []
+        summary, clips = evaluate_motions(motions, model, set_sites, insoles, st or None, noise, args.seed,
+                                          progress=progress, keep=keep, desc=f"{label or spec}",
+                                          smoothing=args.smoothing,
+                                          contact_detector="default" if args.contact_detector else None,
+                                          inpaint_noise=args.inpaint_noise, mirror=args.mirror,
+                                          stride_scale=args.stride_scale,
+                                          pelvis_odometry="default" if args.pelvis_odometry else None)
+        summary.update({
+            "model": str(spec), "kind": kind, "sensors": list(set_sites),
+            "insoles": insoles, "steps": _steps_label(st, kind), "step_list": st if kind == "diffusion" else None,
+            "noise": bool(noise is not None), "seed": args.seed, "smoothing": args.smoothing,
+            "inpaint_noise": noise_mode_for(model, args.inpaint_noise) if kind == "diffusion" else None,
+            "contact_detector": args.contact_detector and kind != "floor",
+            "mirror": mirror_for(model, args.mirror),
+            "stride_scale": args.stride_scale and kind != "floor",
+            "pelvis_odometry": args.pelvis_odometry and kind != "floor",
+        })
+        return summary, clips
+
+    keep = args.export_dir is not None
+    result, clips = one(args.model, sites, args.insoles, keep=keep, label=f"{args.model} {','.join(sites)}")
+    result["per_clip"] = [{"name": c.name, **c.metrics.summary()} for c in clips]
+    result["truth_repaired"] = repaired
+
+    if args.against is not None:
+        other, other_clips = one(args.against, sites, args.insoles, label=f"{args.against} {','.join(sites)}")
+        mine, theirs = [c.metrics for c in clips], [c.metrics for c in other_clips]
+        diffs = {m: paired_difference(mine, theirs, m, seed=args.seed) for m in ("ga_deg", "la_deg", "jpe_cm")}
+        result["against"] = {
+            **{k: other[k] for k in ("model", "kind", "steps", "mirror", "ga_deg", "la_deg", "jpe_cm",
+                                     "jitter_ratio", "re2_m", "re5_m", "re10_m")},
+            "differences": {m: d.as_dict() for m, d in diffs.items()},
+            "per_clip": [{"name": c.name, **c.metrics.summary()} for c in other_clips],
+        }
+
+    if args.export_dir is not None:
+        from app.export.bvh import write_bvh
+
+        out = args.export_dir
+        out.mkdir(parents=True, exist_ok=True)
+        for c in clips:
+            base = _safe(c.name)
+            write_bvh(out / f"{base}.recon.bvh", c.recon.rot, c.recon.root, c.inp.body, FPS_MODEL)
+            write_bvh(out / f"{base}.truth.bvh", c.inp.rot, c.inp.root, c.inp.body, FPS_MODEL)
+        result["export_dir"] = str(out)
+
+    if args.report is not None:
+        rows = []
+        per_clip: dict[tuple[str, str], list] = {}
+        for label, set_sites, insoles in REPORT_SETS:
+            for spec in REPORT_MODELS:
+                try:
+                    s, set_clips = one(spec, list(set_sites), insoles, label=f"{spec} {label}")
+                except FileNotFoundError as exc:
+                    print(f"evaluate: report row {label} / {spec} skipped: {exc}", file=sys.stderr)
+                    rows.append({"label": label, "model": f"{spec} (weights missing)", "steps": "-", "clips": 0,
+                                 "frames": 0, **{k: None for k in ("ga_deg", "la_deg", "jpe_cm", "jitter_ratio",
+                                                                    "re2_m", "re5_m", "re10_m")}})
+                    continue
+                rows.append({"label": label, **s})
+                per_clip[label, spec] = [c.metrics for c in set_clips]
+        comparisons = compare_rows(per_clip, seed=args.seed)
+        noise_txt = "with the sensor noise model" if noise is not None else "without sensor noise"
+        text = report_markdown(rows) + ("\n" + comparison_markdown(comparisons) if comparisons else "") + (
+            f"\n{len(motions)} clip(s) from {', '.join(map(str, args.data))}; signals synthesized {noise_txt}; "
+            f"seed {args.seed}; live poser frame by frame at 20 Hz; mirror averaging: "
+            f"{', '.join(sorted({str(r['model']) for r in rows if r.get('mirror')})) or 'none'}"
+            f"{'; broken feet in the truth repaired (--repair-truth)' if repaired else ''}.\n\n"
+            f"Reproduce: `imucap evaluate --data {' '.join(map(str, args.data))}"
+            f"{' --limit ' + str(args.limit) if args.limit else ''}{' --repair-truth' if repaired else ''}"
+            f" --json --report {args.report}`\n"
+        )
+        args.report.parent.mkdir(parents=True, exist_ok=True)
+        args.report.write_text(text)
+        result["report"] = {"path": str(args.report), "rows": rows, "comparisons": comparisons}
+
+    result["seconds"] = round(time.time() - t0, 2)
+    if args.json:
+        print(json.dumps(result))
+    else:
+        def f(v, nd=2):
+            return "n/a" if v is None else f"{v:.{nd}f}"
+
+        print(f"{result['clips']} clips, {result['frames']} frames, model {result['model']}, "
+              f"sensors {','.join(sites)}{' + insoles' if args.insoles else ''}, steps {result['steps']}")
+        print(f"GA {f(result['ga_deg'], 1)} deg  LA {f(result['la_deg'], 1)} deg  JPE {f(result['jpe_cm'], 1)} cm  "
+              f"jitter {f(result['jitter_ratio'])}  RE2 {f(result['re2_m'])} m  RE5 {f(result['re5_m'])} m  "
+              f"RE10 {f(result['re10_m'])} m")
+        if args.against is not None:
+            a = result["against"]
+            for m, d in a["differences"].items():
+                print(f"{m} minus {a['model']}: {d['difference']:+.2f} "
+                      f"[{d['low']:+.2f}, {d['high']:+.2f}] ({round(100 * d['confidence'])} % over clips; "
+                      f"lower on {d['model_lower']} of {result['clips']} clips)")
+    return 0
+
+
+__all__ = ["register", "run"]

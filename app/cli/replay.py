@@ -1,0 +1,229 @@
+"""`imucap replay` and `imucap export`: the researcher's workflow for recorded sessions
+(`imucap demo --record FILE.h5`, the GUI's record button, or any ``Recorder``).
+
+    imucap replay REC.h5 [--model diffusion|regressor|floor|PATH.pt] [--sensors SITE,...]
+                  [--insoles/--no-insoles] [--steps K] [--seed S] [--threads N] [--height M]
+                  [--out FILE.{bvh,csv,h5,mot}]... [--json] [--no-progress]
+    imucap export REC.h5 --out FILE.{bvh,csv,h5,mot} [--out ...] [--height M] [--json]
+
+``replay`` re-runs the poser over the recording's raw sensor stream with the recorded
+calibration(s): another model or step count, or only some of the recorded sensors (the
+others are inpainted, as with a smaller suit live). Progress goes to stderr; ``--json``
+prints one JSON object on stdout (frames, duration_s, sensors, insoles, model, steps,
+vs_recorded_ga_deg = how far the re-run is from the live reconstruction, outputs ...).
+``--out`` writes the re-run poses (repeat it for several formats).
+
+``export`` writes the poses stored in the recording (the live reconstruction).
+
+Formats by extension: .bvh (skeleton, metres, Y up), .csv (one row per 20 Hz frame),
+.h5/.hdf5 (arrays + units and provenance), .mot (OpenSim joint angles, Rajagopal-model
+coordinates). See app/exporters.py and the export_*.py modules for the exact layouts.
+The subject's body comes from the recording (bone offsets or height); ``--height``
+overrides it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+OUT_HELP = "write the poses to FILE; format by extension: .bvh, .csv, .h5/.hdf5, .mot (repeatable)"
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("replay", help="re-run the poser over a recorded session (other model, sensor subset)",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("recording", type=Path, metavar="REC.h5", help="a session recording")
+    p.add_argument("--model", default="diffusion", help="diffusion | regressor | floor | PATH.pt (default diffusion)")
+    p.add_argument("--sensors", default=None,
+                   help="comma separated recorded sites to use (default: all the recording has)")
+    p.add_argument("--insoles", action=argparse.BooleanOptionalAction, default=None,
+                   help="use the insoles' contacts (default: as the session did)")
+    p.add_argument("--steps", default=None,
+                   help="diffusion steps: K, 'paper', '10D:K' or a list (default: the model's)")
+    p.add_argument("--mirror", action=argparse.BooleanOptionalAction, default=None,
+                   help="mirror averaging (default: as recorded, else the model file's own)")
+    p.add_argument("--stride-scale", action=argparse.BooleanOptionalAction, default=None,
+                   help="scale the root path by the shanks' inertial strides (default: as recorded; sessions "
+                        "recorded before it existed ran without it)")
+    p.add_argument("--pelvis-odometry", action=argparse.BooleanOptionalAction, default=None,
+                   help="without both shanks, the root's walk from the pelvis sensor (default: as recorded; "
+                        "sessions recorded before it existed ran without it)")
+    p.add_argument("--held-out", action="store_true",
+                   help="with --sensors a subset: replay again with every recorded sensor and report, per site "
+                        "left out, the mean angle between its reconstructed segment and what its sensor measured")
+    p.add_argument("--seed", type=int, default=0, help="seed of the inpainting noise (replays are reproducible)")
+    p.add_argument("--threads", type=int, default=1, help="torch threads (0 = torch's default)")
+    p.add_argument("--height", type=float, default=None, help="subject height in m (default: from the recording)")
+    p.add_argument("--out", action="append", type=Path, default=[], metavar="FILE", help=OUT_HELP)
+    p.add_argument("--json", action="store_true", help="print one JSON summary on stdout")
+    p.add_argument("--no-progress", action="store_true", help="no progress lines on stderr")
+    p.set_defaults(func=run_replay)
+
+    e = subparsers.add_parser("export", help="write a recording's reconstruction as BVH, CSV, HDF5 or OpenSim .mot",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    e.add_argument("recording", type=Path, metavar="REC.h5", help="a session recording")
+    e.add_argument("--out", action="append", type=Path, required=True, metavar="FILE", help=OUT_HELP)
+    e.add_argument("--height", type=float, default=None, help="subject height in m (default: from the recording)")
+    e.add_argument("--json", action="store_true", help="print one JSON summary on stdout")
+    e.set_defaults(func=run_export)
+
+
+# ---------------------------------------------------------------------------- helpers
+
+
+def _open(path: Path):
+    from app.recording import read_recording
+
+    if not path.exists():
+        raise FileNotFoundError(f"recording {path} not found")
+    return read_recording(path)
+
+
+def _check_outs(outs: list[Path]) -> None:
+    from app.export.formats import check_export_path
+
+    for o in outs:
+        check_export_path(o)
+
+
+def _model_label(spec: str, model: Any) -> str:
+    from inference.poser.poser import DEFAULT_WEIGHTS
+
+    if model is None:
+        return "floor"
+    c = model.config
+    where = DEFAULT_WEIGHTS.get(spec, spec)
+    return f"{model.kind} {c.layers}/{c.d_model}/{c.ff} ({Path(str(where)).name})"
+
+
+def _emit(summary: dict[str, Any], as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(summary))
+    else:
+        for k, v in summary.items():
+            print(f"{k}: {v}")
+    sys.stdout.flush()
+
+
+class _Progress:
+    """'replay: 40% (2400/6000 hub frames, 760 poses)' on stderr every 10%."""
+
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled
+        self.next = 10
+
+    def __call__(self, done: int, total: int, poses: int) -> None:
+        if not self.enabled or total <= 0:
+            return
+        pct = 100 * done // total
+        if pct >= self.next or done == total:
+            print(f"replay: {pct}% ({done}/{total} hub frames, {poses} poses)", file=sys.stderr, flush=True)
+            self.next = (pct // 10 + 1) * 10
+
+
+# ---------------------------------------------------------------------------- commands
+
+
+def run_replay(args: argparse.Namespace) -> int:
+    from app.export.formats import body_for_recording, export_motion, motion_from_poses
+    from app.replay import compare_to_recorded, held_out_errors, replay_recording, resolve_insoles, resolve_sensors
+    from inference.poser.poser import Poser, resolve_model
+
+    _check_outs(args.out)
+    rec = _open(args.recording)
+    sensors = resolve_sensors(rec, args.sensors)
+    insoles = resolve_insoles(rec, args.insoles)
+    body, note = body_for_recording(rec.metadata, args.height)
+    if note:
+        print(f"replay: warning: {note}", file=sys.stderr)
+    if args.threads > 0:
+        import torch
+
+        torch.set_num_threads(args.threads)
+    model = resolve_model(args.model)
+    # a session recorded before the model file's defaults changed replays as it ran
+    mirror = args.mirror if args.mirror is not None else rec.metadata.get("mirror")
+    stride = args.stride_scale if args.stride_scale is not None else bool(rec.metadata.get("stride_scale", False))
+    odometry = (args.pelvis_odometry if args.pelvis_odometry is not None
+                else bool(rec.metadata.get("pelvis_odometry", False)))
+    setting = dict(steps=args.steps, seed=args.seed, mirror=mirror, stride_scale=stride,
+                   pelvis_odometry="default" if odometry else None)
+    poser = Poser(model, body=body, **setting)
+    label = _model_label(args.model, model)
+    steps = len(poser.steps) if poser.kind == "diffusion" else (1 if poser.kind == "regressor" else 0)
+    if not args.no_progress:
+        print(f"replay: {args.recording} ({rec.n_frames} hub frames, {len(rec.calibrations)} calibration(s)), "
+              f"sensors {','.join(sensors)}{' + insoles' if insoles else ''}, model {label}, {steps} step(s)",
+              file=sys.stderr, flush=True)
+    t0 = time.perf_counter()
+    res = replay_recording(rec, poser, sensors=sensors, insoles=insoles, progress=_Progress(not args.no_progress))
+    held_out = None
+    left_out = [s for s in rec.sites if s not in res.sensors]
+    if args.held_out:
+        if not left_out:
+            raise ValueError("--held-out needs --sensors to leave out some of the recorded sensors "
+                             f"({', '.join(rec.sites)})")
+        full = Poser(model, body=body, **setting)
+        held_out = held_out_errors(res.poses, replay_recording(rec, full, sensors=rec.sites, insoles=insoles).poses,
+                                   left_out)
+    seconds = time.perf_counter() - t0
+    outputs = []
+    motion = None
+    if args.out:
+        motion = motion_from_poses(res.poses, body, rec, meta={
+            "model": label, "steps": steps, "sensors": list(res.sensors), "insoles": res.insoles,
+            "what": f"imucap replay (seed {args.seed})", "step_list": list(poser.steps), "mirror": poser.mirror,
+            "stride_scale": poser.stride is not None, "pelvis_odometry": poser.pelvis_odometry is not None})
+        for o in args.out:
+            outputs.append(str(export_motion(o, motion)))
+            if not args.no_progress:
+                print(f"replay: wrote {o}", file=sys.stderr)
+    n = len(res.poses)
+    span = (res.poses[-1].t - res.poses[0].t + 0.05) if n else 0.0
+    summary: dict[str, Any] = {
+        "recording": str(args.recording), "frames": n, "duration_s": round(span, 3),
+        "sensors": list(res.sensors), "insoles": res.insoles, "model": label, "kind": poser.kind,
+        "steps": steps, "step_list": list(poser.steps) if poser.kind == "diffusion" else None, "seed": args.seed,
+        "mirror": poser.mirror, "stride_scale": poser.stride is not None,
+        "pelvis_odometry": poser.pelvis_odometry is not None,
+        "recorded_sensors": list(rec.sites), "recorded_model": rec.metadata.get("model"),
+        "calibrations": res.calibrations_used, "hub_frames": res.hub_frames,
+        "frames_filled": res.stats.get("frames_filled"), "resampler_restarts": res.stats.get("resampler_restarts"),
+        "step_p50_ms": res.stats.get("step_p50_ms"), "body_height_m": round(float(body.height), 3),
+        **compare_to_recorded(rec, res.poses),
+        **({"held_out": held_out} if held_out is not None else {}),
+        "outputs": outputs, "seconds": round(seconds, 2),
+    }
+    if note:
+        summary["warning"] = note
+    _emit(summary, args.json)
+    return 0
+
+
+def run_export(args: argparse.Namespace) -> int:
+    from app.export.formats import body_for_recording, export_motion, motion_from_recording
+
+    _check_outs(args.out)
+    rec = _open(args.recording)
+    body, note = body_for_recording(rec.metadata, args.height)
+    if note:
+        print(f"export: warning: {note}", file=sys.stderr)
+    motion = motion_from_recording(rec, body)
+    outputs = [str(export_motion(o, motion)) for o in args.out]
+    summary: dict[str, Any] = {
+        "recording": str(args.recording), "frames": motion.n_frames, "duration_s": round(motion.duration, 3),
+        "gaps": motion.gaps(), "model": motion.meta.get("model"), "sensors": motion.meta.get("sensors"),
+        "insoles": motion.meta.get("insoles"), "body_height_m": round(float(body.height), 3), "outputs": outputs,
+    }
+    if note:
+        summary["warning"] = note
+    _emit(summary, args.json)
+    return 0
+
+
+__all__ = ["register", "run_replay", "run_export"]

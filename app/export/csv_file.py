@@ -1,0 +1,79 @@
+"""Write a reconstructed motion as CSV: the format anyone can open (spreadsheets, pandas,
+MATLAB's readtable, R) without knowing our code.
+
+One row per 20 Hz frame, comma separated, one header row of column names, no comments
+(so every reader takes the header as names). Columns, in order:
+
+- ``time_s``: seconds since the recording's first raw frame;
+- ``root_x_m, root_y_m, root_z_m``: pelvis joint in the world frame (right-handed, Z up,
+  X = the subject's forward at calibration; metres);
+- per segment, in DESIGN.md order (pelvis, l_thigh, r_thigh, spine1, ...):
+  ``<segment>_qw, <segment>_qx, <segment>_qy, <segment>_qz``: global orientation R_WB
+  (segment -> world) as a unit quaternion (w, x, y, z). A quaternion and its negative are
+  the same rotation; we keep w >= 0 on the first frame and then the sign closest to the
+  previous frame, so columns are continuous in time (plots and filters behave);
+- per segment: ``<segment>_joint_x_m, _y_m, _z_m``: world position of the joint where the
+  segment starts (the pelvis joint equals the root);
+- ``contact_l_heel, contact_l_toe, contact_r_heel, contact_r_toe``: 1 if that point is
+  on the ground, else 0.
+
+24 x 4 + 24 x 3 + 8 = 176 columns. Numbers use 9 significant digits (well below the
+reconstruction's own error, and a quaternion round trip stays within 1e-8).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from app.export.formats import ExportMotion, atomic_target
+from inference.body.rotations import matrix_to_quat
+from inference.body.skeleton import CONTACTS, SEGMENTS
+
+
+def csv_columns() -> list[str]:
+    """The header row (see the module docstring)."""
+    cols = ["time_s", "root_x_m", "root_y_m", "root_z_m"]
+    cols += [f"{s}_q{c}" for s in SEGMENTS for c in "wxyz"]
+    cols += [f"{s}_joint_{c}_m" for s in SEGMENTS for c in "xyz"]
+    cols += [f"contact_{c}" for c in CONTACTS]
+    return cols
+
+
+def continuous_quaternions(rot: np.ndarray) -> np.ndarray:
+    """(T, S, 4) quaternions of (T, S, 3, 3) rotations, w >= 0 at the first frame and each
+    later one on the hemisphere of its predecessor (no sign flips between frames)."""
+    q = matrix_to_quat(np.asarray(rot, dtype=np.float64))
+    if len(q) == 0:
+        return q
+    q[0] *= np.where(q[0, :, :1] < 0, -1.0, 1.0)
+    for t in range(1, len(q)):
+        flip = np.sum(q[t] * q[t - 1], axis=-1, keepdims=True) < 0
+        q[t] = np.where(flip, -q[t], q[t])
+    return q
+
+
+def csv_table(m: ExportMotion) -> np.ndarray:
+    """(T, 176) numbers in ``csv_columns()`` order."""
+    T = m.n_frames
+    q = continuous_quaternions(m.rot).reshape(T, -1)
+    return np.concatenate([m.time[:, None], m.root, q, m.joints.reshape(T, -1),
+                           m.contacts.astype(np.float64)], axis=1)
+
+
+def write_csv(path: str | os.PathLike, m: ExportMotion) -> Path:
+    """Write ``m`` as CSV (module docstring); returns the path. Written to a temporary name
+    and renamed, so a crash never leaves a half-written file."""
+    path = Path(path)
+    tmp = atomic_target(path)
+    table = csv_table(m)
+    n_float = table.shape[1] - 4
+    fmt = ["%.9g"] * n_float + ["%d"] * 4
+    np.savetxt(tmp, table, delimiter=",", fmt=fmt, header=",".join(csv_columns()), comments="")
+    os.replace(tmp, path)
+    return path
+
+
+__all__ = ["csv_columns", "csv_table", "continuous_quaternions", "write_csv"]

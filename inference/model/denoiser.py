@@ -1,0 +1,342 @@
+"""The DiffusionPoser denoiser ``f(z_t, t, h) -> x0`` and its size configuration.
+
+Architecture (paper, Figure 2): a transformer *decoder*. The diffusion-step embedding
+and the body-height embedding are two tokens that serve as the cross-attention memory
+AND are prepended to the 61 frame tokens for self-attention. The output head reads
+only the frame tokens and predicts the clean window x0 (normalised features).
+
+The paper's model does not take the observation mask: inpainting (diffusion.inpaint) is
+what makes one model serve every sensor subset. ``ModelConfig.mask_input`` adds the mask as
+190 more input channels of each frame token (still one model for every subset, trained on
+random masks); why it is the shipped choice is in NOTES.md ("Session 2").
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+import warnings
+from dataclasses import asdict, dataclass, fields
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from inference.features.layout import N_FEATURES, WINDOW
+
+# Height is fed as a standardised scalar; these are typical adult statures (metres).
+HEIGHT_MEAN = 1.70
+HEIGHT_STD = 0.10
+
+
+@dataclass
+class ModelConfig:
+    """Size of a denoiser or regressor.
+
+    The paper's model is ``ModelConfig.paper()`` (8 layers / 512 / FF 2048 / 8 heads).
+    The default stays 4/256/1024 (other code and tests use it as "the default model");
+    the CPU real-time size measured with benchmarks/bench_model.py is 4/128/512 (NOTES.md,
+    "Model (issue 3)"): ~11 vs ~3.7 ms per model call on one core of this machine. The
+    shipped model's size comes from its model file, not from this default.
+    """
+
+    layers: int = 4
+    d_model: int = 128
+    heads: int = 4
+    ff: int = 512
+    dropout: float = 0.1
+    window: int = WINDOW
+    features: int = N_FEATURES
+    # x0 = sqrt(ab_t) z + sqrt(1 - ab_t) F(z, t, h) instead of x0 = F(z, t, h): the network
+    # learns the residual (v-prediction in disguise), so at low noise the input passes
+    # through unchanged instead of having to be re-learned. Without it, a CPU-sized
+    # training budget left the model blurring even a clean input (18 deg at t = 0; NOTES).
+    skip: bool = False
+    # the frame tokens also read the per-feature known/unknown mask. Without it a model
+    # trained by replacement (TrainConfig.cond_prob) must guess from the values alone
+    # whether an entry is a clean measurement or noise, which a CPU budget did not teach.
+    mask_input: bool = False
+    T: int = 1000
+
+    @classmethod
+    def paper(cls) -> ModelConfig:
+        return cls(layers=8, d_model=512, heads=8, ff=2048)
+
+    @classmethod
+    def tiny(cls) -> ModelConfig:
+        """For tests and smoke runs only."""
+        return cls(layers=1, d_model=32, heads=2, ff=64, dropout=0.0)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> ModelConfig:
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in d.items() if k in names})
+
+
+def timestep_embedding(t: Tensor, dim: int, max_period: float = 10000.0) -> Tensor:
+    """Sinusoidal embedding of integer diffusion levels, (B,) -> (B, dim)."""
+    half = dim // 2
+    freqs = torch.exp(-math.log(max_period) * torch.arange(half, dtype=torch.float32, device=t.device) / half)
+    args = t.float()[:, None] * freqs[None]
+    emb = torch.cat([torch.cos(args), torch.sin(args)], dim=-1)
+    if dim % 2:
+        emb = torch.cat([emb, torch.zeros_like(emb[:, :1])], dim=-1)
+    return emb
+
+
+class Denoiser(nn.Module):
+    """Transformer-decoder denoiser; input and output (B, N, F) normalised features."""
+
+    def __init__(self, config: ModelConfig | None = None) -> None:
+        super().__init__()
+        self.config = cfg = config or ModelConfig()
+        d = cfg.d_model
+        self.in_proj = nn.Linear(cfg.features * (2 if cfg.mask_input else 1), d)
+        # learned positions for [step, height, frame_0 .. frame_{N-1}]
+        self.pos = nn.Parameter(torch.zeros(1, cfg.window + 2, d))
+        nn.init.normal_(self.pos, std=0.02)
+        self.step_mlp = nn.Sequential(nn.Linear(d, d), nn.SiLU(), nn.Linear(d, d))
+        self.height_mlp = nn.Sequential(nn.Linear(1, d), nn.SiLU(), nn.Linear(d, d))
+        layer = nn.TransformerDecoderLayer(
+            d_model=d, nhead=cfg.heads, dim_feedforward=cfg.ff, dropout=cfg.dropout,
+            activation="gelu", batch_first=True, norm_first=True,
+        )
+        self.decoder = nn.TransformerDecoder(layer, num_layers=cfg.layers)
+        self.norm = nn.LayerNorm(d)
+        self.out_proj = nn.Linear(d, cfg.features)
+        if cfg.skip:
+            from inference.model.diffusion import cosine_alpha_bar
+
+            ab = cosine_alpha_bar(cfg.T).float()
+            self.register_buffer("skip_a", ab.sqrt(), persistent=False)
+            self.register_buffer("skip_b", (1.0 - ab).clamp(min=0.0).sqrt(), persistent=False)
+
+    def cond_tokens(self, t: Tensor, height: Tensor) -> Tensor:
+        """(B, 2, d): the step token and the height token."""
+        d = self.config.d_model
+        dtype = self.pos.dtype
+        step = self.step_mlp(timestep_embedding(t, d).to(dtype))
+        h = ((height.to(dtype) - HEIGHT_MEAN) / HEIGHT_STD)[:, None]
+        return torch.stack([step, self.height_mlp(h)], dim=1)
+
+    def forward(self, z: Tensor, t: Tensor, height: Tensor, mask: Tensor | None = None) -> Tensor:
+        """z (B, N, F) noised window, t (B,) int levels, height (B,) metres -> x0 (B, N, F).
+        mask (B, N, F) bool, True = known: read only by ``mask_input`` models (None there
+        means nothing is known: unconditional generation)."""
+        n = z.shape[1]
+        cond = self.cond_tokens(t, height)
+        inp = z
+        if self.config.mask_input:
+            m = torch.zeros_like(z) if mask is None else mask.to(z.dtype)
+            inp = torch.cat([z, m], dim=-1)
+        tokens = torch.cat([cond, self.in_proj(inp)], dim=1) + self.pos[:, : n + 2]
+        if self.training or torch.is_grad_enabled():
+            h = self.decoder(tokens, cond)
+        else:
+            h = self._lean_decoder(tokens, cond)
+        out = self.out_proj(self.norm(h[:, 2:]))
+        if self.config.skip:
+            a = self.skip_a[t].to(out.dtype)[:, None, None]
+            b = self.skip_b[t].to(out.dtype)[:, None, None]
+            out = a * z.to(out.dtype) + b * out
+        return out
+
+    def _lean_decoder(self, x: Tensor, mem: Tensor) -> Tensor:
+        """The decoder stack in eval mode, written out with the layers' own weights.
+
+        Same maths as ``nn.TransformerDecoder`` with norm_first layers (a test pins it),
+        but about half the per-call time for live-size models on CPU: nn.MultiheadAttention
+        spends more time in argument checks and reshapes than in arithmetic for a
+        63-token window, and the live loop calls the model K times per 50 ms frame.
+        """
+        B, L, d = x.shape
+        heads = self.config.heads
+        hd = d // heads
+        for layer in self.decoder.layers:
+            sa, ca = layer.self_attn, layer.multihead_attn
+            # self-attention over [step, height, frames]
+            y = F.layer_norm(x, (d,), layer.norm1.weight, layer.norm1.bias, layer.norm1.eps)
+            qkv = F.linear(y, sa.in_proj_weight, sa.in_proj_bias).view(B, L, 3, heads, hd).permute(2, 0, 3, 1, 4)
+            a = F.scaled_dot_product_attention(qkv[0], qkv[1], qkv[2])
+            x = x + F.linear(a.transpose(1, 2).reshape(B, L, d), sa.out_proj.weight, sa.out_proj.bias)
+            # cross-attention to the two memory tokens
+            y = F.layer_norm(x, (d,), layer.norm2.weight, layer.norm2.bias, layer.norm2.eps)
+            w, b = ca.in_proj_weight, ca.in_proj_bias
+            q = F.linear(y, w[:d], b[:d]).view(B, L, heads, hd).transpose(1, 2)
+            kv = F.linear(mem, w[d:], b[d:]).view(B, -1, 2, heads, hd).permute(2, 0, 3, 1, 4)
+            a = F.scaled_dot_product_attention(q, kv[0], kv[1])
+            x = x + F.linear(a.transpose(1, 2).reshape(B, L, d), ca.out_proj.weight, ca.out_proj.bias)
+            # feed-forward
+            y = F.layer_norm(x, (d,), layer.norm3.weight, layer.norm3.bias, layer.norm3.eps)
+            x = x + layer.linear2(F.gelu(layer.linear1(y)))
+        return x
+
+
+def freeze_for_cpu(model: nn.Module, batch: int = 1, window: int | None = None) -> nn.Module:
+    """TorchScript trace + freeze of a Denoiser for one fixed input shape (the live loop's
+    (1, 61, 190)): same outputs, ~25-30% less time per call on CPU for live-size models
+    (benchmarks/bench_model.py; int8 dynamic quantisation, bfloat16 and torch.compile
+    bought nothing at these sizes). The result only accepts that shape; call it exactly
+    like the model: ``f(z, t, height)``, or ``f(z, t, height, mask)`` for ``mask_input``."""
+    model = model.eval()
+    cfg = model.config
+    n = window or cfg.window
+    example = (torch.zeros(batch, n, cfg.features), torch.zeros(batch, dtype=torch.long), torch.full((batch,), 1.7))
+    if cfg.mask_input:
+        example = (*example, torch.ones(batch, n, cfg.features, dtype=torch.bool))
+    with torch.inference_mode(False), torch.no_grad(), warnings.catch_warnings():
+        # TorchScript is deprecated in favour of torch.compile, which here compiles for
+        # ~40 s and then runs no faster than eager (NOTES.md); keep the lever that works
+        warnings.simplefilter("ignore", DeprecationWarning)
+        traced = torch.jit.trace(model, example, check_trace=False)
+        return torch.jit.freeze(traced)
+
+
+def deepened_state_dict(state: dict[str, Tensor], model: nn.Module) -> dict[str, Tensor]:
+    """``model``'s state with a shallower trained model of the same width in its first
+    layers and every extra layer an exact identity (the outputs of its attention and
+    feed-forward blocks zeroed, which pre-norm residual layers turn into a pass-through).
+
+    The deeper model starts with the trained one's outputs and its new layers learn from
+    there: more capacity for a fine-tune without paying for training from scratch.
+    """
+    own = model.state_dict()
+    unknown = set(state) - set(own)
+    if unknown:
+        raise ValueError(f"the trained state has parameters this model lacks: {sorted(unknown)[:3]}")
+    out = {}
+    for k, v in own.items():
+        if k in state:
+            if state[k].shape != v.shape:
+                raise ValueError(f"{k}: trained shape {tuple(state[k].shape)} != {tuple(v.shape)} (width differs)")
+            out[k] = state[k].clone()
+        elif k.startswith("decoder.layers.") and k.endswith(
+                ("self_attn.out_proj.weight", "self_attn.out_proj.bias", "multihead_attn.out_proj.weight",
+                 "multihead_attn.out_proj.bias", "linear2.weight", "linear2.bias")):
+            out[k] = torch.zeros_like(v)
+        elif k.startswith("decoder.layers."):
+            out[k] = v.clone()
+        else:
+            raise ValueError(f"{k}: missing from the trained state")
+    return out
+
+
+def count_parameters(model: nn.Module) -> int:
+    return sum(p.numel() for p in model.parameters())
+
+
+# ----------------------------------------------------------------------- model files
+
+MODEL_KINDS = ("diffusion", "regressor")
+MODEL_FORMAT = "imucap-model-v1"
+
+
+def build_model(kind: str, config: ModelConfig | None = None) -> nn.Module:
+    """A fresh Denoiser ("diffusion") or Regressor ("regressor")."""
+    if kind == "diffusion":
+        return Denoiser(config)
+    if kind == "regressor":
+        from inference.model.regressor import Regressor
+
+        return Regressor(config)
+    raise ValueError(f"unknown model kind {kind!r}; choose one of {', '.join(MODEL_KINDS)}")
+
+
+@dataclass
+class LoadedModel:
+    """A model ready for inference plus what it needs around it: the feature normaliser
+    statistics (the network works on normalised features) and its provenance."""
+
+    model: nn.Module
+    kind: str
+    config: ModelConfig
+    norm_mean: np.ndarray  # (F,) float32
+    norm_std: np.ndarray  # (F,) float32
+    step: int = 0
+    meta: dict | None = None
+
+    def normalize(self, x: Tensor) -> Tensor:
+        mean = torch.as_tensor(self.norm_mean, dtype=x.dtype)
+        return (x - mean) / torch.as_tensor(self.norm_std, dtype=x.dtype)
+
+    def denormalize(self, x: Tensor) -> Tensor:
+        mean = torch.as_tensor(self.norm_mean, dtype=x.dtype)
+        return x * torch.as_tensor(self.norm_std, dtype=x.dtype) + mean
+
+
+def save_model(path: str | os.PathLike, model: nn.Module, kind: str, norm_mean: np.ndarray,
+               norm_std: np.ndarray, step: int = 0, meta: dict | None = None, fp16: bool = False) -> None:
+    """Write an inference model file (weights only, no optimizer), atomically.
+
+    ``fp16`` halves the file (shipping weights); they are cast back to float32 on load
+    because CPU inference in half precision is slower, not faster.
+    """
+    sd = {k: (v.half() if fp16 and v.is_floating_point() else v).detach().cpu().clone()
+          for k, v in model.state_dict().items()}
+    obj = {
+        "format": MODEL_FORMAT, "kind": kind, "model_config": model.config.to_dict(), "state_dict": sd,
+        "norm_mean": np.asarray(norm_mean, np.float32), "norm_std": np.asarray(norm_std, np.float32),
+        "step": int(step), "meta": meta or {},
+    }
+    atomic_torch_save(obj, path)
+
+
+def retag_model(path: str | os.PathLike, dest: str | os.PathLike, meta: dict) -> None:
+    """Write model file ``path`` to ``dest`` with ``meta`` merged into its metadata (the
+    poser defaults it carries) and every tensor as it was, bit for bit: a shipped file's
+    defaults can change without its training run at hand."""
+    obj = torch.load(path, map_location="cpu", weights_only=False)
+    if not isinstance(obj, dict) or obj.get("format") != MODEL_FORMAT or "state_dict" not in obj:
+        raise ValueError(f"{path} is not an imucap model file (a training checkpoint exports with --out RUN)")
+    obj["meta"] = {**(obj.get("meta") or {}), **meta}
+    atomic_torch_save(obj, dest)
+
+
+def load_model(path: str | os.PathLike, use_ema: bool = True) -> LoadedModel:
+    """Load an inference model file or a training checkpoint (its EMA weights by default),
+    in eval mode, float32, on the CPU."""
+    obj = torch.load(path, map_location="cpu", weights_only=False)
+    if not isinstance(obj, dict) or "model_config" not in obj:
+        raise ValueError(f"{path} is not an imucap model file or training checkpoint")
+    kind = obj["kind"]
+    cfg = ModelConfig.from_dict(obj["model_config"])
+    model = build_model(kind, cfg)
+    if "state_dict" in obj:
+        sd = obj["state_dict"]
+    else:
+        sd = obj["ema"] if use_ema and obj.get("ema") is not None else obj["model"]
+    model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in sd.items()})
+    model.eval()
+    return LoadedModel(model=model, kind=kind, config=cfg, norm_mean=np.asarray(obj["norm_mean"], np.float32),
+                       norm_std=np.asarray(obj["norm_std"], np.float32), step=int(obj.get("step", 0)),
+                       meta=obj.get("meta"))
+
+
+def atomic_torch_save(obj: object, path: str | os.PathLike) -> None:
+    """torch.save to a temporary file in the same directory, fsync, then os.replace, so a
+    crash or kill mid-write never leaves a truncated file under the final name."""
+    path = os.fspath(path)
+    d = os.path.dirname(os.path.abspath(path))
+    os.makedirs(d, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".pt", dir=d)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            torch.save(obj, f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+__all__ = [
+    "ModelConfig", "Denoiser", "timestep_embedding", "count_parameters", "HEIGHT_MEAN", "HEIGHT_STD",
+    "freeze_for_cpu", "MODEL_KINDS", "build_model", "LoadedModel", "save_model", "load_model", "atomic_torch_save",
+]

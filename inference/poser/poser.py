@@ -1,0 +1,579 @@
+"""The live poser: one 20 Hz observation in, one reconstructed body frame out.
+
+DiffusionPoser runs autoregressively (paper sec. 3.4): the model always sees a 61-frame
+window whose frames 0..N-2 are the *history* (measured + reconstructed features of the
+last 60 frames) and whose last frame holds the new measurement. Each step:
+
+1. shift the window by one frame; frame N-1 gets the new measurement for the observed
+   features and a copy of frame N-2 for the unobserved ones (an initial guess the first
+   inpainting step starts from);
+2. inpaint with mask = all of the history + the observed features of frame N-1
+   (``diffusion.inpaint``, Algorithm 1) -- or, for the baselines, one regressor pass or
+   the standing pose;
+3. clean the reconstructed frame (6D -> rotation -> 6D, contacts to 0/1, each knee a
+   hinge about its lateral axis: ``joint_constraints``, ``knee_hinge=False`` to skip), correct the
+   root displacement from the predicted contacts, write it back into the history;
+4. with both shanks measured, scale the root displacement by the running ratio of the
+   shanks' inertial strides to the reconstructed ones (``stride.StrideScale``;
+   ``stride_scale=False`` to skip; NOTES.md "Session 15", "Session 16"): the reconstructed
+   stride is the unmeasured thigh's guess; without both shanks, the root displacement
+   comes from the pelvis sensor's last second instead
+   (``pelvis_odometry.TwoWayOdometry``; ``pelvis_odometry=None`` to skip; NOTES.md
+   "Session 17", "Session 18"): there the guessed legs cancel the walk, even planted on the
+   insoles' contacts;
+5. integrate the root path and run FK for the outputs; the output root and the
+   unmeasured orientations go through light speed-adaptive low-passes (``smoothing``,
+   ``smoothing=False`` to skip): per-frame inference makes them wobble. Output only: the
+   history and the root integration use the unfiltered values.
+
+Frame of reference: the model is trained with random-heading augmentation and
+heading-invariant normalisation (``training.rotate_yaw`` / ``feature_stats``), i.e. it
+works in the *world* frame at any heading. So features go in exactly as calibration
+delivers them (world frame, Z up, X = forward at calibration) and no yaw normalisation
+is applied here; the standing history faces +X, which is the calibration heading.
+
+A sensor missing in some frames (packet loss, out of range, a NaN from the resampler)
+is simply unobserved in those frames: its features are inpainted like any other, the
+motion continues, and the measurements take over again when they return.
+
+Speed: everything per step stays in torch (float32) on preallocated buffers under
+``torch.inference_mode``; the window is a view into a double-length buffer so shifting
+it is free except for one copy every N frames. Outputs are numpy *views* of fresh
+tensors (zero-copy), so consumers get arrays without a conversion cost.
+
+Default weights live in ``inference/weights/`` (``default_weights``); a missing file
+raises a FileNotFoundError that says how to train one.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import types
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from inference.body.body import Body, contact_points, forward_kinematics, npose_rotations, tpose
+from inference.body.rotations import matrix_to_rot6d, rot6d_to_matrix
+from inference.body.skeleton import N_CONTACTS, N_SEGMENTS, SEGMENT_INDEX, SITE_INDEX
+from inference.features.layout import FPS_MODEL, N_FEATURES, SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
+from inference.features.mirror import MirrorAveraged
+from inference.model.denoiser import Denoiser, LoadedModel, freeze_for_cpu, load_model
+from inference.model.diffusion import Schedule, inpaint, paper_steps, parse_steps
+from inference.model.regressor import regress
+from inference.poser.contact_detector import DETECTOR_THRESHOLD, SHANK_INDEX, ContactDetector, load_detector
+from inference.poser.joint_constraints import constrain_knees
+from inference.poser.pelvis_odometry import PELVIS_INDEX, Odometry, load_odometry
+from inference.poser.smoothing import ROOT_SMOOTHING, ROTATION_SMOOTHING, RotationOneEuro, VectorOneEuro
+from inference.poser.stride import FOOT_SEGMENTS, SHANK_SITES, StrideScale
+
+WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
+DEFAULT_WEIGHTS: dict[str, Path] = {
+    "diffusion": WEIGHTS_DIR / "diffusionposer.pt",
+    "regressor": WEIGHTS_DIR / "regressor.pt",
+}
+CONTACT_DETECTOR_WEIGHTS = WEIGHTS_DIR / "contact_detector.pt"
+PELVIS_ODOMETRY_WEIGHTS = WEIGHTS_DIR / "pelvis_odometry.pt"
+POSER_KINDS = ("diffusion", "regressor", "floor")
+# what of the history the model is told is known: all of it (the paper: measured and
+# reconstructed features), or only what was measured (reconstructions are then just the
+# starting guess, re-inferred every frame from 3 s of measurements)
+HISTORY_MODES = ("reconstructed", "measured")
+# inpainting noise: a fresh draw every frame (the paper), or the same draw every frame, which
+# makes the output a deterministic function of the window, so it only moves when the
+# measurements do (much less jitter at the same accuracy; NOTES.md "Session 2"), or no draw
+# at all: the first level starts from the prior's mean (``inpaint(start="mean")``), which
+# estimates the mean pose given the measurements instead of sampling one (NOTES.md
+# "Session 6": the largest gain where few sensors leave the pose open)
+NOISE_MODES = ("fresh", "fixed", "mean")
+# a predicted contact value above this puts the foot point on the ground for the root
+# correction. A model unsure of a contact predicts something in between, and a swinging foot
+# taken as planted cancels the step; how sure a model is depends on the model, so the model
+# file may carry its own (meta "contact_threshold", `imucap train --export --contact-threshold`).
+# The shipped diffusion model carries 0.3 (NOTES.md, session 5: swept where the shank contact
+# detector does not apply); this is the default otherwise.
+CONTACT_THRESHOLD = 0.5
+
+
+# --------------------------------------------------------------------------- models
+
+def default_weights(kind: str = "diffusion") -> Path:
+    """Path of the shipped weights of `kind`; a clear error (with the command that makes
+    them) when they are not there, because a half-installed checkout should say so
+    rather than fall back to something silently worse."""
+    if kind not in DEFAULT_WEIGHTS:
+        raise ValueError(f"no default weights for model kind {kind!r}; kinds: {', '.join(DEFAULT_WEIGHTS)}")
+    path = DEFAULT_WEIGHTS[kind]
+    if not path.exists():
+        raise FileNotFoundError(
+            f"the default {kind} model {path} is missing. Train one with "
+            f"`imucap train --config CONFIG.json --out runs/{kind}` (config field \"kind\": \"{kind}\", "
+            f"see inference/training.py TrainConfig) and copy runs/{kind}/model.pt to {path}, "
+            f"or pass --model PATH.pt"
+        )
+    return path
+
+
+def _resolve_detector(spec: ContactDetector | str | os.PathLike | None) -> ContactDetector | None:
+    """"default" = the shipped detector if it is installed (else the model's own contacts,
+    with a warning), None = none, a path = that file."""
+    return _resolve_stage(spec, ContactDetector, CONTACT_DETECTOR_WEIGHTS, load_detector,
+                          "root correction uses the model's contacts (train one with "
+                          "`imucap train --contact-detector --out DIR`)")
+
+
+def _resolve_odometry(spec: Odometry | str | os.PathLike | None) -> Odometry | None:
+    """"default" = the shipped pelvis odometry if it is installed (else the model's own
+    root displacement, with a warning), None = none, a path = that file."""
+    return _resolve_stage(spec, Odometry, PELVIS_ODOMETRY_WEIGHTS, load_odometry,
+                          "without both shanks the root follows the model's own displacement (train one with "
+                          "`imucap train --pelvis-odometry --out DIR`)")
+
+
+def _resolve_stage(spec, cls: type | types.UnionType, path: Path, loader, missing: str):
+    """A helper stage of the poser (contact detector, pelvis odometry) from its spec."""
+    if spec is None or isinstance(spec, cls):
+        return spec
+    if os.fspath(spec) == "default":
+        if not path.exists():
+            warnings.warn(f"{path} is missing: {missing}", stacklevel=4)
+            return None
+        return _shipped_stage(path, path.stat().st_mtime_ns, loader)
+    return loader(spec)
+
+
+@functools.lru_cache(maxsize=4)
+def _shipped_stage(path: Path, mtime_ns: int, loader):
+    """One shared instance per shipped file (the stages hold no state between calls);
+    reloaded if the file changes."""
+    return loader(path)
+
+
+def resolve_model(spec: str | os.PathLike | LoadedModel | None = "diffusion") -> LoadedModel | None:
+    """A model from a CLI-style spec: "diffusion"/"regressor" (shipped weights), "floor"
+    (no model: returns None), a path to a model file or checkpoint, or a LoadedModel."""
+    if spec is None or isinstance(spec, LoadedModel):
+        return spec
+    s = os.fspath(spec)
+    if s == "floor":
+        return None
+    if s in DEFAULT_WEIGHTS:
+        return load_model(default_weights(s))
+    if not Path(s).exists():
+        raise FileNotFoundError(f"model {s!r}: not a file, and not one of {', '.join(POSER_KINDS)}")
+    return load_model(s)
+
+
+def default_steps(model: LoadedModel | None) -> list[int]:
+    """The step list a model runs with unless told otherwise: the one recorded in its
+    file (``meta["default_steps"]``, written by whoever tuned speed vs accuracy for the
+    shipped weights), else the paper's 10D list."""
+    meta = (model.meta or {}) if model is not None else {}
+    if meta.get("default_steps") is not None:
+        return parse_steps(meta["default_steps"])
+    return paper_steps()
+
+
+# --------------------------------------------------------------------------- output
+
+@dataclass
+class PoseFrame:
+    """One reconstructed 20 Hz frame.
+
+    rot: (24, 3, 3) global segment orientations R_WB; root: (3,) pelvis joint position
+    (m, world); joints: (24, 3) world joint positions; contacts: (4,) bool and
+    contact_prob: (4,) the model's raw contact values clipped to [0, 1] (l_heel, l_toe,
+    r_heel, r_toe); features: (190,) the full frame as written to the history (observed
+    entries are exactly the input); observed: (190,) the mask actually used (input mask
+    and finite values); index: frame counter since the last reset.
+    """
+
+    index: int
+    rot: np.ndarray
+    root: np.ndarray
+    joints: np.ndarray
+    contacts: np.ndarray
+    contact_prob: np.ndarray
+    features: np.ndarray
+    observed: np.ndarray
+
+
+def standing_features(body: Body, pose: str = "npose") -> np.ndarray:
+    """(190,) features of a subject standing still on the floor facing +X: N-pose (arms
+    down) or T-pose, acceleration 0, dp 0, pelvis at the height that puts the lowest foot
+    point on z = 0 (the loaders floor-align every clip the same way), all contacts on."""
+    if pose == "npose":
+        R = npose_rotations(1)[0]
+    elif pose == "tpose":
+        R = tpose(1)[0]
+    else:
+        raise ValueError(f"unknown standing pose {pose!r} (npose, tpose)")
+    joints = forward_kinematics(R, np.zeros(3), body.offsets)
+    cps = contact_points(R, joints, body)
+    x = np.zeros(N_FEATURES)
+    x[SL_ROT] = matrix_to_rot6d(R).reshape(-1)
+    x[SL_PZ] = -float(cps[:, 2].min())
+    x[SL_CONTACT] = 1.0
+    return x
+
+
+# --------------------------------------------------------------------------- the poser
+
+def noise_mode_for(model: LoadedModel | None, noise: str | None = None) -> str:
+    """The inpainting noise mode a poser runs with: ``noise`` if given, else what the model
+    file recommends (meta, set at export), else the paper's fresh draws."""
+    meta = (model.meta or {}) if model is not None else {}
+    return noise or meta.get("noise") or "fresh"
+
+
+def mirror_for(model: LoadedModel | None, mirror: bool | None = None) -> bool:
+    """Whether a poser mirror-averages (``mirror.MirrorAveraged``): ``mirror`` if given, else
+    what the model file says; never for the floor, which has no model to ask."""
+    if model is None:
+        return False
+    return bool((model.meta or {}).get("mirror", False) if mirror is None else mirror)
+
+
+class Poser:
+    """Frame-by-frame reconstruction with a diffusion model, the regressive baseline or
+    the floor baseline, all behind one interface (``step``).
+
+    model: a LoadedModel (kind "diffusion" or "regressor") or None for the floor
+    baseline (unobserved segments held at the standing pose, root held). body: the
+    subject's Body (bone lengths for FK and the root correction) or a height in metres.
+    steps: diffusion step list (anything ``diffusion.parse_steps`` takes); default
+    ``default_steps(model)``. seed: the inpainting noise generator's seed, so a replay is
+    reproducible. root_xy0: where the root path starts.
+    """
+
+    def __init__(
+        self,
+        model: LoadedModel | None,
+        body: Body | float = 1.75,
+        steps: str | int | Sequence[int] | None = None,
+        seed: int = 0,
+        start_pose: str = "npose",
+        root_correction: bool = True,
+        root_xy0: tuple[float, float] = (0.0, 0.0),
+        inpaint_mode: str | None = None,
+        freeze: bool = True,
+        history: str | None = None,
+        noise: str | None = None,
+        smoothing: bool = True,
+        knee_hinge: bool = True,
+        contact_threshold: float | None = None,
+        contact_detector: ContactDetector | str | os.PathLike | None = "default",
+        mirror: bool | None = None,
+        stride_scale: bool = True,
+        pelvis_odometry: Odometry | str | os.PathLike | None = "default",
+    ) -> None:
+        self.model = model
+        self.kind = "floor" if model is None else model.kind
+        if self.kind not in POSER_KINDS:
+            raise ValueError(f"cannot pose with a model of kind {self.kind!r}")
+        self.body = body if isinstance(body, Body) else Body.from_height(float(body))
+        self.steps: list[int] = parse_steps(steps) if steps is not None else default_steps(model)
+        if self.kind != "diffusion":
+            self.steps = [] if self.kind == "floor" else [0]  # one pass; reported as such
+        self.window = model.config.window if model is not None else WINDOW
+        self.root_correction = root_correction and self.kind != "floor"
+        self.stride = StrideScale(self.body, FPS_MODEL) if stride_scale and self.root_correction else None
+        self.start_pose = start_pose
+        # None = what the model file recommends (meta, set at export), else the paper's way
+        meta = (model.meta or {}) if model is not None else {}
+        history = history or meta.get("history") or "reconstructed"
+        noise = noise_mode_for(model, noise)
+        if history not in HISTORY_MODES:
+            raise ValueError(f"unknown history mode {history!r} ({', '.join(HISTORY_MODES)})")
+        if noise not in NOISE_MODES:
+            raise ValueError(f"unknown noise mode {noise!r} ({', '.join(NOISE_MODES)})")
+        self.history_mode = history
+        self.noise_mode = noise
+        self.inpaint_mode = inpaint_mode or meta.get("inpaint_mode") or "paper"
+        self.contact_threshold = float(contact_threshold if contact_threshold is not None
+                                       else meta.get("contact_threshold", CONTACT_THRESHOLD))
+        self.seed = seed
+        # contacts from both shank sensors when they are measured (contact_detector.py):
+        # far more often right than a reconstruction model's own contact features
+        self.contact_detector = None if self.kind == "floor" else _resolve_detector(contact_detector)
+        # without both shanks the root's walk from the pelvis sensor (pelvis_odometry.py):
+        # the guessed legs cancel the walk there, insoles or not
+        self.pelvis_odometry = None if self.kind == "floor" else _resolve_odometry(pelvis_odometry)
+        # the floor is by definition the standing pose wherever nothing is measured
+        self.knee_hinge = knee_hinge and self.kind != "floor"
+        # output only: the integrated root path (and so every later frame) is unfiltered
+        self.smoothing = smoothing
+        self._filters = ((VectorOneEuro(FPS_MODEL, ROOT_SMOOTHING), RotationOneEuro(FPS_MODEL, ROTATION_SMOOTHING))
+                         if smoothing else None)
+        self.root_xy0 = (float(root_xy0[0]), float(root_xy0[1]))
+        self.schedule = Schedule.cosine()
+        # the live loop always calls the denoiser with one (1, N, 190) window, or two with
+        # mirror averaging (mirror.MirrorAveraged: the window and its mirror image in one
+        # batch): a frozen TorchScript trace of that shape is ~25-30% faster per call on CPU
+        # (bench_model.py)
+        self.mirror = mirror_for(model, mirror)
+        self._net = None
+        if model is not None:
+            frozen = freeze and isinstance(model.model, Denoiser)
+            batch = 2 if self.mirror else 1
+            self._net = freeze_for_cpu(model.model, batch=batch, window=self.window) if frozen else model.model
+            if self.mirror:
+                self._net = MirrorAveraged(self._net, model.norm_mean, model.norm_std)
+        if model is not None:
+            self._mean = torch.as_tensor(model.norm_mean, dtype=torch.float32)
+            self._std = torch.as_tensor(model.norm_std, dtype=torch.float32)
+        else:
+            self._mean = torch.zeros(N_FEATURES)
+            self._std = torch.ones(N_FEATURES)
+        self._height = torch.tensor([self.body.height], dtype=torch.float32)
+        self._offsets = torch.as_tensor(self.body.offsets, dtype=torch.float32)
+        self._contact_offsets = torch.as_tensor(self.body.contact_offsets, dtype=torch.float32)
+        self._stand = torch.as_tensor(standing_features(self.body, start_pose), dtype=torch.float32)
+        self._shank_idx = torch.as_tensor(SHANK_INDEX)
+        self._pelvis_idx = torch.as_tensor(PELVIS_INDEX)
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    def reset(self, root_xy0: tuple[float, float] | None = None) -> None:
+        """Back to a standing history (e.g. after recalibration or a long dropout)."""
+        if root_xy0 is not None:
+            self.root_xy0 = (float(root_xy0[0]), float(root_xy0[1]))
+        N = self.window
+        with torch.inference_mode():
+            stand_n = self._normalize(self._stand)
+            # double-length buffer: the window is buf[:, pos-N+1 : pos+1]
+            self._buf = stand_n.repeat(1, 2 * N, 1).contiguous()
+            self._pos = N - 1
+            self._mask = torch.ones(1, N, N_FEATURES, dtype=torch.bool)
+            # per-frame masks aligned with _buf ("measured" history); the standing start
+            # counts as known: it is the calibration pose the session began in
+            self._mbuf = (torch.ones(1, 2 * N, N_FEATURES, dtype=torch.bool)
+                          if self.history_mode == "measured" else None)
+            self._stand_win = stand_n.expand(1, N, N_FEATURES)
+            R0 = rot6d_to_matrix(self._stand[SL_ROT].view(N_SEGMENTS, 6))
+            j0 = forward_kinematics(R0, torch.zeros(3), self._offsets)
+            self._prev_cps = contact_points(R0, j0, self._contact_offsets)
+            self._root_xy = torch.tensor(self.root_xy0, dtype=torch.float64)
+            self._root_raw = np.zeros(2)  # the root path without stride scaling
+            self._gen = torch.Generator().manual_seed(self.seed)
+        for f in self._filters or ():
+            f.reset()
+        if self.stride is not None:
+            self.stride.reset()
+        self.index = 0
+
+    def _normalize(self, x: Tensor) -> Tensor:
+        return (x - self._mean) / self._std
+
+    def _advance(self) -> Tensor:
+        """Shift the window by one frame; returns the window view (1, N, F) whose last
+        frame is free to fill."""
+        N = self.window
+        if self._pos + 1 >= 2 * N:
+            self._buf[:, : N - 1] = self._buf[:, N + 1:].clone()
+            if self._mbuf is not None:
+                self._mbuf[:, : N - 1] = self._mbuf[:, N + 1:].clone()
+            self._pos = N - 2
+        self._pos += 1
+        return self._buf[:, self._pos - N + 1: self._pos + 1]
+
+    def history(self) -> np.ndarray:
+        """(N, 190) the current window in physical units (a copy), for inspection/tests."""
+        N = self.window
+        with torch.inference_mode():
+            w = self._buf[0, self._pos - N + 1: self._pos + 1] * self._std + self._mean
+            return w.numpy().copy()
+
+    # ------------------------------------------------------------------ one step
+    def _predict(self, win: Tensor, mask: Tensor) -> Tensor:
+        if self.kind == "diffusion":
+            if self.noise_mode == "fixed":
+                self._gen.manual_seed(self.seed)
+            return inpaint(self._net, win, mask, self._height, self.steps, generator=self._gen,
+                           schedule=self.schedule, mode=self.inpaint_mode,
+                           mask_input=self.model.config.mask_input,
+                           start="mean" if self.noise_mode == "mean" else "sample")
+        if self.kind == "regressor":
+            return regress(self._net, win, mask, self._height)
+        return torch.where(mask, win, self._stand_win)
+
+    def step(self, features: np.ndarray | Tensor, observed_mask: np.ndarray | Tensor) -> PoseFrame:
+        """Reconstruct the next frame from this frame's observation.
+
+        features: (190,) physical units; only the observed entries are read (the others
+        may hold anything, NaN included). observed_mask: (190,) bool, True = measured in
+        this frame (``features.observation_mask`` of the sensors that delivered).
+        """
+        with torch.inference_mode():
+            f_in = torch.as_tensor(_writable(features))
+            m = torch.as_tensor(_writable(observed_mask)).to(torch.bool).reshape(N_FEATURES)
+            f32 = f_in.to(torch.float32).reshape(N_FEATURES)
+            m = m & torch.isfinite(f32)
+            f32 = torch.where(m, f32, self._stand)  # no NaN may reach any arithmetic
+            fn = self._normalize(f32)
+
+            win = self._advance()
+            win[0, -1] = torch.where(m, fn, win[0, -2])
+            if self.history_mode == "measured":
+                self._mbuf[0, self._pos] = m
+                mask = self._mbuf[:, self._pos - self.window + 1: self._pos + 1]
+            else:
+                self._mask[0, -1] = m
+                mask = self._mask
+            out = self._predict(win, mask)
+            y = out[0, -1] * self._std + self._mean  # physical units, fresh tensor
+
+            # clean the reconstruction: valid rotations, 0/1 contacts (what the data holds)
+            R = rot6d_to_matrix(y[SL_ROT].reshape(N_SEGMENTS, 6))
+            seg_measured = m[SL_ROT].view(N_SEGMENTS, 6).all(dim=-1)
+            if self.knee_hinge:
+                R = constrain_knees(R, seg_measured)
+            y[SL_ROT] = torch.where(m[SL_ROT], y[SL_ROT], matrix_to_rot6d(R).reshape(-1))
+            prob = y[SL_CONTACT].clamp(0.0, 1.0)
+            threshold = self.contact_threshold
+            det = self.contact_detector
+            if det is not None and not bool(m[SL_CONTACT].any()) and bool(m[self._shank_idx].all()):
+                prob, threshold = det.probabilities(self._recent(win, self._shank_idx, det.context)), DETECTOR_THRESHOLD
+            contact = prob > threshold
+            y[SL_CONTACT] = torch.where(m[SL_CONTACT], y[SL_CONTACT], contact.to(y.dtype))
+
+            joints_rel = forward_kinematics(R, torch.zeros(3), self._offsets)
+            cps = contact_points(R, joints_rel, self._contact_offsets)
+            if self.root_correction and not bool(m[SL_DP].any()):
+                odo = self.pelvis_odometry
+                if odo is not None and not bool(m[self._shank_idx].all()) and bool(m[self._pelvis_idx].all()):
+                    y[SL_DP] = odo.displacement(self._recent(win, self._pelvis_idx, odo.context))
+                else:
+                    y[SL_DP] = correct_root_displacement(y[SL_DP], self._prev_cps, cps, contact)
+            self._prev_cps = cps
+
+            # history keeps the exact normalised measurement where observed
+            win[0, -1] = torch.where(m, fn, self._normalize(y))
+
+            if self.stride is not None and not bool(m[SL_DP].any()):
+                y[SL_DP] = y[SL_DP] * self._stride_scale(joints_rel, f32, m, contact, y[SL_DP])
+            self._root_xy += y[SL_DP].to(torch.float64)
+            root = torch.cat([self._root_xy.to(torch.float32), y[SL_PZ]])
+            if self._filters is not None:
+                root_filter, rot_filter = self._filters
+                root = root_filter(root)
+                R = rot_filter(R, seg_measured)
+                joints_rel = forward_kinematics(R, torch.zeros(3), self._offsets)
+            joints = joints_rel + root
+            feats = torch.where(m, f_in.to(torch.float64).reshape(N_FEATURES), y.to(torch.float64))
+            frame = PoseFrame(
+                index=self.index, rot=R.numpy(), root=root.numpy(), joints=joints.numpy(),
+                contacts=contact.numpy(), contact_prob=prob.numpy(), features=feats.numpy(),
+                observed=m.numpy(),
+            )
+        self.index += 1
+        return frame
+
+    def _recent(self, win: Tensor, idx: Tensor, n: int) -> Tensor:
+        """(n, len(idx)) the features ``idx`` of the window's last n frames in physical
+        units, oldest first: what a helper stage reads."""
+        return win[0, -n:, idx] * self._std[idx] + self._mean[idx]
+
+    def _stride_scale(self, joints_rel: Tensor, f32: Tensor, m: Tensor, contact: Tensor,
+                      dp: Tensor) -> float:
+        """Feed this frame to the stride estimator; the factor for this frame's root step.
+        Without both shanks the paper's root stands alone (the bias the scale undoes belongs
+        to the sensor set it was measured with); the scale is kept for when they return."""
+        self._root_raw += dp.numpy().astype(np.float64)
+        if not (bool(m[_SHANK_ROT].all()) and bool(m[_SHANK_ACC].all())):
+            self.stride.drop()
+            return 1.0
+        ankles = joints_rel.numpy()[list(_FOOT_JOINTS), :2].astype(np.float64) + self._root_raw
+        R = rot6d_to_matrix(f32[_SHANK_ROT].reshape(2, 6)).numpy()
+        return self.stride.update(R, f32[_SHANK_ACC].numpy().reshape(2, 3), contact.numpy(), ankles)
+
+
+_SHANK_SEGMENTS = tuple(SEGMENT_INDEX[s] for s in SHANK_SITES)
+_FOOT_JOINTS = tuple(SEGMENT_INDEX[s] for s in FOOT_SEGMENTS)
+_SHANK_ROT = torch.tensor([SL_ROT.start + 6 * k + i for k in _SHANK_SEGMENTS for i in range(6)])
+_SHANK_ACC = torch.tensor([SL_ACC.start + 3 * SITE_INDEX[s] + i for s in SHANK_SITES for i in range(3)])
+
+
+def _writable(a):
+    """torch refuses to wrap read-only numpy views (e.g. broadcasts) without a warning."""
+    if isinstance(a, np.ndarray) and not a.flags.writeable:
+        return a.copy()
+    return a
+
+
+def correct_root_displacement(dp: Tensor, prev_points: Tensor, points: Tensor, contact: Tensor) -> Tensor:
+    """The paper's root correction (sec. 3.4.2): subtract from the predicted ground-plane
+    root displacement ``dp`` (2,) the mean horizontal *world* displacement, from the
+    previous frame to this one, of the foot points predicted in contact.
+
+    prev_points/points: (4, 3) heel/toe points relative to the root at the previous and
+    this frame; a point's world displacement is its relative displacement plus ``dp``,
+    so a point in contact that moved with the body by ``d`` pulls dp to ``-d`` (the foot
+    stays planted, the pelvis moves). With no point in contact dp is unchanged.
+    """
+    if not bool(contact.any()):
+        return dp
+    world = points[:, :2] - prev_points[:, :2] + dp
+    return dp - world[contact].mean(dim=0)
+
+
+# --------------------------------------------------------------------------- offline
+
+@dataclass
+class Reconstruction:
+    """A whole clip reconstructed frame by frame (20 Hz): rot (T,24,3,3), root (T,3),
+    joints (T,24,3), contacts (T,4) bool, contact_prob (T,4), features (T,190)."""
+
+    rot: np.ndarray
+    root: np.ndarray
+    joints: np.ndarray
+    contacts: np.ndarray
+    contact_prob: np.ndarray
+    features: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.rot.shape[0])
+
+
+def reconstruct_offline(poser: Poser, features: np.ndarray, mask: np.ndarray, progress=None) -> Reconstruction:
+    """Run the live loop over a clip: features (T, 190), mask (T, 190) or (190,) bool.
+
+    Exactly the per-frame ``step`` a live session runs (no look-ahead, no batching), so
+    evaluation measures what a user gets. ``progress`` is called with 1 after each frame
+    (e.g. a tqdm ``update``)."""
+    features = np.asarray(features)
+    T = features.shape[0]
+    mask = np.ascontiguousarray(np.broadcast_to(np.asarray(mask, dtype=bool), (T, N_FEATURES)))
+    rot = np.empty((T, N_SEGMENTS, 3, 3))
+    root = np.empty((T, 3))
+    joints = np.empty((T, N_SEGMENTS, 3))
+    contacts = np.empty((T, N_CONTACTS), dtype=bool)
+    prob = np.empty((T, N_CONTACTS))
+    feats = np.empty((T, N_FEATURES))
+    for t in range(T):
+        fr = poser.step(features[t], mask[t])
+        rot[t], root[t], joints[t] = fr.rot, fr.root, fr.joints
+        contacts[t], prob[t], feats[t] = fr.contacts, fr.contact_prob, fr.features
+        if progress is not None:
+            progress(1)
+    return Reconstruction(rot=rot, root=root, joints=joints, contacts=contacts, contact_prob=prob, features=feats)
+
+
+def make_poser(spec: str | os.PathLike | LoadedModel | None, body: Body | float = 1.75,
+               steps: str | int | Sequence[int] | None = None, **kwargs) -> Poser:
+    """A Poser from a model spec (see ``resolve_model``): "diffusion" (default weights),
+    "regressor", "floor", a model file path, or a LoadedModel."""
+    return Poser(resolve_model(spec), body=body, steps=steps, **kwargs)
+
+
+__all__ = [
+    "Poser", "PoseFrame", "Reconstruction", "reconstruct_offline", "make_poser", "resolve_model", "mirror_for",
+    "default_weights", "default_steps", "standing_features", "correct_root_displacement",
+    "DEFAULT_WEIGHTS", "WEIGHTS_DIR", "POSER_KINDS",
+]
