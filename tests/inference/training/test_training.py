@@ -32,7 +32,7 @@ from inference.training.loop import (
     train,
 )
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 TINY = {"layers": 1, "d_model": 32, "heads": 2, "ff": 64, "dropout": 0.1}
 
 
@@ -520,7 +520,7 @@ def test_cli_init_and_stop_after(tmp_path, capsys):
     assert "pass only one" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("path", sorted((Path(__file__).resolve().parents[2] / "configs").glob("*.json")),
+@pytest.mark.parametrize("path", sorted((Path(__file__).resolve().parents[3] / "configs").rglob("*.json")),
                          ids=lambda p: p.name)
 def test_shipped_configs_parse(path):
     cfg = TrainConfig.load(path)
