@@ -38,11 +38,13 @@ def _one_torch_thread():
 # dataset (minutes of full CPU, more in a fresh clone that has no dataset cache) share one
 # xdist group, so under `--dist loadgroup` they run one after another on one worker instead
 # of starving each other: a suit test lost a device's samples for whole seconds while the
-# other worker built a dataset (session 5).
-REALTIME_MODULES = {"test_suit.py", "test_batched.py", "test_end_to_end.py", "test_gui.py", "test_cli_demo.py"}
+# other worker built a dataset.
+REALTIME_MODULES = {"sim_devices/test_suit.py", "drivers/test_batched.py", "drivers/test_end_to_end.py",
+                    "app/gui/test_main_window.py", "app/cli/test_demo.py"}
 
 
 def pytest_collection_modifyitems(config, items):
     for item in items:
-        if item.get_closest_marker("data") is not None or item.path.name in REALTIME_MODULES:
+        module = item.path.relative_to(REPO / "tests").as_posix()
+        if item.get_closest_marker("data") is not None or module in REALTIME_MODULES:
             item.add_marker(pytest.mark.xdist_group("realtime_or_heavy"))

@@ -61,7 +61,9 @@ def paper_model():
     import torch
 
     from inference.features.layout import N_FEATURES
-    from inference.model.denoiser import Denoiser, LoadedModel, ModelConfig
+    from inference.model.config import ModelConfig
+    from inference.model.denoiser import Denoiser
+    from inference.model.files import LoadedModel
 
     cfg = ModelConfig.paper()
     cfg.dropout = 0.0
@@ -84,8 +86,9 @@ def run_bench(model_spec: str = "diffusion", steps=None, frames: int = 200, pape
     import torch
 
     from inference.features.layout import N_FEATURES
-    from inference.model.denoiser import LoadedModel, ModelConfig, build_model
+    from inference.model.config import ModelConfig
     from inference.model.diffusion import even_steps, parse_steps
+    from inference.model.files import LoadedModel, build_model
     from inference.poser.poser import default_weights, resolve_model
 
     if threads > 0:

@@ -116,10 +116,10 @@ def run(args: argparse.Namespace) -> int:
         load_motions,
         report_markdown,
     )
-    from inference.features.layout import FPS_MODEL
     from inference.metrics.errors import paired_difference
     from inference.model.diffusion import parse_steps
     from inference.poser.poser import default_steps, mirror_for, noise_mode_for, resolve_model
+    from inference.signals.resample import FPS_MODEL
 
     if args.threads > 0:
         torch.set_num_threads(args.threads)

@@ -86,7 +86,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import torch
 
-    from inference.training.loop import LAST, TrainConfig, export_model, train
+    from inference.training.config import LAST, TrainConfig
+    from inference.training.loop import export_model, train
 
     if args.retag is not None and args.export is None:
         raise ValueError("--retag needs --export DEST")
@@ -106,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
                                    ("mirror", args.mirror))
                  if v is not None}
         if args.retag is not None:
-            from inference.model.denoiser import retag_model
+            from inference.model.files import retag_model
 
             if args.default_steps is not None:
                 poser["default_steps"] = args.default_steps

@@ -28,8 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.export.formats import ExportMotion, atomic_target
-from inference.body.rotations import matrix_to_quat
+from app.export.common import ExportMotion, atomic_target, continuous_quaternions
 from inference.body.skeleton import CONTACTS, SEGMENTS
 
 
@@ -40,19 +39,6 @@ def csv_columns() -> list[str]:
     cols += [f"{s}_joint_{c}_m" for s in SEGMENTS for c in "xyz"]
     cols += [f"contact_{c}" for c in CONTACTS]
     return cols
-
-
-def continuous_quaternions(rot: np.ndarray) -> np.ndarray:
-    """(T, S, 4) quaternions of (T, S, 3, 3) rotations, w >= 0 at the first frame and each
-    later one on the hemisphere of its predecessor (no sign flips between frames)."""
-    q = matrix_to_quat(np.asarray(rot, dtype=np.float64))
-    if len(q) == 0:
-        return q
-    q[0] *= np.where(q[0, :, :1] < 0, -1.0, 1.0)
-    for t in range(1, len(q)):
-        flip = np.sum(q[t] * q[t - 1], axis=-1, keepdims=True) < 0
-        q[t] = np.where(flip, -q[t], q[t])
-    return q
 
 
 def csv_table(m: ExportMotion) -> np.ndarray:
@@ -76,4 +62,4 @@ def write_csv(path: str | os.PathLike, m: ExportMotion) -> Path:
     return path
 
 
-__all__ = ["csv_columns", "csv_table", "continuous_quaternions", "write_csv"]
+__all__ = ["csv_columns", "csv_table", "write_csv"]

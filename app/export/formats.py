@@ -23,77 +23,23 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from app.export.bvh import write_bvh
+from app.export.common import ExportMotion
+from app.export.csv_file import write_csv
+from app.export.hdf5_file import write_hdf5
+from app.export.opensim import write_mot
 from inference.body.body import Body
-from inference.body.skeleton import N_CONTACTS, N_SEGMENTS
-from inference.features.layout import FPS_MODEL
 
 if TYPE_CHECKING:
     from app.pipeline import LivePose
     from app.recording import Recording
 
 DEFAULT_HEIGHT_M = 1.75
-
-
-@dataclass
-class ExportMotion:
-    """A reconstructed motion ready to be written.
-
-    time: (T,) s since the recording's first raw frame; rot: (T, 24, 3, 3) global segment
-    orientations R_WB (world: Z up, X forward at calibration); root: (T, 3) pelvis joint
-    (m); joints: (T, 24, 3) joint positions (m), joint i = start of segment i; contacts:
-    (T, 4) bool (l_heel, l_toe, r_heel, r_toe); contact_prob: (T, 4) or None; body: the
-    bone geometry the poses were made with; fps: the nominal frame rate (20 Hz); meta:
-    provenance (source recording, model, steps, sensors, insoles, time_origin, ...).
-    """
-
-    time: np.ndarray
-    rot: np.ndarray
-    root: np.ndarray
-    joints: np.ndarray
-    contacts: np.ndarray
-    body: Body
-    fps: float = float(FPS_MODEL)
-    contact_prob: np.ndarray | None = None
-    meta: dict[str, Any] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        self.time = np.asarray(self.time, dtype=np.float64)
-        self.rot = np.asarray(self.rot, dtype=np.float64)
-        self.root = np.asarray(self.root, dtype=np.float64)
-        self.joints = np.asarray(self.joints, dtype=np.float64)
-        self.contacts = np.asarray(self.contacts, dtype=bool)
-        T = self.time.shape[0]
-        shapes = {"rot": (self.rot.shape, (T, N_SEGMENTS, 3, 3)), "root": (self.root.shape, (T, 3)),
-                  "joints": (self.joints.shape, (T, N_SEGMENTS, 3)),
-                  "contacts": (self.contacts.shape, (T, N_CONTACTS))}
-        bad = {k: got for k, (got, want) in shapes.items() if got != want}
-        if self.time.ndim != 1 or bad:
-            raise ValueError(f"export: inconsistent motion arrays for {T} frames: {bad or self.time.shape}")
-        if self.contact_prob is not None:
-            self.contact_prob = np.asarray(self.contact_prob, dtype=np.float64).reshape(T, N_CONTACTS)
-
-    @property
-    def n_frames(self) -> int:
-        return int(self.time.shape[0])
-
-    @property
-    def duration(self) -> float:
-        """Seconds covered: first to last frame plus one frame period (0 when empty)."""
-        return float(self.time[-1] - self.time[0] + 1.0 / self.fps) if self.n_frames else 0.0
-
-    def gaps(self) -> int:
-        """Frames missing in the 20 Hz sequence (live poses dropped while the poser was behind).
-        Formats with a fixed frame time (BVH) close such gaps up; the others keep real times."""
-        if self.n_frames < 2:
-            return 0
-        step = np.diff(self.time) * self.fps
-        return int(np.sum(np.maximum(np.rint(step) - 1, 0)))
 
 
 # ---------------------------------------------------------------------------- building
@@ -159,26 +105,18 @@ def motion_from_poses(poses: Sequence[LivePose], body: Body, rec: Recording | No
 
 
 def _write_bvh(path: Path, m: ExportMotion) -> Path:
-    from app.export.bvh import write_bvh
-
     return write_bvh(path, m.rot, m.root, m.body, m.fps)
 
 
 def _write_csv(path: Path, m: ExportMotion) -> Path:
-    from app.export.csv_file import write_csv
-
     return write_csv(path, m)
 
 
 def _write_hdf5(path: Path, m: ExportMotion) -> Path:
-    from app.export.hdf5_file import write_hdf5
-
     return write_hdf5(path, m)
 
 
 def _write_mot(path: Path, m: ExportMotion) -> Path:
-    from app.export.opensim import write_mot
-
     return write_mot(path, m)
 
 
@@ -209,14 +147,3 @@ def export_motion(path: str | os.PathLike, motion: ExportMotion) -> Path:
     return WRITERS[p.suffix.lower()](p, motion)
 
 
-def atomic_target(path: Path) -> Path:
-    """A temporary sibling to write to before ``os.replace``: a crash never leaves a
-    truncated export under the real name."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    return path.with_name(path.name + ".tmp")
-
-
-__all__ = [
-    "ExportMotion", "WRITERS", "body_for_recording", "motion_from_recording", "motion_from_poses",
-    "check_export_path", "export_motion", "supported_extensions", "atomic_target", "DEFAULT_HEIGHT_M",
-]

@@ -36,8 +36,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from app.export.csv_file import continuous_quaternions
-from app.export.formats import ExportMotion, atomic_target
+from app.export.common import ExportMotion, atomic_target, continuous_quaternions
 from inference.body.skeleton import CONTACTS, PARENTS, SEGMENTS
 
 FORMAT = "imucap-motion"

@@ -68,7 +68,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.export.formats import ExportMotion, atomic_target
+from app.export.common import ExportMotion, atomic_target
 from inference.body.rotations import matrix_about_axis, matrix_to_euler
 from inference.body.skeleton import N_SEGMENTS, SEGMENT_INDEX
 

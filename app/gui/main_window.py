@@ -18,7 +18,7 @@ import pyqtgraph as pg
 import pyqtgraph.opengl as gl
 from PySide6 import QtCore, QtWidgets
 
-from app.cli.demo import DemoConfig, DemoSession
+from app.demo_session import DemoConfig, DemoSession
 from app.pipeline import stride_text
 from inference.body.body import contact_points
 from inference.body.skeleton import CONTACTS, PARENTS

@@ -30,11 +30,11 @@ from inference.body.body import Body, global_from_local, npose_rotations
 from inference.body.motion import Motion
 from inference.body.rotations import matrix_about_axis, matrix_to_rot6d, quat_to_matrix
 from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX, SITE_SEGMENT, parse_sites
-from inference.features.layout import FPS_MODEL, N_FEATURES, SL_ACC, SL_CONTACT, SL_ROT, observation_mask
+from inference.features.layout import N_FEATURES, SL_ACC, SL_CONTACT, SL_ROT, observation_mask
 from inference.metrics.errors import ClipMetrics, evaluate_clip, paired_difference, summarize
-from inference.model.denoiser import LoadedModel
+from inference.model.files import LoadedModel
 from inference.poser.poser import Poser, Reconstruction, reconstruct_offline, resolve_model
-from inference.signals.resample import STEP, downsample
+from inference.signals.resample import FPS_MODEL, STEP, downsample
 from inference.signals.synthesis import NoiseModel, kinematics, synthesize
 
 SIX = ("pelvis", "head", "l_wrist", "r_wrist", "l_shank", "r_shank")

@@ -12,8 +12,6 @@ import numpy as np
 
 from inference.body.skeleton import N_CONTACTS, N_SEGMENTS, N_SITES, SITE_INDEX, SITE_SEGMENT_INDEX, SITES
 
-FPS_MODEL = 20
-FPS_SIGNAL = 60
 WINDOW = 61
 
 SL_ROT = slice(0, N_SEGMENTS * 6)  # 0:144
@@ -43,6 +41,6 @@ def observation_mask(sites: list[str] | tuple[str, ...], insoles: bool = False) 
 
 
 __all__ = [
-    "FPS_MODEL", "FPS_SIGNAL", "WINDOW", "SL_ROT", "SL_ACC", "SL_DP", "SL_PZ", "SL_CONTACT",
+    "WINDOW", "SL_ROT", "SL_ACC", "SL_DP", "SL_PZ", "SL_CONTACT",
     "N_FEATURES", "observation_mask", "SITES",
 ]

@@ -30,7 +30,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from inference.features.layout import FPS_MODEL, SL_CONTACT, SL_DP
+from inference.features.layout import SL_CONTACT, SL_DP
+from inference.signals.resample import FPS_MODEL
 
 
 def reverse_features(x: np.ndarray) -> np.ndarray:

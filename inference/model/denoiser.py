@@ -1,4 +1,4 @@
-"""The DiffusionPoser denoiser ``f(z_t, t, h) -> x0`` and its size configuration.
+"""The DiffusionPoser denoiser ``f(z_t, t, h) -> x0``.
 
 Architecture (paper, Figure 2): a transformer *decoder*. The diffusion-step embedding
 and the body-height embedding are two tokens that serve as the cross-attention memory
@@ -14,68 +14,14 @@ random masks); why it is the shipped choice is in NOTES.md ("Session 2").
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 import warnings
-from dataclasses import asdict, dataclass, fields
 
-import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from inference.features.layout import N_FEATURES, WINDOW
-
-# Height is fed as a standardised scalar; these are typical adult statures (metres).
-HEIGHT_MEAN = 1.70
-HEIGHT_STD = 0.10
-
-
-@dataclass
-class ModelConfig:
-    """Size of a denoiser or regressor.
-
-    The paper's model is ``ModelConfig.paper()`` (8 layers / 512 / FF 2048 / 8 heads).
-    The default stays 4/256/1024 (other code and tests use it as "the default model");
-    the CPU real-time size measured with benchmarks/bench_model.py is 4/128/512 (NOTES.md,
-    "Model (issue 3)"): ~11 vs ~3.7 ms per model call on one core of this machine. The
-    shipped model's size comes from its model file, not from this default.
-    """
-
-    layers: int = 4
-    d_model: int = 128
-    heads: int = 4
-    ff: int = 512
-    dropout: float = 0.1
-    window: int = WINDOW
-    features: int = N_FEATURES
-    # x0 = sqrt(ab_t) z + sqrt(1 - ab_t) F(z, t, h) instead of x0 = F(z, t, h): the network
-    # learns the residual (v-prediction in disguise), so at low noise the input passes
-    # through unchanged instead of having to be re-learned. Without it, a CPU-sized
-    # training budget left the model blurring even a clean input (18 deg at t = 0; NOTES).
-    skip: bool = False
-    # the frame tokens also read the per-feature known/unknown mask. Without it a model
-    # trained by replacement (TrainConfig.cond_prob) must guess from the values alone
-    # whether an entry is a clean measurement or noise, which a CPU budget did not teach.
-    mask_input: bool = False
-    T: int = 1000
-
-    @classmethod
-    def paper(cls) -> ModelConfig:
-        return cls(layers=8, d_model=512, heads=8, ff=2048)
-
-    @classmethod
-    def tiny(cls) -> ModelConfig:
-        """For tests and smoke runs only."""
-        return cls(layers=1, d_model=32, heads=2, ff=64, dropout=0.0)
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict) -> ModelConfig:
-        names = {f.name for f in fields(cls)}
-        return cls(**{k: v for k, v in d.items() if k in names})
+from inference.model.config import HEIGHT_MEAN, HEIGHT_STD, ModelConfig
+from inference.model.diffusion import cosine_alpha_bar
 
 
 def timestep_embedding(t: Tensor, dim: int, max_period: float = 10000.0) -> Tensor:
@@ -110,8 +56,6 @@ class Denoiser(nn.Module):
         self.norm = nn.LayerNorm(d)
         self.out_proj = nn.Linear(d, cfg.features)
         if cfg.skip:
-            from inference.model.diffusion import cosine_alpha_bar
-
             ab = cosine_alpha_bar(cfg.T).float()
             self.register_buffer("skip_a", ab.sqrt(), persistent=False)
             self.register_buffer("skip_b", (1.0 - ab).clamp(min=0.0).sqrt(), persistent=False)
@@ -226,117 +170,5 @@ def deepened_state_dict(state: dict[str, Tensor], model: nn.Module) -> dict[str,
     return out
 
 
-def count_parameters(model: nn.Module) -> int:
-    return sum(p.numel() for p in model.parameters())
 
 
-# ----------------------------------------------------------------------- model files
-
-MODEL_KINDS = ("diffusion", "regressor")
-MODEL_FORMAT = "imucap-model-v1"
-
-
-def build_model(kind: str, config: ModelConfig | None = None) -> nn.Module:
-    """A fresh Denoiser ("diffusion") or Regressor ("regressor")."""
-    if kind == "diffusion":
-        return Denoiser(config)
-    if kind == "regressor":
-        from inference.model.regressor import Regressor
-
-        return Regressor(config)
-    raise ValueError(f"unknown model kind {kind!r}; choose one of {', '.join(MODEL_KINDS)}")
-
-
-@dataclass
-class LoadedModel:
-    """A model ready for inference plus what it needs around it: the feature normaliser
-    statistics (the network works on normalised features) and its provenance."""
-
-    model: nn.Module
-    kind: str
-    config: ModelConfig
-    norm_mean: np.ndarray  # (F,) float32
-    norm_std: np.ndarray  # (F,) float32
-    step: int = 0
-    meta: dict | None = None
-
-    def normalize(self, x: Tensor) -> Tensor:
-        mean = torch.as_tensor(self.norm_mean, dtype=x.dtype)
-        return (x - mean) / torch.as_tensor(self.norm_std, dtype=x.dtype)
-
-    def denormalize(self, x: Tensor) -> Tensor:
-        mean = torch.as_tensor(self.norm_mean, dtype=x.dtype)
-        return x * torch.as_tensor(self.norm_std, dtype=x.dtype) + mean
-
-
-def save_model(path: str | os.PathLike, model: nn.Module, kind: str, norm_mean: np.ndarray,
-               norm_std: np.ndarray, step: int = 0, meta: dict | None = None, fp16: bool = False) -> None:
-    """Write an inference model file (weights only, no optimizer), atomically.
-
-    ``fp16`` halves the file (shipping weights); they are cast back to float32 on load
-    because CPU inference in half precision is slower, not faster.
-    """
-    sd = {k: (v.half() if fp16 and v.is_floating_point() else v).detach().cpu().clone()
-          for k, v in model.state_dict().items()}
-    obj = {
-        "format": MODEL_FORMAT, "kind": kind, "model_config": model.config.to_dict(), "state_dict": sd,
-        "norm_mean": np.asarray(norm_mean, np.float32), "norm_std": np.asarray(norm_std, np.float32),
-        "step": int(step), "meta": meta or {},
-    }
-    atomic_torch_save(obj, path)
-
-
-def retag_model(path: str | os.PathLike, dest: str | os.PathLike, meta: dict) -> None:
-    """Write model file ``path`` to ``dest`` with ``meta`` merged into its metadata (the
-    poser defaults it carries) and every tensor as it was, bit for bit: a shipped file's
-    defaults can change without its training run at hand."""
-    obj = torch.load(path, map_location="cpu", weights_only=False)
-    if not isinstance(obj, dict) or obj.get("format") != MODEL_FORMAT or "state_dict" not in obj:
-        raise ValueError(f"{path} is not an imucap model file (a training checkpoint exports with --out RUN)")
-    obj["meta"] = {**(obj.get("meta") or {}), **meta}
-    atomic_torch_save(obj, dest)
-
-
-def load_model(path: str | os.PathLike, use_ema: bool = True) -> LoadedModel:
-    """Load an inference model file or a training checkpoint (its EMA weights by default),
-    in eval mode, float32, on the CPU."""
-    obj = torch.load(path, map_location="cpu", weights_only=False)
-    if not isinstance(obj, dict) or "model_config" not in obj:
-        raise ValueError(f"{path} is not an imucap model file or training checkpoint")
-    kind = obj["kind"]
-    cfg = ModelConfig.from_dict(obj["model_config"])
-    model = build_model(kind, cfg)
-    if "state_dict" in obj:
-        sd = obj["state_dict"]
-    else:
-        sd = obj["ema"] if use_ema and obj.get("ema") is not None else obj["model"]
-    model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in sd.items()})
-    model.eval()
-    return LoadedModel(model=model, kind=kind, config=cfg, norm_mean=np.asarray(obj["norm_mean"], np.float32),
-                       norm_std=np.asarray(obj["norm_std"], np.float32), step=int(obj.get("step", 0)),
-                       meta=obj.get("meta"))
-
-
-def atomic_torch_save(obj: object, path: str | os.PathLike) -> None:
-    """torch.save to a temporary file in the same directory, fsync, then os.replace, so a
-    crash or kill mid-write never leaves a truncated file under the final name."""
-    path = os.fspath(path)
-    d = os.path.dirname(os.path.abspath(path))
-    os.makedirs(d, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".pt", dir=d)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            torch.save(obj, f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
-__all__ = [
-    "ModelConfig", "Denoiser", "timestep_embedding", "count_parameters", "HEIGHT_MEAN", "HEIGHT_STD",
-    "freeze_for_cpu", "MODEL_KINDS", "build_model", "LoadedModel", "save_model", "load_model", "atomic_torch_save",
-]

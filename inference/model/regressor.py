@@ -23,7 +23,7 @@ from torch import Tensor, nn
 
 from inference.body.skeleton import SITES
 from inference.features.layout import N_FEATURES, observation_mask
-from inference.model.denoiser import HEIGHT_MEAN, HEIGHT_STD, ModelConfig
+from inference.model.config import HEIGHT_MEAN, HEIGHT_STD, ModelConfig
 
 # configurations the paper and the issue evaluate; drawn more often than random subsets so
 # the baseline is not handicapped on exactly the sets it is compared on

@@ -37,7 +37,7 @@ from torch import Tensor, nn
 
 from inference.body.rotations import matrix_about_axis, matrix_to_rot6d, rot6d_to_matrix
 from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX
-from inference.features.layout import FPS_MODEL, SL_ACC, SL_DP, SL_ROT
+from inference.features.layout import SL_ACC, SL_DP, SL_ROT
 from inference.features.time_reversal import is_forward_walk, reverse_features
 from inference.poser.small_nets import (
     FitConfig,
@@ -50,6 +50,7 @@ from inference.poser.small_nets import (
     save_net,
     stack_context,
 )
+from inference.signals.resample import FPS_MODEL
 
 ODOMETRY_FORMAT = "imucap-pelvis-odometry-v1"
 TWO_WAY_FORMAT = "imucap-pelvis-odometry-two-way-v1"

@@ -62,16 +62,18 @@ from torch import Tensor
 from inference.body.body import Body, contact_points, forward_kinematics, npose_rotations, tpose
 from inference.body.rotations import matrix_to_rot6d, rot6d_to_matrix
 from inference.body.skeleton import N_CONTACTS, N_SEGMENTS, SEGMENT_INDEX, SITE_INDEX
-from inference.features.layout import FPS_MODEL, N_FEATURES, SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
+from inference.features.layout import N_FEATURES, SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
 from inference.features.mirror import MirrorAveraged
-from inference.model.denoiser import Denoiser, LoadedModel, freeze_for_cpu, load_model
+from inference.model.denoiser import Denoiser, freeze_for_cpu
 from inference.model.diffusion import Schedule, inpaint, paper_steps, parse_steps
+from inference.model.files import LoadedModel, load_model
 from inference.model.regressor import regress
 from inference.poser.contact_detector import DETECTOR_THRESHOLD, SHANK_INDEX, ContactDetector, load_detector
 from inference.poser.joint_constraints import constrain_knees
 from inference.poser.pelvis_odometry import PELVIS_INDEX, Odometry, load_odometry
 from inference.poser.smoothing import ROOT_SMOOTHING, ROTATION_SMOOTHING, RotationOneEuro, VectorOneEuro
 from inference.poser.stride import FOOT_SEGMENTS, SHANK_SITES, StrideScale
+from inference.signals.resample import FPS_MODEL
 
 WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
 DEFAULT_WEIGHTS: dict[str, Path] = {

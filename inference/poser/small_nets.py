@@ -103,7 +103,7 @@ def net_from_entry(entry: dict, cls: type) -> nn.Module:
 
 
 def save_file(path: str | os.PathLike, obj: dict) -> None:
-    from inference.model.denoiser import atomic_torch_save
+    from inference.model.config import atomic_torch_save
 
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     atomic_torch_save(obj, path)

@@ -28,7 +28,9 @@ from inference.body.rotations import quat_normalize, quat_slerp
 
 HALF = 5  # look-ahead / look-behind of the moving average, samples
 WINDOW_MA = 2 * HALF + 1
-STEP = 3  # 60 Hz -> 20 Hz
+FPS_SIGNAL = 60  # the rate every live stream is put on (the hub's grid) and synthesis works at
+FPS_MODEL = 20  # the model's frame rate
+STEP = FPS_SIGNAL // FPS_MODEL  # 60 Hz -> 20 Hz
 
 
 def _window_mean(stack: list[np.ndarray]) -> np.ndarray:

@@ -42,8 +42,7 @@ from inference.body.body import MAIN_CHILD, Body, points_on_segments
 from inference.body.motion import Motion
 from inference.body.rotations import matrix_about_axis, matrix_to_quat, so3_exp, so3_log
 from inference.body.skeleton import N_SEGMENTS, SEGMENT_INDEX, SEGMENTS, SITE_SEGMENT_INDEX, SITES
-from inference.features.layout import FPS_SIGNAL
-from inference.signals.resample import moving_average
+from inference.signals.resample import FPS_SIGNAL, moving_average
 from inference.signals.site_signals import SiteSignals
 
 GRAVITY = np.array([0.0, 0.0, -9.81])

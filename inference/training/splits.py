@@ -16,8 +16,8 @@ import numpy as np
 
 from inference.loaders import find_motion_files
 from inference.metrics.plausibility import implausible_feature_frames, repair_feet
+from inference.training.data import cache_root, data_root
 from inference.training.dataset import FeatureDataset, build_dataset, clip_weights
-from inference.training.loop import cache_root, data_root
 
 HELD_OUT_BANDAI_STYLE = "_sad_"
 # Bandai is 97% of the frames but covers only locomotion and gestures; HDM05 brings the

@@ -10,7 +10,8 @@ import torch
 
 import app.cli.bench as cli_bench
 from app.cli.main import main
-from inference.model.denoiser import LoadedModel, ModelConfig, build_model
+from inference.model.config import ModelConfig
+from inference.model.files import LoadedModel, build_model
 
 
 def _tiny_paper():

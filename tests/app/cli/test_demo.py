@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 import torch
 
-from app.cli.demo import assignment_for, resolve_demo_model
 from app.cli.main import main
+from app.demo_session import assignment_for, resolve_demo_model
 from app.recording import read_recording
 from inference.features.layout import N_FEATURES
-from inference.model.denoiser import ModelConfig, build_model, save_model
+from inference.model.config import ModelConfig
+from inference.model.files import build_model, save_model
 
 
 @pytest.fixture(scope="module")

@@ -17,7 +17,8 @@ from app.export.opensim import read_mot
 from app.recording import read_recording
 from inference.features.layout import N_FEATURES
 from inference.loaders import load_motion
-from inference.model.denoiser import ModelConfig, build_model, save_model
+from inference.model.config import ModelConfig
+from inference.model.files import build_model, save_model
 
 
 @pytest.fixture(scope="module")
@@ -109,7 +110,7 @@ def test_replay_mirrors_as_recorded_else_as_the_model_file_says(recorded, tiny_m
 
     import h5py
 
-    from inference.model.denoiser import retag_model
+    from inference.model.files import retag_model
 
     tagged = tmp_path / "tagged.pt"
     retag_model(tiny_model, tagged, {"mirror": True})

@@ -7,7 +7,8 @@ import csv
 
 import numpy as np
 
-from app.export.csv_file import continuous_quaternions, csv_columns, write_csv
+from app.export.common import continuous_quaternions
+from app.export.csv_file import csv_columns, write_csv
 from app.export.formats import body_for_recording, motion_from_recording
 from app.recording import read_recording
 from inference.body.rotations import axis_angle_to_matrix, matrix_to_quat, quat_to_matrix

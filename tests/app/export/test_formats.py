@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from app.export.common import ExportMotion
 from app.export.formats import (
-    ExportMotion,
     body_for_recording,
     check_export_path,
     export_motion,

@@ -3,7 +3,7 @@ thread, the skeleton item's data changes, the sensor chooser reaches the pipelin
 record button writes a file. The window is grabbed to a PNG: set IMUCAP_SCREENSHOT=docs/demo.png
 to refresh the picture in the docs (a test run must not rewrite tracked files).
 
-Run under Xvfb: ``xvfb-run -a .venv/bin/pytest -m gui tests/app/test_gui.py``."""
+Run under Xvfb: ``xvfb-run -a .venv/bin/pytest -m gui tests/app/gui/test_main_window.py``."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
 pytest.importorskip("pytestqt")
 pytest.importorskip("OpenGL")
 
-from app.cli.demo import DemoConfig, DemoSession  # noqa: E402
+from app.demo_session import DemoConfig, DemoSession  # noqa: E402
 from app.recording import read_recording  # noqa: E402
 from calibration import Protocol  # noqa: E402
 

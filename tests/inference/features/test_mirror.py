@@ -8,7 +8,9 @@ import torch
 
 from inference.features.layout import N_FEATURES, SL_CONTACT, SL_DP, WINDOW, observation_mask
 from inference.features.mirror import MirrorAveraged, mirror_features, mirror_points
-from inference.model.denoiser import ModelConfig, build_model, freeze_for_cpu
+from inference.model.config import ModelConfig
+from inference.model.denoiser import freeze_for_cpu
+from inference.model.files import build_model
 
 
 def test_mirror_features_equal_the_features_of_the_mirrored_motion():

@@ -8,15 +8,9 @@ import numpy as np
 import torch
 
 from inference.features.layout import N_FEATURES, WINDOW, observation_mask
-from inference.model.denoiser import (
-    Denoiser,
-    ModelConfig,
-    build_model,
-    count_parameters,
-    load_model,
-    save_model,
-    timestep_embedding,
-)
+from inference.model.config import ModelConfig, count_parameters
+from inference.model.denoiser import Denoiser, timestep_embedding
+from inference.model.files import build_model, load_model, save_model
 from inference.model.regressor import MaskConfig, Regressor, random_observation_mask, regress
 
 
@@ -157,7 +151,9 @@ def test_freeze_for_cpu_same_outputs():
 def test_skip_parameterisation_passes_clean_input_through_and_round_trips(tmp_path):
     """With skip=True a clean window (t = 0) comes back exactly; at the top level the
     output is the network's alone. The flag survives save/load."""
-    from inference.model.denoiser import Denoiser, ModelConfig, load_model, save_model
+    from inference.model.config import ModelConfig
+    from inference.model.denoiser import Denoiser
+    from inference.model.files import load_model, save_model
 
     torch.manual_seed(0)
     cfg = ModelConfig(layers=1, d_model=32, heads=2, ff=64, dropout=0.0, skip=True)

@@ -26,7 +26,7 @@ from inference.poser.contact_detector import (
     train_detector,
 )
 from inference.poser.poser import Poser
-from inference.training.loop import rotate_yaw
+from inference.training.augment import rotate_yaw
 
 
 def _walks(seeds, **kw):
@@ -95,7 +95,8 @@ def test_poser_uses_the_detector_only_when_both_shanks_are_measured(sites, insol
     mask = observation_mask(list(sites), insoles)
     never = Poser(None, contact_detector=_biased(-20.0))
     assert never.contact_detector is None  # the floor keeps the standing pose's contacts
-    from inference.model.denoiser import LoadedModel, ModelConfig, build_model
+    from inference.model.config import ModelConfig
+    from inference.model.files import LoadedModel, build_model
 
     cfg = ModelConfig(layers=1, d_model=32, heads=2, ff=64, mask_input=True)
     torch.manual_seed(0)

@@ -14,7 +14,7 @@ import torch
 
 from inference.evaluation.runner import SIX, synthetic_motion
 from inference.features.codec import features_from_motion
-from inference.features.layout import FPS_MODEL, SL_DP, observation_mask
+from inference.features.layout import SL_DP, observation_mask
 from inference.poser.pelvis_odometry import (
     CONTEXT,
     PELVIS_INDEX,
@@ -31,7 +31,8 @@ from inference.poser.pelvis_odometry import (
     train_odometry,
 )
 from inference.poser.poser import Poser
-from inference.training.loop import rotate_yaw
+from inference.signals.resample import FPS_MODEL
+from inference.training.augment import rotate_yaw
 
 
 def _walk(seed=0, **kw) -> np.ndarray:
@@ -180,7 +181,8 @@ def test_file_round_trip(tmp_path):
     (("head", "l_wrist", "r_wrist"), False, False),  # no pelvis sensor to walk from
 ])
 def test_poser_walks_from_the_pelvis_only_without_both_shanks(sites, insoles, expect_odometry):
-    from inference.model.denoiser import LoadedModel, ModelConfig, build_model
+    from inference.model.config import ModelConfig
+    from inference.model.files import LoadedModel, build_model
 
     x = _walk(5)
     mask = observation_mask(list(sites), insoles)

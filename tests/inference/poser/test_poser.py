@@ -12,10 +12,11 @@ from inference.body.body import Body, contact_points, forward_kinematics, npose_
 from inference.body.skeleton import SEGMENT_INDEX
 from inference.evaluation.runner import SIX, clip_input, synthetic_motion
 from inference.features.layout import N_FEATURES, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, observation_mask
-from inference.model.denoiser import LoadedModel, ModelConfig, build_model
+from inference.model.config import ModelConfig
+from inference.model.files import LoadedModel, build_model
 from inference.poser import poser as poser_mod
 from inference.poser.poser import Poser, correct_root_displacement, reconstruct_offline, standing_features
-from inference.training.loop import feature_stats
+from inference.training.data import feature_stats
 
 
 @pytest.fixture(scope="module")

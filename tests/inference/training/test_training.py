@@ -16,21 +16,13 @@ import torch
 from inference.body.rotations import matrix_to_rot6d, rot6d_to_matrix
 from inference.features.layout import SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT
 from inference.features.mirror import mirror_features, mirror_points
-from inference.model.denoiser import ModelConfig, build_model, load_model
-from inference.training.loop import (
-    EMA,
-    LossWeights,
-    StepContext,
-    TrainConfig,
-    batch_loss,
-    contact_offsets_for,
-    feature_stats,
-    motion_losses,
-    rotate_yaw,
-    scale_features,
-    synthetic_dataset,
-    train,
-)
+from inference.model.config import ModelConfig
+from inference.model.files import build_model, load_model
+from inference.training.augment import rotate_yaw, scale_features
+from inference.training.config import LossWeights, TrainConfig
+from inference.training.data import feature_stats, synthetic_dataset
+from inference.training.loop import EMA, StepContext, batch_loss, train
+from inference.training.losses import contact_offsets_for, motion_losses
 
 ROOT = Path(__file__).resolve().parents[3]
 TINY = {"layers": 1, "d_model": 32, "heads": 2, "ff": 64, "dropout": 0.1}
@@ -88,7 +80,7 @@ def test_swing_compares_the_legs_amplitude_not_their_positions():
 
 def test_swing_is_asked_for_only_where_pelvis_and_shanks_are_known():
     from inference.features.layout import observation_mask
-    from inference.training.loop import sites_known_share
+    from inference.training.losses import sites_known_share
 
     n = 10
     legs = torch.as_tensor(observation_mask(["pelvis", "l_shank", "r_shank", "head"]))
@@ -471,7 +463,7 @@ def test_deeper_model_starts_from_a_shallower_ones_outputs(tmp_path):
 
 
 def test_last_frame_terms_see_only_the_last_frame():
-    from inference.training.loop import motion_losses
+    from inference.training.losses import motion_losses
 
     torch.manual_seed(0)
     B, N = 2, 5
@@ -529,7 +521,7 @@ def test_shipped_configs_parse(path):
 
 def test_retag_changes_a_model_files_poser_defaults_and_not_its_weights(tmp_path, capsys):
     from app.cli.main import main
-    from inference.model.denoiser import save_model
+    from inference.model.files import save_model
 
     torch.manual_seed(0)
     net = build_model("regressor", ModelConfig.tiny())

@@ -1,0 +1,167 @@
+"""What a training run is: its configuration, loss weights and file names. Read by the
+loop, the data and the command line; a config file is this dataclass as JSON."""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import asdict, dataclass, field, fields
+
+from inference.body.skeleton import parse_sites
+from inference.features.layout import (
+    WINDOW,
+)
+from inference.model.config import ModelConfig
+from inference.model.regressor import MaskConfig
+
+CHECKPOINT_FORMAT = "imucap-train-v1"
+
+
+LAST = "last.pt"
+
+
+MODEL_FILE = "model.pt"
+
+
+LOG_FILE = "train.jsonl"
+
+
+STD_FLOOR = 1e-2  # features with less spread than this are treated as constant
+
+
+VAL_SITES = ("pelvis", "head", "l_wrist", "r_wrist", "l_shank", "r_shank")  # the paper's 6
+
+
+@dataclass
+class LossWeights:
+    """Weights of the loss terms. The terms are in these units:
+
+    simple: normalised features (1 = one standard deviation); vel: 6D change per second;
+    fk: metres; drift: metres; slide: metres per second. Defaults are the weights the
+    shipped model was trained with (NOTES.md, "Training the shipped model"): each
+    auxiliary term starts at ~0.1-0.3 of the simple term. Heavier weights (terms 10-50x
+    the simple term at initialisation) stalled learning: the model never learned to
+    reproduce even an un-noised input, because the random initial predictions give
+    foot speeds of metres per second and 6D velocities of ~20 /s.
+    """
+
+    simple: float = 1.0
+    vel: float = 0.002
+    fk: float = 2.0
+    drift: float = 0.05
+    slide: float = 0.02
+    # the live poser outputs only a window's last frame, the one without future context;
+    # these repeat the simple and fk terms on that frame alone to spend more of a small
+    # model's capacity there (0 = the paper's uniform weighting over the window)
+    last: float = 0.0
+    fk_last: float = 0.0
+    # swing amplitude of the legs: per window, the spread over time of each knee, ankle and
+    # toe position relative to the pelvis, predicted vs. true (metres). The pointwise terms
+    # above are all minimised by the conditional mean, which under-flexes an unmeasured
+    # thigh and shortens the stride the root correction walks (NOTES.md, sessions 11-12);
+    # this term compares amplitudes, not positions, so it pulls the other way
+    swing: float = 0.0
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class TrainConfig:
+    """Everything that defines a training run; saved in every checkpoint."""
+
+    kind: str = "diffusion"  # or "regressor"
+    model: ModelConfig = field(default_factory=ModelConfig)
+    loss: LossWeights = field(default_factory=LossWeights)
+    mask: MaskConfig = field(default_factory=MaskConfig)  # regressor; diffusion when cond_prob > 0
+    # diffusion only: share of training windows noised only where unobserved (a mask drawn
+    # from `mask`; observed entries stay clean), the rest noised everywhere as in the
+    # paper. > 0 makes the shipped poser inpaint in "replace" mode (diffusion.inpaint).
+    cond_prob: float = 0.0
+    # diffusion only: levels drawn as t = (T + 1) * u ** (1 / t_power), u uniform; 1 = the
+    # usual uniform draw, > 1 spends more of the training on the high-noise levels the
+    # live step list (1000/700/400/10/0) relies on; at t ~ 0 an x0 model has little to learn
+    t_power: float = 1.0
+    # diffusion only: share of training windows whose level is one of the live step list
+    # (``infer_steps``) instead of a random one. With 3 live steps (1000/400/0) the model is
+    # only ever called at three levels; a small model trained uniformly spends ~99 % of its
+    # samples elsewhere
+    t_focus: float = 0.0
+    # diffusion only: share of the windows drawn at the top level T whose noised entries hold
+    # zeros (the prior's mean) instead of a draw: what a poser with noise "mean" feeds the
+    # model at its first call (``inpaint(start="mean")``). 1 = the top level is trained only
+    # that way, so its answer becomes the mean estimate of the unknown features
+    mean_start: float = 0.0
+    # sites whose orientations must be known for a window's swing loss term to count (by the
+    # share of its frames, ``sites_known_share``); empty = every window alike. The swing term
+    # asks for the true leg amplitude, which only the measurements can place: with the
+    # shanks unseen (pelvis and wrists) the step's phase is a guess, and an amplitude forced
+    # onto a guessed phase costs angle. With the pelvis unseen (shanks only) a short-step
+    # walker already gets the typical stride, and the push adds to it; gating on the pelvis
+    # too softened that only a little (NOTES.md, session 12)
+    swing_gate: list[str] = field(default_factory=list)
+    steps: int = 100_000  # total optimiser steps (also the horizon of the LR decay)
+    batch: int = 64  # global batch (split over ranks)
+    window: int = WINDOW
+    lr: float = 2e-4
+    lr_min: float = 1e-5
+    warmup: int = 1000
+    weight_decay: float = 0.01
+    grad_clip: float = 1.0
+    ema_decay: float = 0.999
+    augment_yaw: bool = True
+    # share of training windows mirrored left <-> right (``mirror_features``): the data has
+    # few actors, each with their own handedness and habits; a mirrored actor is a new one
+    augment_mirror: float = 0.0
+    # train the mirror-averaged model the poser runs (mirror.MirrorAveraged: every forward
+    # pass also answers for the mirrored windows, in one batch of twice the size), so the
+    # average, not each half, is what the loss shapes (NOTES.md "Session 13")
+    mirror_average: bool = False
+    # body-size augmentation: each window's body scaled by s, log-uniform in
+    # [1 / (1 + a), 1 + a] (``scale_features``). The data has one body size per actor, so
+    # without it the height token tells the model who is moving and it learns that
+    # actor's habits (NOTES.md "Session 8")
+    augment_scale: float = 0.0
+    seed: int = 0
+    T: int = 1000
+    log_every: int = 50
+    ckpt_every: int = 1000
+    val_every: int = 1000
+    val_batches: int = 8
+    val_batch: int = 32
+    keep_every: int = 0  # also keep step_XXXXXXX.pt every this many steps (0 = only last.pt)
+    threads: int = 0  # torch intra-op threads per process (0 = leave torch's default)
+    # step list the live poser should use with this model (written to model.pt as
+    # meta["default_steps"]; anything diffusion.parse_steps takes); None = the paper's 10D
+    infer_steps: str | None = None
+    # {"train": spec, "val": spec}, see load_dataset; empty = default_data() (the issue's split)
+    data: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> TrainConfig:
+        names = {f.name for f in fields(cls)}
+        unknown = set(d) - names
+        if unknown:
+            raise ValueError(f"unknown training config keys: {sorted(unknown)}")
+        d = dict(d)
+        if isinstance(d.get("model"), dict):
+            d["model"] = ModelConfig.from_dict(d["model"])
+        if isinstance(d.get("loss"), dict):
+            d["loss"] = LossWeights(**d["loss"])
+        if isinstance(d.get("mask"), dict):
+            d["mask"] = MaskConfig.from_dict(d["mask"])
+        cfg = cls(**d)
+        if cfg.kind not in ("diffusion", "regressor"):
+            raise ValueError(f"unknown model kind {cfg.kind!r}")
+        # a misspelt site would otherwise surface as a KeyError at the first batch
+        cfg.swing_gate = parse_sites(cfg.swing_gate)
+        return cfg
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> TrainConfig:
+        with open(path) as f:
+            return cls.from_dict(json.load(f))
