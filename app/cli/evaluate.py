@@ -66,10 +66,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "measured (default); --no-contact-detector uses the model's own contact outputs")
     p.add_argument("--stride-scale", action=argparse.BooleanOptionalAction, default=True,
                    help="scale the root path by the shanks' inertial strides when both shanks are measured "
-                        "(inference/stride.py; default; NOTES.md 'Session 16')")
+                        "(inference/stride.py; default; docs/model.md 'Stride scaling')")
     p.add_argument("--pelvis-odometry", action=argparse.BooleanOptionalAction, default=True,
                    help="without both shanks, the root's walk from the pelvis sensor "
-                        "(inference/pelvis_odometry.py; default; NOTES.md 'Session 17'); --no-pelvis-odometry "
+                        "(inference/pelvis_odometry.py; default; docs/model.md 'Pelvis odometry'); --no-pelvis-odometry "
                         "uses the model's own root displacement corrected by its contacts")
     p.add_argument("--against", default=None, metavar="SPEC",
                    help="also score this model (same forms as --model) on the same clips and sensors, and "
@@ -80,7 +80,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--limit", type=int, default=None, help="only the first N motion files (sorted)")
     p.add_argument("--seed", type=int, default=0, help="seed of sensor noise and inpainting noise")
     # default 1: the live loop is one small model call per step, and with more threads two
-    # evaluations at once spin in OpenMP barriers (~15x slower, seen in session 2)
+    # evaluations at once spin in OpenMP barriers (~15x slower)
     p.add_argument("--threads", type=int, default=1, help="torch threads (0 = torch's default)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.add_argument("--report", type=Path, default=None, metavar="FILE.md",

@@ -5,7 +5,7 @@
 
 Multi-process (one process per core or GPU):
 
-    torchrun --standalone --nproc_per_node 2 -m app.cli train --config cfg.json --out runs/x
+    torchrun --standalone --nproc_per_node 2 -m app.cli.main train --config cfg.json --out runs/x
 
 The config is a JSON object with the fields of ``inference.training.TrainConfig``; its
 ``data`` entry names the training and validation sets (see ``training.load_dataset``).

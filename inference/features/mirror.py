@@ -6,7 +6,7 @@ same symmetry serves at inference: ``MirrorAveraged`` asks the denoiser about th
 and about its mirror image in one batched call and averages the two answers (the second
 mirrored back). A model that learnt a handedness from two right-handed HDM05 actors then
 cannot impose it on a person it has not seen: the averaged answer is the same for a
-motion and its mirror image (NOTES.md, session 13).
+motion and its mirror image (docs/model.md, "Inference: steps, start, noise, mirror, history").
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ Why: a pelvis sensor tells a forward walk from a backward one only by the order 
 within a stride (accelerations are the same played either way), and the training data has
 few backward walks (one take per Bandai style, against hundreds of forward walks). Trained
 without a style, the odometry walked that style's backward walk in place (proud: 0.26 of
-6.52 m; NOTES.md "Session 17").
+6.52 m; docs/model.md, "Pelvis odometry").
 
 Backward walking is close to forward walking played backwards: the joint-angle patterns of
 the leg in backward gait are roughly the time reversal of those of forward gait (Thorstensson
@@ -18,7 +18,7 @@ frame. Runs, hops and everything else stay as they are: played backwards a fligh
 takes off where it landed, and reversing every clip scored worse on clips held out of the
 training split than reversing the walks alone.
 
-What it buys and costs (NOTES.md "Session 18"): a held-out style's backward walk goes
+What it buys and costs (docs/model.md, "Pelvis odometry"): a held-out style's backward walk goes
 backward (proud: 5.1 of 6.5 m instead of 0.3), and clips held out of the training split
 score RE5 0.14 instead of 0.25 m; but forward walks come out ~10 % less accurate (the sad
 walks' RE10 0.75 -> 0.89 m over four seeds) and on the real x-IMU3 log in-place knee raises

@@ -73,7 +73,7 @@ MIXAMO = JointMap(
 # ``wrist`` (pronation, a twist about the forearm: dof ry). A sensor strapped near the
 # wrist turns with the second, as a real forearm's distal end does and as Bandai's
 # forearm bone does, so our forearm starts at the elbow and takes the wrist bone's
-# orientation, and our hand is ``hand`` (NOTES.md, session 14: mapping the wrist bone to
+# orientation, and our hand is ``hand`` (docs/motion_data.md: mapping the wrist bone to
 # our hand left HDM05's wrist sensors without pronation).
 ASF = JointMap(
     name="acclaim",

@@ -27,7 +27,13 @@ import numpy as np
 
 from inference.body.body import MAIN_CHILD, Body, anthropometric_offsets
 from inference.body.motion import Motion
-from inference.body.rotations import quat_about_axis, quat_between_vectors, quat_to_matrix, triad
+from inference.body.rotations import (
+    matrix_to_quat,
+    quat_about_axis,
+    quat_between_vectors,
+    quat_to_matrix,
+    triad,
+)
 from inference.body.skeleton import N_SEGMENTS, PARENTS, SEGMENT_INDEX, SEGMENTS
 
 # our T-pose bone directions, the target of step 1 (unit vectors, our world frame)
@@ -70,9 +76,13 @@ class JointMap:
 
     segments: our segment name -> source joint name. A segment missing here copies its
     parent's orientation. `split` names our segments that sit partway along a source
-    bone: segment -> fraction of the parent's bone at which its joint lies. `orient`
-    names segments whose orientation comes from a source bone further along the same line
-    than the one that places their joint (the Acclaim forearm, see joint_maps.ASF).
+    bone: segment -> fraction of the parent's bone at which its joint lies; the bone runs
+    to the source joint of our segment's main child or, where the source has none, to
+    the parent's end site (toes at the end of a foot bone). `orient` names segments whose
+    orientation comes from a source bone further along the same line than the one that
+    places their joint (the Acclaim forearm, see joint_maps.ASF). `twist` names segments
+    whose source bone is a hinge while the next joint (the hand) holds the pronation: the
+    segment adds that joint's twist about the segment's own bone (``twist_about_bone``).
     """
 
     name: str
@@ -83,9 +93,10 @@ class JointMap:
     # the segment rolled by that much in every frame (see joint_maps.BANDAI)
     roll_quarters: dict[str, int] = field(default_factory=dict)
     orient: dict[str, str] = field(default_factory=dict)
+    twist: dict[str, str] = field(default_factory=dict)
 
     def required(self) -> set[str]:
-        return set(self.segments.values()) | set(self.orient.values())
+        return set(self.segments.values()) | set(self.orient.values()) | set(self.twist.values())
 
 
 def _source_direction(src: SourceSkeleton, j: int, children: list[int]) -> np.ndarray | None:
@@ -216,10 +227,12 @@ def retarget(
     T = src.glob.shape[0]
     rot = np.zeros((T, N_SEGMENTS, 3, 3))
     orient = {SEGMENT_INDEX[s]: src.index(n) for s, n in jmap.orient.items()}
+    twist = {SEGMENT_INDEX[s]: src.index(n) for s, n in jmap.twist.items()}
     for i in range(N_SEGMENTS):
         if i in ours_to_src:
             j = orient.get(i, ours_to_src[i])
-            rot[:, i] = W @ src.glob[:, j] @ Q[j].T @ Wt
+            G = src.glob[:, j] if i not in twist else _with_twist_of(src, j, twist[i])
+            rot[:, i] = W @ G @ Q[j].T @ Wt
         else:
             rot[:, i] = rot[:, PARENTS[i]]
 
@@ -234,9 +247,12 @@ def retarget(
         elif SEGMENTS[i] in jmap.split:
             # a joint partway along the parent's bone: the parent keeps the first part
             frac = jmap.split[SEGMENTS[i]]
-            child = MAIN_CHILD[i]
-            bone = tpose_pos[child] - tpose_pos[par]
-            offsets[i] = frac * bone
+            child = MAIN_CHILD.get(i)
+            if child in tpose_pos:
+                end = tpose_pos[child]
+            else:
+                end = W @ _tpose_end_site(src, Q, P, ours_to_src[par]) * scale
+            offsets[i] = frac * (end - tpose_pos[par])
             tpose_pos[i] = tpose_pos[par] + offsets[i]
         else:
             if anthro is None:
@@ -247,6 +263,44 @@ def retarget(
     body = Body.from_offsets(offsets)
     return Motion(rot=rot, root=root, fps=src.fps, body=body, name=name, source=source,
                   meta=dict(meta or {})).floor_aligned()
+
+
+def twist_about_bone(local: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """The twist part (T, 3, 3) of rotations ``local`` about the unit ``axis`` (same frame):
+    the rotation about the axis that is left when the swing (a turn about an axis at right
+    angles to it) is taken out. Read off the quaternion as (w, axis component), it does
+    not depend on whether the swing comes before or after the twist. A half turn of pure
+    swing leaves no twist to speak of: it counts as none."""
+    q = matrix_to_quat(local)
+    w, along = q[..., 0], q[..., 1:] @ axis
+    n = np.hypot(w, along)
+    ok = n > 1e-9
+    tw = np.zeros(q.shape)
+    tw[..., 0] = np.where(ok, w / np.where(ok, n, 1.0), 1.0)
+    tw[..., 1:] = np.where(ok, along / np.where(ok, n, 1.0), 0.0)[..., None] * axis
+    return quat_to_matrix(tw)
+
+
+def _with_twist_of(src: SourceSkeleton, j: int, c: int) -> np.ndarray:
+    """Global rotations of source joint j turned by the twist that joint c (further down
+    the line: the hand) has relative to it, about the bone from j to c. A sensor near the
+    wrist turns with the radius, which turns with the hand: a rig that keeps its elbow a
+    pure hinge and puts pronation in the hand bone hides it from the forearm otherwise.
+    The bone is read in j's frame off the zero pose, where BVH and our Acclaim reader
+    both have every global rotation at the identity."""
+    axis = src.rest[c] - src.rest[j]
+    axis = axis / np.linalg.norm(axis)
+    G = src.glob[:, j]
+    local = np.swapaxes(G, -1, -2) @ src.glob[:, c]
+    return G @ twist_about_bone(local, axis)
+
+
+def _tpose_end_site(src: SourceSkeleton, Q: np.ndarray, P: np.ndarray, j: int) -> np.ndarray:
+    """T-pose position (source units and axes) of joint j's end site, for a segment the
+    source has no joint for (toes where the foot bone simply ends)."""
+    if j not in src.end_sites:
+        raise ValueError(f"source joint {src.names[j]!r} has no end site to place its child segment at")
+    return P[j] + Q[j] @ (src.end_sites[j] - src.rest[j])
 
 
 def _height_scale(tpose_pos: dict[int, np.ndarray]) -> float:

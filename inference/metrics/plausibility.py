@@ -3,7 +3,7 @@
 Marker-based solvers sometimes fail in a way no body can move: in HDM05 the source AMC of
 actor bd's four kickLFront clips holds the right foot turned ~180 deg from the shank in
 every frame, and deep squats of bk and dg pass 90 deg at the ankle where a real one stops
-near 40 (NOTES.md, session 12). Training on such frames teaches a backwards foot, and
+near 40 (docs/motion_data.md). Training on such frames teaches a backwards foot, and
 scoring against them charges a model for the solver's failure, so the training split can
 leave such clips out, or repair them (``repair_feet``), and the evaluation can say how much
 of its error sits in them.
@@ -84,7 +84,7 @@ def repair_feet(motion: Motion, ankle_limit_deg: float = ANKLE_LIMIT_DEG,
                 margin_s: float = REPAIR_MARGIN_S) -> tuple[Motion, FootRepair]:
     """The clip with each foot past ``ankle_limit_deg`` against its shank put back.
 
-    Two failures are told apart (NOTES.md, session 13). A foot turned half a turn about
+    Two failures are told apart (docs/motion_data.md). A foot turned half a turn about
     its own bone (bd's kicks: every frame, and 13-49 deg once turned back) is turned back:
     joint positions do not change, only which way the sole faces. Any other broken
     stretch (deep squats, lying down: the solver loses the foot for a fraction of a

@@ -26,7 +26,7 @@ class ModelConfig:
 
     The paper's model is ``ModelConfig.paper()`` (8 layers / 512 / FF 2048 / 8 heads).
     The default stays 4/256/1024 (other code and tests use it as "the default model");
-    the CPU real-time size measured with benchmarks/bench_model.py is 4/128/512 (NOTES.md,
+    the CPU real-time size measured with benchmarks/bench_model.py is 4/128/512 (docs/model.md,
     "Model (issue 3)"): ~11 vs ~3.7 ms per model call on one core of this machine. The
     shipped model's size comes from its model file, not from this default.
     """
@@ -41,7 +41,7 @@ class ModelConfig:
     # x0 = sqrt(ab_t) z + sqrt(1 - ab_t) F(z, t, h) instead of x0 = F(z, t, h): the network
     # learns the residual (v-prediction in disguise), so at low noise the input passes
     # through unchanged instead of having to be re-learned. Without it, a CPU-sized
-    # training budget left the model blurring even a clean input (18 deg at t = 0; NOTES).
+    # training budget left the model blurring even a clean input (18 deg at t = 0; docs/model.md).
     skip: bool = False
     # the frame tokens also read the per-feature known/unknown mask. Without it a model
     # trained by replacement (TrainConfig.cond_prob) must guess from the values alone

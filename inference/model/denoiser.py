@@ -8,7 +8,7 @@ only the frame tokens and predicts the clean window x0 (normalised features).
 The paper's model does not take the observation mask: inpainting (diffusion.inpaint) is
 what makes one model serve every sensor subset. ``ModelConfig.mask_input`` adds the mask as
 190 more input channels of each frame token (still one model for every subset, trained on
-random masks); why it is the shipped choice is in NOTES.md ("Session 2").
+random masks); why it is the shipped choice is in docs/model.md ("Conditioning, masks and noise levels").
 """
 
 from __future__ import annotations
@@ -135,7 +135,7 @@ def freeze_for_cpu(model: nn.Module, batch: int = 1, window: int | None = None) 
         example = (*example, torch.ones(batch, n, cfg.features, dtype=torch.bool))
     with torch.inference_mode(False), torch.no_grad(), warnings.catch_warnings():
         # TorchScript is deprecated in favour of torch.compile, which here compiles for
-        # ~40 s and then runs no faster than eager (NOTES.md); keep the lever that works
+        # ~40 s and then runs no faster than eager (docs/model.md, "Speed"); keep the lever that works
         warnings.simplefilter("ignore", DeprecationWarning)
         traced = torch.jit.trace(model, example, check_trace=False)
         return torch.jit.freeze(traced)

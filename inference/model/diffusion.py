@@ -241,7 +241,7 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
     ``mode="replace"`` is Algorithm 1 with the known entries left clean in ``z`` (only the
     current estimate of the unknown ones is re-noised), for models trained the same way
     (``TrainConfig.cond_prob``): the model then always sees the measurements exactly
-    instead of a noisy copy of them, which a small CPU-trained model needs (NOTES.md).
+    instead of a noisy copy of them, which a small CPU-trained model needs (docs/model.md, 'Inference').
     ``mode="replace-ddim"``: the same, but one noise draw at the first level and then
     deterministic DDIM updates of the unknown entries (no fresh noise per step), so the
     frame-to-frame randomness of the live output is one draw instead of one per step.
@@ -252,7 +252,7 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
     the model's estimate of the *mean* unknown features given the known ones, where a drawn
     start gives one sample whose error about the truth is larger wherever the measurements
     leave the pose open (arms with only the shanks worn: HDM05 dg, 2 sites, GA 35.5 -> 31.0
-    deg; 6 sites 16.6 -> 15.7; NOTES.md "Session 6"). With the DDIM modes the whole run is then
+    deg; 6 sites 16.6 -> 15.7; docs/model.md, "Inference: steps, start, noise, mirror, history"). With the DDIM modes the whole run is then
     deterministic and draws nothing.
 
     ``mask_input``: hand the model the mask too (default: ``wants_mask(model)``; pass it

@@ -4,7 +4,7 @@ A small model given the pelvis and a shank sensor predicts the thigh with as muc
 twist and ab/adduction error as flexion error, although the knee barely allows any:
 in every dataset here the knee's local rotation lies on one axis, the thigh's lateral
 (y) axis of our T-pose (mean deviation off that axis: HDM05 0.0 deg, its knees are
-1-DoF in the ASF files; Bandai 0.2-0.3 deg, measured in NOTES.md session 3).
+1-DoF in the ASF files; Bandai 0.2-0.3 deg, measured in docs/model.md, "Output filters and joint constraints").
 So when one side of a knee is measured, the other side is the measured one turned
 about that axis, and only the flexion angle is left to the model: the
 reconstruction keeps the model's flexion and takes everything else from the sensor.

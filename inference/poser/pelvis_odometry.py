@@ -6,7 +6,7 @@ contacts come from the shanks (``contact_detector``) and the stride from their o
 accelerations (``stride``). Without them the legs, and so the contacts, are the model's
 guess, and on walks that guess cancels the walk: with pelvis + wrists (the paper's best
 3-site set for the whole body) the held-out Bandai walks' reconstructed root stood still
-(RE10 4.6 m, the floor baseline that never moves scores 4.4; NOTES "Session 17").
+(RE10 4.6 m, the floor baseline that never moves scores 4.4; docs/model.md, "Pelvis odometry").
 
 A pelvis sensor does carry the walk: every step lifts and drops the pelvis and rocks it
 side to side, and the size and rhythm of that bounce follow step length and cadence
@@ -56,12 +56,12 @@ ODOMETRY_FORMAT = "imucap-pelvis-odometry-v1"
 TWO_WAY_FORMAT = "imucap-pelvis-odometry-two-way-v1"
 # frames at 20 Hz (1 s: a stride of a slow walk). Chosen on clips held out of the training
 # split (10 % by clip): RE2 / RE5 0.114 / 0.294 m at 10 frames, 0.108 / 0.271 at 15,
-# 0.099 / 0.245 at 20, 0.107 / 0.284 at 30, 0.100 / 0.268 at 40 (NOTES.md "Session 17")
+# 0.099 / 0.245 at 20, 0.107 / 0.284 at 30, 0.100 / 0.268 at 40 (docs/model.md, "Pelvis odometry")
 CONTEXT = 20
 # The two-way odometry's gate (``TwoWayOdometry``): the backward net's mean forward speed
 # over the last second. Picked on the clips held out of the training split: RE2 / RE5 at
 # 0.3 / 0.5 / 0.7 m/s 0.083 / 0.144, 0.089 / 0.187, 0.098 / 0.242 (the forward net alone
-# 0.099 / 0.245; NOTES.md "Session 18")
+# 0.099 / 0.245; docs/model.md, "Pelvis odometry")
 GATE_M_S = 0.3
 GATE_FRAMES = 20
 
@@ -151,7 +151,7 @@ class TwoWayOdometry(nn.Module):
     Why two: the second alone walks a backward walk backwards but every forward walk ~10 %
     worse, and on the real x-IMU3 log it took knee raises in place for backward steps; the
     first alone walked a held-out style's backward walk in place. Gated, the backward
-    walks go backward and forward walks are the first net's (NOTES.md "Session 18")."""
+    walks go backward and forward walks are the first net's (docs/model.md, "Pelvis odometry")."""
 
     def __init__(self, forward_net: PelvisOdometry, backward_net: PelvisOdometry,
                  gate_m_s: float = GATE_M_S, gate_frames: int = GATE_FRAMES) -> None:

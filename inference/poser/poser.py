@@ -15,11 +15,11 @@ last 60 frames) and whose last frame holds the new measurement. Each step:
    root displacement from the predicted contacts, write it back into the history;
 4. with both shanks measured, scale the root displacement by the running ratio of the
    shanks' inertial strides to the reconstructed ones (``stride.StrideScale``;
-   ``stride_scale=False`` to skip; NOTES.md "Session 15", "Session 16"): the reconstructed
+   ``stride_scale=False`` to skip; docs/model.md, "Stride scaling"): the reconstructed
    stride is the unmeasured thigh's guess; without both shanks, the root displacement
    comes from the pelvis sensor's last second instead
-   (``pelvis_odometry.TwoWayOdometry``; ``pelvis_odometry=None`` to skip; NOTES.md
-   "Session 17", "Session 18"): there the guessed legs cancel the walk, even planted on the
+   (``pelvis_odometry.TwoWayOdometry``; ``pelvis_odometry=None`` to skip; docs/model.md,
+   "Pelvis odometry"): there the guessed legs cancel the walk, even planted on the
    insoles' contacts;
 5. integrate the root path and run FK for the outputs; the output root and the
    unmeasured orientations go through light speed-adaptive low-passes (``smoothing``,
@@ -89,16 +89,16 @@ POSER_KINDS = ("diffusion", "regressor", "floor")
 HISTORY_MODES = ("reconstructed", "measured")
 # inpainting noise: a fresh draw every frame (the paper), or the same draw every frame, which
 # makes the output a deterministic function of the window, so it only moves when the
-# measurements do (much less jitter at the same accuracy; NOTES.md "Session 2"), or no draw
+# measurements do (much less jitter at the same accuracy; docs/model.md, "Inference"), or no draw
 # at all: the first level starts from the prior's mean (``inpaint(start="mean")``), which
-# estimates the mean pose given the measurements instead of sampling one (NOTES.md
-# "Session 6": the largest gain where few sensors leave the pose open)
+# estimates the mean pose given the measurements instead of sampling one (docs/model.md,
+# "Inference": the largest gain where few sensors leave the pose open)
 NOISE_MODES = ("fresh", "fixed", "mean")
 # a predicted contact value above this puts the foot point on the ground for the root
 # correction. A model unsure of a contact predicts something in between, and a swinging foot
 # taken as planted cancels the step; how sure a model is depends on the model, so the model
 # file may carry its own (meta "contact_threshold", `imucap train --export --contact-threshold`).
-# The shipped diffusion model carries 0.3 (NOTES.md, session 5: swept where the shank contact
+# The shipped diffusion model carries 0.3 (docs/model.md, "Root and contacts": swept where the shank contact
 # detector does not apply); this is the default otherwise.
 CONTACT_THRESHOLD = 0.5
 

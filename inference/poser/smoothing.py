@@ -3,7 +3,7 @@
 Every 20 Hz frame of the live poser is a fresh inference, so the root's height and its
 per-frame displacement (and, without insoles, the contact-driven root correction) wobble
 by millimetres from frame to frame, and so do the orientations no sensor measures.
-Measured on HDM05 dg (6 sites, NOTES.md session 3) the root wobble was most of the
+Measured on HDM05 dg (6 sites, docs/model.md, "Output filters and joint constraints") the root wobble was most of the
 jitter ratio of the session-2 model (3.64; 2.05 with the true root path); the model
 trained to weight the last frame is more accurate but wobbles more in orientation too.
 A fixed low-pass would trade the wobble for lag in fast motion; the 1-Euro filter
@@ -33,7 +33,7 @@ class OneEuroConfig:
     rate_cutoff_hz: float = 1.0
 
 
-# chosen by sweeps on the HDM05 dg subset (NOTES.md, session 3). Root: 2 Hz at rest (time
+# chosen by sweeps on the HDM05 dg subset (docs/model.md, "Output filters and joint constraints"). Root: 2 Hz at rest (time
 # constant 80 ms), ~2.7 Hz at a walk (1.3 m/s): jitter 3.64 -> 2.38, RE2 unchanged.
 # Unmeasured orientations: 4 Hz at rest (40 ms), beta per rad/s: jitter 3.55 -> 2.97 for
 # +0.2 deg GA with the session-3 model.

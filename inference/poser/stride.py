@@ -4,7 +4,7 @@ Why: the paper's root correction walks the pelvis by the planted foot's displace
 relative to it, so the stride it produces is whatever the *reconstructed* leg says. The
 thigh is never measured by the sensor sets we ship (the knee hinge fixes only its axis),
 and its flexion amplitude is the model's prior: with the shanks alone a short-step walker
-gets the typical stride (NOTES.md, sessions 12-14: 8-17 % too long on the held-out "sad"
+gets the typical stride (docs/model.md, "Stride scaling": 8-17 % too long on the held-out "sad"
 walks; with 6 sites 0-13 % too short).
 
 A shank sensor measures what the root correction lacks. Between two stance phases the
@@ -47,7 +47,7 @@ class StrideScaleConfig:
     (shuffling, turning on the spot). gain: weight of a new stride in the running mean
     (log domain), so ~1/gain strides of memory; 1 = the last stride alone, which did best
     on the training walks: the reconstruction's stride error changes from stride to stride,
-    and memory only makes the scale lag it (NOTES.md "Session 16"). limits: a stride ratio
+    and memory only makes the scale lag it (docs/model.md, "Stride scaling"). limits: a stride ratio
     outside this range is a detection error, not a stride, and is skipped. anchor_at: where
     in a stance run (0 = its first frame, 1 = its last) the zero-velocity anchor sits; stance
     is foot-flat (heel and toe down, ``foot_flat``), and the ankle of a rolling foot is
@@ -213,7 +213,7 @@ def foot_flat(contacts: np.ndarray) -> np.ndarray:
     """(..., 2) stance per foot, where the strides are anchored, from (..., 4) heel/toe
     contacts (``skeleton.CONTACTS`` order): heel and toe down. Contact runs from heel strike to toe
     off, and the ankle is still only while the foot is flat; anchoring in a union of the
-    two put some strides on a rolling foot (NOTES.md "Session 16")."""
+    two put some strides on a rolling foot (docs/model.md, "Stride scaling")."""
     c = np.asarray(contacts, dtype=bool)
     return np.stack([c[..., 0] & c[..., 1], c[..., 2] & c[..., 3]], axis=-1)
 

@@ -38,7 +38,7 @@ class LossWeights:
 
     simple: normalised features (1 = one standard deviation); vel: 6D change per second;
     fk: metres; drift: metres; slide: metres per second. Defaults are the weights the
-    shipped model was trained with (NOTES.md, "Training the shipped model"): each
+    shipped model was trained with (docs/model.md, "Training"): each
     auxiliary term starts at ~0.1-0.3 of the simple term. Heavier weights (terms 10-50x
     the simple term at initialisation) stalled learning: the model never learned to
     reproduce even an un-noised input, because the random initial predictions give
@@ -58,7 +58,7 @@ class LossWeights:
     # swing amplitude of the legs: per window, the spread over time of each knee, ankle and
     # toe position relative to the pelvis, predicted vs. true (metres). The pointwise terms
     # above are all minimised by the conditional mean, which under-flexes an unmeasured
-    # thigh and shortens the stride the root correction walks (NOTES.md, sessions 11-12);
+    # thigh and shortens the stride the root correction walks (docs/model.md, "Losses");
     # this term compares amplitudes, not positions, so it pulls the other way
     swing: float = 0.0
 
@@ -98,7 +98,7 @@ class TrainConfig:
     # shanks unseen (pelvis and wrists) the step's phase is a guess, and an amplitude forced
     # onto a guessed phase costs angle. With the pelvis unseen (shanks only) a short-step
     # walker already gets the typical stride, and the push adds to it; gating on the pelvis
-    # too softened that only a little (NOTES.md, session 12)
+    # too softened that only a little (docs/model.md, "Losses")
     swing_gate: list[str] = field(default_factory=list)
     steps: int = 100_000  # total optimiser steps (also the horizon of the LR decay)
     batch: int = 64  # global batch (split over ranks)
@@ -115,12 +115,12 @@ class TrainConfig:
     augment_mirror: float = 0.0
     # train the mirror-averaged model the poser runs (mirror.MirrorAveraged: every forward
     # pass also answers for the mirrored windows, in one batch of twice the size), so the
-    # average, not each half, is what the loss shapes (NOTES.md "Session 13")
+    # average, not each half, is what the loss shapes (docs/model.md, "Augmentation")
     mirror_average: bool = False
     # body-size augmentation: each window's body scaled by s, log-uniform in
     # [1 / (1 + a), 1 + a] (``scale_features``). The data has one body size per actor, so
     # without it the height token tells the model who is moving and it learns that
-    # actor's habits (NOTES.md "Session 8")
+    # actor's habits (docs/model.md, "Conditioning, masks and noise levels")
     augment_scale: float = 0.0
     seed: int = 0
     T: int = 1000

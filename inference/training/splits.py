@@ -108,17 +108,16 @@ def train_set(
     """The training split. ``hdm05_speeds``: extra copies of the HDM05 clips performed at
     these speed factors (``Motion.at_speed``), sharing the HDM05 half of the draws. Two
     HDM05 actors are all the training data has of squats, kicks and throws, so their tempo
-    could be learnt as part of the movement; tried in session 5 against the unseen actor,
-    it came out level with a control run; re-scored with the mean start (session 6) it beat
-    the control by 0.5-0.7 deg with only the shanks worn (NOTES.md). The model shipped since
-    session 7 is trained with 0.8, 0.9, 1.1 and 1.25 (configs/shipped_diffusion.json; session 7 and 10:
-    configs/s7_diffusion.json, configs/s10_diffusion_ft1_energy_per_window.json).
+    could be learnt as part of the movement. Against the unseen actor, with the mean start,
+    the copies beat a control run by 0.5-0.7 deg with only the shanks worn (docs/model.md,
+    "Augmentation"); the shipped model is trained with 0.8, 0.9, 1.1 and 1.25
+    (configs/shipped_diffusion.json).
     Bandai (many actors and styles) is left at its own speed.
 
     ``energy_per``: "trial" draws clips by their mean kinetic energy (the paper's words,
     sec. 3.3); "window" also weighs each clip by its length, so each window is drawn by its
     clip's energy whatever the clip's length (``dataset.clip_weights``). The shipped
-    diffusion model (session 11) is trained with "window" from its first step.
+    diffusion model is trained with "window" from its first step.
 
     ``drop_implausible``: clips with a frame no body makes are never drawn
     (``drop_implausible_clips``); their names go to stderr when ``progress``.
