@@ -31,7 +31,8 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from inference.features.layout import N_FEATURES, WINDOW, observation_mask  # noqa: E402
-from inference.model.denoiser import Denoiser, ModelConfig, count_parameters, freeze_for_cpu  # noqa: E402
+from inference.model.config import ModelConfig, count_parameters  # noqa: E402
+from inference.model.denoiser import Denoiser, freeze_for_cpu  # noqa: E402
 from inference.model.diffusion import even_steps, inpaint, paper_like_steps  # noqa: E402
 
 SIX = ["pelvis", "head", "l_wrist", "r_wrist", "l_shank", "r_shank"]

@@ -251,7 +251,7 @@ class Hub:
         self.rate = rate
         # the selector's sleep between drains; default one grid period: a sample waits at
         # most one frame before it is queued, well inside ``latency`` (13 x 100 Hz: 0.10 of a
-        # core at 10 ms, 0.08 at 16.7 ms, NOTES.md)
+        # core at 10 ms, 0.08 at 16.7 ms, docs/devices.md)
         self.read_interval = min(1.0 / rate if read_interval is None else read_interval, latency / 2)
         self.selector = selector
         self._selector_thread: threading.Thread | None = None

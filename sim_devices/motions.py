@@ -244,7 +244,7 @@ def _gait(T: int, fps: float, body: Body, speed: float, rng: np.random.Generator
     # the anchor (lowest point, stance foot) switches at heel-to-toe roll and at foot strike,
     # which puts kinks into the derived root path and spikes of tens of m/s^2 into the pelvis
     # acceleration; short Gaussians (35 ms horizontal, 60 ms vertical) remove most of them
-    # at the cost of some stance-foot slide (a trade-off: see NOTES, jog contacts)
+    # at the cost of some stance-foot slide (a trade-off: see docs/motion_data.md)
     sigma = 0.06 * fps
     vel = gaussian_filter1d(vel, 0.035 * fps, axis=0, mode="nearest")
     root = np.zeros((T, 3))

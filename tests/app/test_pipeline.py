@@ -73,7 +73,7 @@ def test_chain_calibrates_and_reconstructs_observed_segments(session):
 
 
 def test_simulated_devices_replay_raw_free_acceleration(session):
-    """The contract the pipeline relies on (NOTES, synthesis): devices stream the unsmoothed
+    """The contract the pipeline relies on (docs/motion_data.md, synthesis): devices stream the unsmoothed
     free acceleration, so the moving average is applied exactly once, in the resampler."""
     sig, _ = session
     src = SignalSource(sig, "l_shank")
