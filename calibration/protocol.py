@@ -175,3 +175,91 @@ def synthesize_session(
                 R_known=Rk)
     out = replace(sig, quat=quat, free_acc=moving_average(free_raw), specific_force=sf, gyro=gy, meta=meta)
     return out, truth
+
+
+@dataclass
+class WalkProtocol:
+    """Durations (s) of the table-free protocol (``calibration.walk``): N-pose held still,
+    a walk forward, standing still, then a blend into the activity. ``walk`` is the
+    simulated subject's walking time; a real subject's is whatever they take."""
+
+    npose: float = 7.0  # the guided steps: 3 s countdown, 3 s hold, a margin
+    walk: float = 4.0
+    stand: float = 3.5  # 1 s settling after the walk, 1.5 s hold, a margin
+    blend: float = 1.0
+
+    @property
+    def prefix(self) -> float:
+        return self.npose + self.walk + self.stand + self.blend
+
+
+def _npose_standing(body, n: int, fps: float, xy: tuple[float, float], heading: float = 0.0) -> Motion:
+    from inference.body.body import npose_rotations
+
+    Rh = matrix_about_axis(np.array([0.0, 0.0, 1.0]), heading)
+    R = Rh @ npose_rotations(n)
+    j = forward_kinematics(R[:1], np.zeros(3), body.offsets)
+    z = -float(contact_points(R[:1], j, body)[..., 2].min())
+    return Motion(rot=R, root=np.tile([xy[0], xy[1], z], (n, 1)), fps=fps, body=body, name="npose")
+
+
+def _blend(a: Motion, b_rot: np.ndarray, b_root: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` frames from the last frame of ``a`` to (b_rot, b_root)."""
+    w = _smoothstep((np.arange(n) + 1) / (n + 1))
+    return _slerp_R(a.rot[-1], b_rot, w), a.root[-1] + w[:, None] * (b_root - a.root[-1])
+
+
+def walk_session_motion(activity: Motion, walk: Motion, protocol: WalkProtocol | None = None) -> Motion:
+    """The subject's body motion for the table-free protocol at the activity's rate:
+    N-pose, blend into ``walk`` (which faces +X, from the origin), stand in the N-pose
+    where the walk ended, then ``activity`` moved to start there."""
+    p = protocol or WalkProtocol()
+    fps = activity.fps
+    walk = walk.resample(fps)
+    body = activity.body
+    n_np = int(round(p.npose * fps))
+    n_bl = max(int(round(0.5 * fps)), 1)
+    start = _npose_standing(body, n_np, fps, (float(walk.root[0, 0]), float(walk.root[0, 1])))
+    n_walk = int(round(p.walk * fps))
+    w = walk.rot[:n_walk], walk.root[:n_walk]
+    r_in, p_in = _blend(start, w[0][0], w[1][0], n_bl)
+    seg = Motion(rot=np.concatenate([start.rot, r_in, w[0]]), root=np.concatenate([start.root, p_in, w[1]]),
+                 fps=fps, body=body)
+    end_xy = (float(w[1][-1, 0]), float(w[1][-1, 1]))
+    stand = _npose_standing(body, int(round(p.stand * fps)), fps, end_xy)
+    r_st, p_st = _blend(seg, stand.rot[0], stand.root[0], n_bl)
+    act_root = activity.root - np.array([activity.root[0, 0] - end_xy[0], activity.root[0, 1] - end_xy[1], 0.0])
+    n_act_bl = max(int(round(p.blend * fps)), 1)
+    pre = Motion(rot=np.concatenate([seg.rot, r_st, stand.rot]), root=np.concatenate([seg.root, p_st, stand.root]),
+                 fps=fps, body=body)
+    r_ab, p_ab = _blend(pre, activity.rot[0], act_root[0], n_act_bl)
+    rot = np.concatenate([pre.rot, r_ab, activity.rot])
+    root = np.concatenate([pre.root, p_ab, act_root])
+    meta = dict(activity.meta or {})
+    walk_start = n_np
+    walk_end = n_np + n_bl + n_walk + n_bl
+    meta.update(protocol=p, activity_start_frame=pre.n_frames + n_act_bl,
+                walk_windows=((0, n_np), (walk_start, walk_end), (walk_end, pre.n_frames)))
+    return replace(activity, rot=rot, root=root, name=f"session_{activity.name}", meta=meta)
+
+
+def synthesize_walk_session(
+    activity: Motion,
+    walk: Motion,
+    protocol: WalkProtocol | None = None,
+    noise: NoiseModel | None = None,
+    rng: np.random.Generator | int | None = None,
+    sites: tuple[str, ...] | list[str] = SITES,
+) -> tuple[SiteSignals, Motion]:
+    """Signals a suit sends while its wearer follows the table-free protocol and then the
+    activity, and the body-motion truth (60 Hz). Each sensor keeps its own heading
+    reference and mounting (the noise model's), which is what the walk must find.
+    ``meta``: synthesis's R_SB / R_WG, ``protocol``, ``activity_start`` (s) and
+    ``walk_windows`` (frame ranges of N-pose, walk, stand at 60 Hz)."""
+    p = protocol or WalkProtocol()
+    truth = walk_session_motion(activity.resample(60.0), walk, p)
+    sig = synthesize(truth, noise=noise, rng=rng, sites=tuple(sites))
+    meta = dict(sig.meta)
+    meta.update(protocol=p, activity_start=truth.meta["activity_start_frame"] / sig.fps,
+                walk_windows=truth.meta["walk_windows"])
+    return replace(sig, meta=meta), truth

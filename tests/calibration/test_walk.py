@@ -1,0 +1,141 @@
+"""The table-free calibration (N-pose, walk, stand) and its guided state machine, on
+sessions synthesized with every sensor in its own heading reference (uniform in +-180 deg)
+and mounted with a random 15 deg rotation, as the noise model draws them."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from calibration.core import CalibrationError
+from calibration.guided import GuidedCalibration
+from calibration.protocol import Protocol, WalkProtocol, synthesize_session, synthesize_walk_session
+from calibration.walk import WalkWindows, calibrate_walk
+from inference.body.rotations import matrix_angle_between, quat_to_matrix
+from inference.body.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX
+from inference.signals.synthesis import NoiseModel
+from sim_devices.motions import generate
+
+SITES = ("pelvis", "head", "l_wrist", "r_wrist", "l_thigh", "r_thigh", "l_shank", "r_shank")
+
+
+@pytest.fixture(scope="module")
+def session():
+    act = generate("walk", seconds=5, seed=1)
+    walk = generate("walk", seconds=6, seed=0)
+    sig, truth = synthesize_walk_session(act, walk, WalkProtocol(), noise=NoiseModel.typical(), rng=3, sites=SITES)
+    return sig, truth
+
+
+def segment_errors(cal, sig, truth, sites=SITES) -> np.ndarray:
+    """(S,) mean angle (deg) between the calibrated and the true segment orientation over the activity."""
+    R = cal.R_WG[None] @ quat_to_matrix(sig.quat) @ cal.R_SB[None]
+    seg = [SITE_SEGMENT_INDEX[SITE_INDEX[s]] for s in sites]
+    a0 = int(sig.meta["activity_start"] * sig.fps)
+    return np.rad2deg(matrix_angle_between(R[a0:], truth.rot[a0:, seg])).mean(0)
+
+
+def windows_of(sig, margin: int = 12) -> WalkWindows:
+    (n0, n1), (_, _), (s0, s1) = sig.meta["walk_windows"]
+    return WalkWindows((n0 + margin, n1 - margin), (n1 - margin, s0 + margin), (s0 + margin, s1 - margin))
+
+
+def test_headings_differ_per_sensor(session):
+    sig, _ = session
+    assert np.ptp(np.rad2deg(sig.meta["heading_rad"])) > 90  # no shared reference to lean on
+
+
+def test_the_walk_puts_every_segment_within_3_deg(session):
+    sig, truth = session
+    cal, res = calibrate_walk(SITES, sig.quat, windows_of(sig), free_acc=sig.free_acc, fps=sig.fps)
+    err = segment_errors(cal, sig, truth)
+    assert cal.valid.all() and err.max() < 3.0, dict(zip(SITES, err.round(2)))
+    assert np.all(res.path_m > 3.0) and np.all(res.spread_deg < 10.0)
+
+
+def test_without_the_heading_step_the_segments_are_off(session):
+    sig, truth = session
+    cal, _ = calibrate_walk(SITES, sig.quat, windows_of(sig), free_acc=sig.free_acc, fps=sig.fps)
+    cal.R_WG = np.tile(np.eye(3), (len(SITES), 1, 1))  # what an N-pose alone would give
+    assert segment_errors(cal, sig, truth).max() > 30.0
+
+
+def test_a_walk_too_short_is_refused(session):
+    sig, _ = session
+    w = windows_of(sig)
+    short = WalkWindows(w.npose, (w.walk[0], w.walk[0] + 20), (w.walk[0] + 20, w.walk[0] + 40))
+    with pytest.raises(CalibrationError, match="walk 4-6 steps"):
+        calibrate_walk(SITES, sig.quat, short, free_acc=sig.free_acc, fps=sig.fps)
+
+
+def feed(g: GuidedCalibration, sig, stop_at=None):
+    for i in range(len(sig)):
+        g.push(i / sig.fps, sig.quat[i], sig.free_acc[i])
+        if g.phase in ("done", "failed") or (stop_at and g.step.name == stop_at):
+            return i
+    return len(sig)
+
+
+def test_guided_walk_protocol_calibrates_from_the_stream(session):
+    sig, truth = session
+    g = GuidedCalibration(SITES, "walk")
+    feed(g, sig)
+    assert g.done, g.status()
+    assert segment_errors(g.calibration, sig, truth).max() < 3.0
+    assert g.report.ok, g.report.all_warnings()
+    assert g.calibration.meta["quality"]["protocol"] == "walk"
+
+
+def test_guided_step_says_who_never_held_still(session):
+    sig, _ = session
+    q = sig.quat.copy()
+    k = SITES.index("l_wrist")
+    # the left wrist turns slowly and steadily the whole time: 60 deg/s about z
+    t = np.arange(len(q)) / sig.fps
+    half = np.deg2rad(60.0) * t / 2
+    spin = np.stack([np.cos(half), 0 * half, 0 * half, np.sin(half)], -1)
+    w1, x1, y1, z1 = spin.T
+    w2, x2, y2, z2 = q[:, k].T
+    q[:, k] = np.stack([w1 * w2 - z1 * z2, w1 * x2 - z1 * y2, w1 * y2 + z1 * x2, w1 * z2 + z1 * w2], -1)
+    g = GuidedCalibration(SITES, "walk", timeout=3.5)
+    for i in range(len(q)):
+        g.push(i / sig.fps, q[i], sig.free_acc[i])
+        if g.phase == "failed":
+            break
+    assert g.phase == "failed" and i / sig.fps < 7.0  # still in the N-pose
+    assert "npose: never still" in g.error and "l_wrist" in g.error and "redo 'npose'" in g.error
+    assert "pelvis" not in g.error
+
+
+def test_redo_of_a_step_keeps_the_steps_before_it(session):
+    sig, truth = session
+    g = GuidedCalibration(SITES, "walk")
+    feed(g, sig)
+    assert g.done
+    first = g.calibration
+    g.redo("stand", t=0.0)
+    assert g.step.name == "stand" and not g.done and "npose" in g._data and "walk" in g._data
+    # the subject stands still again: the stand frames of the session
+    (_, _), (_, _), (s0, s1) = sig.meta["walk_windows"]
+    for i in range(s0, s1):
+        g.push(100.0 + i / sig.fps, sig.quat[i], sig.free_acc[i])
+        if g.done:
+            break
+    assert g.done
+    assert segment_errors(g.calibration, sig, truth).max() < 3.0
+    assert np.allclose(g.calibration.R_WG, first.R_WG, atol=1e-6)
+
+
+def test_guided_table_protocol():
+    act = generate("walk", seconds=4, seed=2)
+    proto = Protocol(table=7.0, strap=2.0, tpose=5.0)
+    sig, truth = synthesize_session(act, proto, noise=NoiseModel.typical(), rng=1, sites=SITES)
+    g = GuidedCalibration(SITES, "table")
+    feed(g, sig)
+    assert g.done, g.status()
+    assert segment_errors(g.calibration, sig, truth).max() < 3.0
+
+
+def test_unknown_protocol_is_named():
+    with pytest.raises(ValueError, match="walk or table"):
+        GuidedCalibration(SITES, "dance")
