@@ -88,6 +88,10 @@ class Sink:
     def on_pose(self, pose: LivePose) -> None:
         """Every reconstructed frame."""
 
+    def on_event(self, t: float, kind: str, detail: str = "") -> None:
+        """Something that happened at session time ``t``: a marker, a note, a device lost
+        or back (``kind``), with a human-readable ``detail``."""
+
     def close(self) -> None:
         """End of session."""
 
@@ -208,6 +212,10 @@ class Pipeline:
         self.resampler.reset()
         self._emit("on_calibration", calibration, t)
 
+    def event(self, t: float, kind: str, detail: str = "") -> None:
+        """Pass an event to every sink (call on the pipeline's thread: ``LivePipeline.call``)."""
+        self._emit("on_event", t, kind, detail)
+
     def recalibrate(self, origin: float | None = None) -> None:
         """Drop the calibration and collect new windows (schedule re-anchored at ``origin``)."""
         self.calibration = None
@@ -218,12 +226,12 @@ class Pipeline:
         return "calibrated" if self.calibration is not None else self.calibrator.status()
 
     def stride_status(self) -> dict[str, Any]:
-        """What the shank stride scaling of the root is doing (``inference/stride.py``), so
+        """What the shank stride scaling of the root is doing (``inference/poser/stride.py``), so
         a screen can say whether the walked distance comes from the shanks yet: enabled
         (the poser has it), shanks (both feed the poser now), scale (None until a stride
         has been measured since calibration) and how many strides were measured; odometry:
         the poser walks the root from the pelvis sensor when the shanks are not both worn
-        (``inference/pelvis_odometry.py``). Read from another thread: plain attribute reads
+        (``inference/poser/pelvis_odometry.py``). Read from another thread: plain attribute reads
         of the poser's estimator."""
         est = self.poser.stride
         strides = 0 if est is None else len(est.strides)

@@ -10,9 +10,14 @@ with the sensor configuration, model, steps, app version, ...):
     /raw/insoles/force (N,2), contacts (N,4) bool, present (N,) bool
     /calibration/t (K,), R_WG (K,S,3,3), R_SB (K,S,3,3), acc_offset (K,S,3), valid (K,S),
         residual_world_deg, residual_tpose_deg (K,S): every calibration that took effect
+        meta (K,) JSON: the protocol and the quality report of each calibration
     /recon/t (M,), index (M,), rot (M,24,4) quaternions R_WB, root (M,3), joints (M,24,3),
         contacts (M,4) bool, contact_prob (M,4), observed_sites (M,13) bool, insoles (M,),
         latency_ms (M,) (NaN when not live)
+    /events/t (E,), kind (E,), detail (E,): what happened during the session, in order:
+        markers (detail = label), notes, devices lost and back, recording errors
+
+Strings are fixed-length UTF-8 (JSON in ``meta``): SWMR appends to fixed-size types only.
 
 Why it survives ``kill -9``: every dataset is created up front (chunked, resizable), then
 the file switches to SWMR mode, where HDF5 orders its writes so that the file on disk is
@@ -44,6 +49,16 @@ from inference.body.skeleton import N_CONTACTS, N_SEGMENTS, N_SITES, SITES
 
 FORMAT = "imucap-session"
 VERSION = 1
+CAL_META = "S8192"
+EVENT_KIND = "S32"
+EVENT_DETAIL = "S512"
+
+
+def _fit(text: str, dtype: str) -> bytes:
+    """UTF-8 bytes cut to the field's size (on a character boundary)."""
+    limit = int(dtype[1:])
+    raw = text.encode("utf-8")
+    return raw if len(raw) <= limit else raw[:limit].decode("utf-8", "ignore").encode("utf-8")
 
 
 def _ds(g: h5py.Group, name: str, tail: tuple[int, ...], dtype: Any, chunk: int) -> h5py.Dataset:
@@ -87,15 +102,20 @@ class Recorder(Sink):
         cal = f.create_group("calibration")
         self._cal = {name: _ds(cal, name, tail, dt, 4) for name, tail, dt in (
             ("t", (), "f8"), ("R_WG", (S, 3, 3), "f8"), ("R_SB", (S, 3, 3), "f8"), ("acc_offset", (S, 3), "f8"),
-            ("valid", (S,), "?"), ("residual_world_deg", (S,), "f8"), ("residual_tpose_deg", (S,), "f8"))}
+            ("valid", (S,), "?"), ("residual_world_deg", (S,), "f8"), ("residual_tpose_deg", (S,), "f8"),
+            ("meta", (), CAL_META))}
         rec = f.create_group("recon")
         self._rec = {name: _ds(rec, name, tail, dt, max(chunk // 3, 16)) for name, tail, dt in (
             ("t", (), "f8"), ("index", (), "i8"), ("rot", (N_SEGMENTS, 4), "f4"), ("root", (3,), "f4"),
             ("joints", (N_SEGMENTS, 3), "f4"), ("contacts", (N_CONTACTS,), "?"), ("contact_prob", (N_CONTACTS,), "f4"),
             ("observed_sites", (N_SITES,), "?"), ("insoles", (), "?"), ("latency_ms", (), "f4"))}
+        ev = f.create_group("events")
+        self._ev = {name: _ds(ev, name, (), dt, 16) for name, dt in (("t", "f8"), ("kind", EVENT_KIND),
+                                                                     ("detail", EVENT_DETAIL))}
         f.swmr_mode = True  # from here on the file on disk is always consistent
         self._buf: dict[str, list] = {k: [] for k in (*self._raw, *(f"cal/{k}" for k in self._cal),
-                                                      *(f"rec/{k}" for k in self._rec))}
+                                                      *(f"rec/{k}" for k in self._rec),
+                                                      *(f"ev/{k}" for k in self._ev))}
         self._last_flush = self.clock()
         self.frames = 0
         self.poses = 0
@@ -137,7 +157,18 @@ class Recorder(Sink):
         for name in ("residual_world_deg", "residual_tpose_deg"):
             v = getattr(calibration, name)
             b[f"cal/{name}"].append(np.full(S, np.nan) if v is None else v[idx])
+        b["cal/meta"].append(_fit(json.dumps(calibration.meta, default=str), CAL_META))
         self.flush()  # rare and precious
+
+    def on_event(self, t: float, kind: str, detail: str = "") -> None:
+        """A marker, a note, a device lost or back: written at the next flush (markers at once)."""
+        if self.closed:
+            return
+        self._buf["ev/t"].append(t)
+        self._buf["ev/kind"].append(_fit(kind, EVENT_KIND))
+        self._buf["ev/detail"].append(_fit(detail, EVENT_DETAIL))
+        if kind == "marker":
+            self.flush()
 
     def on_pose(self, pose: LivePose) -> None:
         if self.closed:
@@ -171,6 +202,8 @@ class Recorder(Sink):
                 continue
             if key.startswith("cal/"):
                 ds = self._cal[key[4:]]
+            elif key.startswith("ev/"):
+                ds = self._ev[key[3:]]
             elif key.startswith("rec/"):
                 ds = self._rec[key[4:]]
             else:
@@ -223,6 +256,10 @@ class Recording:
     calibrations: list[tuple[float, Calibration]]
     recon: dict[str, np.ndarray]
     attrs: dict[str, Any] = field(default_factory=dict)
+    events: list[tuple[float, str, str]] = field(default_factory=list)
+
+    def markers(self) -> list[tuple[float, str]]:
+        return [(t, d) for t, k, d in self.events if k == "marker"]
 
     @property
     def n_frames(self) -> int:
@@ -261,16 +298,23 @@ def read_recording(path: str | os.PathLike) -> Recording:
         k_cal = min(c[k].shape[0] for k in c)
         cals = []
         for i in range(k_cal):
+            cal_meta = json.loads(c["meta"][i].decode("utf-8") or "{}") if "meta" in c else {}
             cals.append((float(c["t"][i]), Calibration(
                 sites=sites, R_WG=c["R_WG"][i], R_SB=c["R_SB"][i], acc_offset=c["acc_offset"][i],
                 valid=c["valid"][i], residual_world_deg=c["residual_world_deg"][i],
-                residual_tpose_deg=c["residual_tpose_deg"][i])))
+                residual_tpose_deg=c["residual_tpose_deg"][i], meta=cal_meta)))
+        events = []
+        if "events" in f:
+            e = f["events"]
+            k_ev = min(e[k].shape[0] for k in e)
+            events = [(float(e["t"][i]), e["kind"][i].decode("utf-8"), e["detail"][i].decode("utf-8"))
+                      for i in range(k_ev)]
         r = f["recon"]
         m = min(r[k].shape[0] for k in r)
         recon = {k: r[k][:m] for k in r}
         attrs = {k: (v if not isinstance(v, bytes) else v.decode()) for k, v in f.attrs.items()}
     recon["R"] = quat_to_matrix(recon["rot"].astype(np.float64)) if m else np.zeros((0, N_SEGMENTS, 3, 3))
-    return Recording(Path(path), sites, meta, raw, cals, recon, attrs)
+    return Recording(Path(path), sites, meta, raw, cals, recon, attrs, events)
 
 
 def replay(path: str | os.PathLike, poser, calibration: Calibration | None = None) -> list[LivePose]:

@@ -26,7 +26,9 @@ from app.pipeline import LivePose, Pipeline
 from app.recording import Recording
 from calibration import Calibration
 from drivers.hub import HubFrame
+from inference.body.rotations import matrix_angle_between
 from inference.body.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX, SITES, parse_sites
+from inference.metrics.errors import global_angle_error
 
 if TYPE_CHECKING:
     from inference.poser.poser import Poser
@@ -162,7 +164,6 @@ def compare_to_recorded(rec: Recording, poses: Sequence[LivePose]) -> dict[str, 
     between replayed poses and the recorded live ones at the same session times: how far
     a re-run (another model, fewer sensors) is from what was seen live. None when no
     frame times match."""
-    from inference.metrics.errors import global_angle_error
 
     r = rec.recon
     if not poses or len(r["t"]) == 0:
@@ -185,7 +186,6 @@ def held_out_errors(poses: Sequence[LivePose], measured: Sequence[LivePose], sit
     calibrated measurement), over the frames both replays produced at the same time and
     in which the site delivered. A real-data check that needs no motion capture, only a
     session recorded with more sensors than the set under test."""
-    from inference.body.rotations import matrix_angle_between
 
     by_t = {round(lp.t, 6): lp for lp in measured}
     pairs = [(lp, by_t[round(lp.t, 6)]) for lp in poses if round(lp.t, 6) in by_t]
@@ -205,3 +205,23 @@ def held_out_errors(poses: Sequence[LivePose], measured: Sequence[LivePose], sit
 
 __all__ = ["replay_recording", "resolve_sensors", "resolve_insoles", "recording_has_insoles", "compare_to_recorded",
            "held_out_errors", "ReplayResult", "SITES"]
+
+
+def truth_errors(times: np.ndarray, R: np.ndarray, truth) -> dict[str, Any]:
+    """GA (deg) of reconstructed global orientations ``R`` (T,24,3,3) at monotonic session
+    ``times`` against a simulator's truth (``app.capture.simulate.Truth``), over the
+    activity (the calibration protocol before it is not what a user records), and per
+    segment for the ones a reader asks about."""
+    from inference.body.skeleton import SEGMENTS
+
+    times = np.asarray(times, float)
+    keep = times >= truth.t0 + truth.activity_start
+    if not keep.any():
+        return {"ga_deg": None, "truth_frames": 0, "truth_note": "no reconstructed frame in the activity"}
+    idx = truth.frame_at(times[keep])
+    inside = (times[keep] - truth.t0) * truth.fps < len(truth.rot) - 0.5
+    Rp, Rt = np.asarray(R)[keep][inside], truth.rot[idx[inside]]
+    ga = global_angle_error(Rp, Rt)
+    seg = np.rad2deg(matrix_angle_between(Rp, Rt)).mean(axis=0)
+    return {"ga_deg": float(ga.mean()), "truth_frames": int(len(ga)),
+            "ga_segment_deg": {SEGMENTS[k]: round(float(seg[k]), 2) for k in range(len(SEGMENTS))}}

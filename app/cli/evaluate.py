@@ -23,7 +23,7 @@ a model whose weights are missing gets a row saying so instead of stopping the t
 Below it, the diffusion model's GA minus each baseline's on the same clips, with a bootstrap
 interval over clips, says which leads the clip sample settles (``comparisons`` in the JSON).
 --export-dir DIR writes <clip>.recon.bvh and <clip>.truth.bvh (20 Hz, metres, Y up; see
-app/export_bvh.py) for the main evaluation.
+app/export/bvh.py) for the main evaluation.
 """
 
 from __future__ import annotations
@@ -66,11 +66,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "measured (default); --no-contact-detector uses the model's own contact outputs")
     p.add_argument("--stride-scale", action=argparse.BooleanOptionalAction, default=True,
                    help="scale the root path by the shanks' inertial strides when both shanks are measured "
-                        "(inference/stride.py; default; docs/model.md 'Stride scaling')")
+                        "(inference/poser/stride.py; default; docs/model.md 'Stride scaling')")
     p.add_argument("--pelvis-odometry", action=argparse.BooleanOptionalAction, default=True,
                    help="without both shanks, the root's walk from the pelvis sensor "
-                        "(inference/pelvis_odometry.py; default; docs/model.md 'Pelvis odometry'); --no-pelvis-odometry "
-                        "uses the model's own root displacement corrected by its contacts")
+                        "(inference/poser/pelvis_odometry.py; default; docs/model.md 'Pelvis odometry'); "
+                        "--no-pelvis-odometry uses the model's own root displacement corrected by its contacts")
     p.add_argument("--against", default=None, metavar="SPEC",
                    help="also score this model (same forms as --model) on the same clips and sensors, and "
                         "report --model minus it per metric with a bootstrap interval over clips")

@@ -17,7 +17,7 @@ vs_recorded_ga_deg = how far the re-run is from the live reconstruction, outputs
 
 Formats by extension: .bvh (skeleton, metres, Y up), .csv (one row per 20 Hz frame),
 .h5/.hdf5 (arrays + units and provenance), .mot (OpenSim joint angles, Rajagopal-model
-coordinates). See app/exporters.py and the export_*.py modules for the exact layouts.
+coordinates). See app/export/formats.py and the export_*.py modules for the exact layouts.
 The subject's body comes from the recording (bone offsets or height); ``--height``
 overrides it.
 """
@@ -30,6 +30,8 @@ import sys
 import time
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 OUT_HELP = "write the poses to FILE; format by extension: .bvh, .csv, .h5/.hdf5, .mot (repeatable)"
 
@@ -61,6 +63,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--height", type=float, default=None, help="subject height in m (default: from the recording)")
     p.add_argument("--out", action="append", type=Path, default=[], metavar="FILE", help=OUT_HELP)
     p.add_argument("--json", action="store_true", help="print one JSON summary on stdout")
+    p.add_argument("--truth", type=Path, metavar="TRUTH.npz",
+                   help="score against the motion a simulated subject played (imucap devices simulate --truth): "
+                        "ga_deg of this replay, recorded_ga_deg of the live reconstruction")
     p.add_argument("--no-progress", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=run_replay)
 
@@ -135,6 +140,11 @@ def run_replay(args: argparse.Namespace) -> int:
     from inference.poser.poser import Poser, resolve_model
 
     _check_outs(args.out)
+    truth = None
+    if args.truth is not None:
+        from app.capture.simulate import read_truth
+
+        truth = read_truth(args.truth)
     rec = _open(args.recording)
     sensors = resolve_sensors(rec, args.sensors)
     insoles = resolve_insoles(rec, args.insoles)
@@ -199,6 +209,13 @@ def run_replay(args: argparse.Namespace) -> int:
         **({"held_out": held_out} if held_out is not None else {}),
         "outputs": outputs, "seconds": round(seconds, 2),
     }
+    if truth is not None:
+        from app.replay import truth_errors
+
+        R = np.stack([p.pose.rot for p in res.poses]) if res.poses else np.zeros((0, 24, 3, 3))
+        summary.update(truth_errors(np.array([p.t for p in res.poses]), R, truth))
+        live = truth_errors(rec.recon["t"], rec.recon["R"], truth)
+        summary["recorded_ga_deg"] = live["ga_deg"]
     if note:
         summary["warning"] = note
     _emit(summary, args.json)

@@ -13,11 +13,11 @@ With ``--resume`` and no ``--config`` the run continues with the configuration s
 its checkpoint. ``--export FILE`` trains nothing: it writes OUT/last.pt's EMA weights as an
 inference model file (``--fp16`` to halve it, ``--default-steps`` for the live poser).
 
-``--contact-detector`` trains the shank contact detector instead (inference/contact_detector.py)
+``--contact-detector`` trains the shank contact detector instead (inference/poser/contact_detector.py)
 on the issue's training split (or ``--data PATH...``), reports its accuracy on the held-out
 sets (or ``--val PATH...``) and writes OUT/contact_detector.pt; copy that to
 inference/weights/ to ship it. ``--pelvis-odometry`` does the same for the pelvis odometry
-(inference/pelvis_odometry.py; OUT/pelvis_odometry.pt, its forward and backward nets and
+(inference/poser/pelvis_odometry.py; OUT/pelvis_odometry.pt, its forward and backward nets and
 their gate; its held-out figures are the root errors RE2/5/10 of the path it integrates
 alone from each clip's measured pelvis).
 """

@@ -9,10 +9,10 @@ ground, so ``imucap export`` (the recorded live reconstruction) and ``imucap rep
 
 Formats (by the output file's extension, case-insensitive):
 
-    .bvh          app/export_bvh.py      skeleton animation (Blender, MotionBuilder, ...)
-    .csv          app/export_csv.py      one row per 20 Hz frame, named columns
-    .h5 / .hdf5   app/export_hdf5.py     arrays + attributes (units, names, provenance)
-    .mot          app/export_opensim.py  OpenSim joint angles (Rajagopal-style coordinates)
+    .bvh          app/export/bvh.py      skeleton animation (Blender, MotionBuilder, ...)
+    .csv          app/export/csv_file.py      one row per 20 Hz frame, named columns
+    .h5 / .hdf5   app/export/hdf5_file.py     arrays + attributes (units, names, provenance)
+    .mot          app/export/opensim.py  OpenSim joint angles (Rajagopal-style coordinates)
 
 Time in every export is seconds since the first raw frame of the recording (so a file
 lines up with the recording it came from); the session-clock value subtracted is kept as

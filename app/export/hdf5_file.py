@@ -10,7 +10,7 @@ Datasets (T = frames, float64 unless said):
 
     time (T,)             s since the recording's first raw frame
     rot (T, 24, 3, 3)     global segment orientations R_WB (segment -> world)
-    quat (T, 24, 4)       the same as (w, x, y, z), continuous in sign (app/export_csv.py)
+    quat (T, 24, 4)       the same as (w, x, y, z), continuous in sign (app/export/csv_file.py)
     root (T, 3)           pelvis joint, m
     joints (T, 24, 3)     joint positions, m (joint i starts segment i)
     contacts (T, 4) bool  l_heel, l_toe, r_heel, r_toe on the ground

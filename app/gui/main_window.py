@@ -13,17 +13,12 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-import pyqtgraph as pg
-import pyqtgraph.opengl as gl
 from PySide6 import QtCore, QtWidgets
 
 from app.demo_session import DemoConfig, DemoSession
+from app.gui.skeleton_view import SkeletonView
 from app.pipeline import stride_text
-from inference.body.body import contact_points
-from inference.body.skeleton import CONTACTS, PARENTS
 
-_BONES = np.array([(i, PARENTS[i]) for i in range(1, len(PARENTS))], dtype=int)
 PRESETS: dict[str, tuple[str, ...]] = {
     "paper 6 (pelvis, head, wrists, shanks)": ("pelvis", "head", "l_wrist", "r_wrist", "l_shank", "r_shank"),
     "3: pelvis + wrists": ("pelvis", "l_wrist", "r_wrist"),
@@ -50,20 +45,7 @@ class DemoWindow(QtWidgets.QMainWindow):
         self.setCentralWidget(split)
 
         # --- 3D view
-        self.view = gl.GLViewWidget()
-        self.view.setBackgroundColor(pg.mkColor(24, 26, 30))
-        self.view.setCameraPosition(distance=3.2, elevation=10, azimuth=-70)
-        grid = gl.GLGridItem(color=(255, 255, 255, 60))
-        grid.setSize(40, 40)
-        grid.setSpacing(0.5, 0.5)
-        self.view.addItem(grid)
-        n = len(_BONES)
-        self.bones = gl.GLLinePlotItem(pos=np.zeros((2 * n, 3)), mode="lines", width=4.0,
-                                       color=(0.85, 0.9, 1.0, 1.0), antialias=True)
-        self.joints = gl.GLScatterPlotItem(pos=np.zeros((24 + len(CONTACTS), 3)), size=9.0,
-                                           color=(1.0, 0.75, 0.3, 1.0), pxMode=True)
-        self.view.addItem(self.bones)
-        self.view.addItem(self.joints)
+        self.view = SkeletonView()
         split.addWidget(self.view)
 
         # --- side panel
@@ -77,7 +59,7 @@ class DemoWindow(QtWidgets.QMainWindow):
         # whether the walked distance comes from the shanks yet (a few strides after calibration)
         self.stride_label = QtWidgets.QLabel("")
         self.stride_label.setToolTip("The root path's scale from the shank sensors' own strides "
-                                     "(inference/stride.py): needs both shanks and a few steps")
+                                     "(inference/poser/stride.py): needs both shanks and a few steps")
         side.addWidget(self.model_label)
         if session.warning:
             warn = QtWidgets.QLabel("NO TRAINED MODEL: floor baseline")
@@ -155,19 +137,7 @@ class DemoWindow(QtWidgets.QMainWindow):
         if key == self._last_index:
             return
         self._last_index = key
-        j = np.asarray(lp.pose.joints, dtype=np.float64)
-        seg = np.empty((2 * len(_BONES), 3))
-        seg[0::2] = j[_BONES[:, 0]]
-        seg[1::2] = j[_BONES[:, 1]]
-        self.bones.setData(pos=seg)
-        cps = contact_points(np.asarray(lp.pose.rot, np.float64), j, self.session.truth.body)
-        pts = np.concatenate([j, cps])
-        col = np.tile([1.0, 0.75, 0.3, 1.0], (len(pts), 1))
-        col[24:] = np.where(np.asarray(lp.pose.contacts)[:, None], [0.2, 1.0, 0.3, 1.0], [0.5, 0.5, 0.5, 1.0])
-        self.joints.setData(pos=pts, color=col)
-        root = j[0]
-        self.view.opts["center"] = pg.Vector(float(root[0]), float(root[1]), 0.9)
-        self.view.update()
+        self.view.show_pose(lp.pose.joints, lp.pose.rot, lp.pose.contacts, self.session.truth.body)
         self.frames_shown += 1
 
     def update_status(self) -> None:

@@ -116,7 +116,7 @@ def default_weights(kind: str = "diffusion") -> Path:
         raise FileNotFoundError(
             f"the default {kind} model {path} is missing. Train one with "
             f"`imucap train --config CONFIG.json --out runs/{kind}` (config field \"kind\": \"{kind}\", "
-            f"see inference/training.py TrainConfig) and copy runs/{kind}/model.pt to {path}, "
+            f"see inference/training/loop.py TrainConfig) and copy runs/{kind}/model.pt to {path}, "
             f"or pass --model PATH.pt"
         )
     return path

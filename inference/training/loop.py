@@ -19,7 +19,7 @@ run would have drawn; checkpoints are written atomically (temp file + os.replace
 SIGINT/SIGTERM stop at the next step boundary with a checkpoint. Multi-process runs use
 torchrun + DistributedDataParallel (gloo on CPU, nccl on GPU).
 
-Data interface (``FeatureDataset`` in inference/dataset.py, or ``ArrayDataset`` here):
+Data interface (``FeatureDataset`` in inference/training/dataset.py, or ``ArrayDataset`` here):
 ``clips`` list of (T_i, 190) float32 unnormalised features, ``heights`` (n,), ``offsets``
 (n, 24, 3), ``weights`` (n,), ``sample(rng, batch, window) -> {x, height, offsets}``.
 """

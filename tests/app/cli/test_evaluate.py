@@ -104,7 +104,7 @@ def test_inpaint_noise_override(capsys, data_dir, tiny_models):
     """--inpaint-noise runs the diffusion poser with another noise mode than the model file's
     (here: the file has none, so the paper's fresh draws), without re-exporting the file; the
     JSON says which mode ran. (That the mean start draws nothing in the DDIM mode is
-    tests/inference/test_poser.py's.)"""
+    tests/inference/poser/test_poser.py's.)"""
     args = ("--data", str(data_dir), "--sensors", "l_shank,r_shank", "--steps", "1000,400,0",
             "--model", str(tiny_models["diffusion"]), "--json", "--no-noise")  # --seed: inpainting only
     runs = {}

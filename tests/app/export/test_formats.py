@@ -1,4 +1,4 @@
-"""The export container and dispatch (app/exporters.py): built from a recording or from
+"""The export container and dispatch (app/export/formats.py): built from a recording or from
 replayed poses, the body the recording states, unknown extensions refused, and the BVH
 written through it read back by our own loader."""
 
@@ -82,7 +82,7 @@ def test_bvh_through_the_dispatcher_reads_back(recorded, tmp_path):
     assert np.abs(rel_back - rel).max() < 2e-3
     assert np.abs((back.root - m.root) - (back.root - m.root)[0]).max() < 1e-3
     # limbs keep their orientations (the loader re-derives pelvis/neck frames of
-    # anthropometric bodies; app/export_bvh.py)
+    # anthropometric bodies; app/export/bvh.py)
     for seg in ("l_thigh", "r_shank", "l_forearm", "r_upperarm", "head"):
         i = SEGMENT_INDEX[seg]
         assert np.rad2deg(matrix_angle_between(back.rot[:, i], m.rot[:, i])).max() < 1.0, seg

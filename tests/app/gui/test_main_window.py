@@ -62,11 +62,11 @@ def test_demo_window(qtbot, tmp_path):
         qtbot.waitExposed(win)
         # frames arrive from the pipeline thread and reach the GL items
         _wait(qtbot, session, lambda: win.frames_shown >= 3, 90_000)  # slow, shared CI machines
-        before = np.array(win.bones.pos, copy=True)
+        before = np.array(win.view.bones.pos, copy=True)
         shown = win.frames_shown
         _wait(qtbot, session, lambda: win.frames_shown >= shown + 5, 30_000)
-        assert not np.allclose(before, win.bones.pos)
-        assert np.isfinite(win.bones.pos).all()
+        assert not np.allclose(before, win.view.bones.pos)
+        assert np.isfinite(win.view.bones.pos).all()
         _wait(qtbot, session, lambda: win.table.rowCount() == len(SUIT), 30_000)
         assert win.table.item(0, 0).text() == "pelvis"
         assert win.stride_label.text().endswith(": off")  # the floor has no root to scale

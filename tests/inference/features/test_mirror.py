@@ -1,4 +1,4 @@
-"""Mirror images of feature windows and the mirror-averaged denoiser (inference/mirror.py)."""
+"""Mirror images of feature windows and the mirror-averaged denoiser (inference/features/mirror.py)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Metrics on hand-computed cases (definitions in inference/metrics.py)."""
+"""Metrics on hand-computed cases (definitions in inference/metrics/errors.py)."""
 
 from __future__ import annotations
 

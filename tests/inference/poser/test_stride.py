@@ -1,4 +1,4 @@
-"""The shank stride estimator (inference/stride.py) on a planted gait built here.
+"""The shank stride estimator (inference/poser/stride.py) on a planted gait built here.
 
 The gait is made the way a foot-mounted or shank-mounted IMU study would check a
 zero-velocity method: each ankle is exactly still in stance and travels one stride in
