@@ -40,7 +40,8 @@ def _one_torch_thread():
 # of starving each other: a suit test lost a device's samples for whole seconds while the
 # other worker built a dataset.
 REALTIME_MODULES = {"sim_devices/test_suit.py", "drivers/test_batched.py", "drivers/test_end_to_end.py",
-                    "app/gui/test_main_window.py", "app/cli/test_demo.py"}
+                    "app/gui/test_main_window.py", "app/cli/test_demo.py", "app/capture/test_identify.py",
+                    "app/cli/test_setup.py"}
 
 
 def pytest_collection_modifyitems(config, items):

@@ -236,6 +236,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     pp.add_argument("--json", action="store_true")
     pp.set_defaults(func=cmd_probe)
 
+    from app.cli.identify import add_parser as add_identify_parser
+
+    add_identify_parser(sub, discover)
+
     ps = sub.add_parser("simulate", help="run a simulated device; prints the URL to open")
     ps.add_argument(
         "--protocol", required=True, choices=["xbus", "bno08x-rvc", "xsens-can", "dualsense", "moticon-udp"]
