@@ -44,6 +44,9 @@ class DemoConfig:
     headless: bool = True
     threads: int = 1  # one window per step: 1 intra-op thread is fastest and leaves a core to the drivers/GUI
     calibration_protocol: Any = None  # a calibration.Protocol overriding the default timings
+    # sinks streaming the body to other programs (--stream: app.streams.make_stream_sinks builds
+    # them, above this module); the session adds them to its pipeline, which closes them
+    streams: list[Any] = field(default_factory=list)
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -181,6 +184,8 @@ class DemoSession:
         self.truth_sink: TruthSink | None = None
         self.calibrated_at: float | None = None
         self.started = False
+        for sink in cfg.streams:
+            self.pipeline.add_sink(sink)
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> DemoSession:
@@ -338,6 +343,8 @@ class DemoSession:
             "frames_filled": stats["frames_filled"], "resampler_restarts": stats["resampler_restarts"],
             "stride": self.pipeline.stride_status(),
         }
+        if self.cfg.streams:
+            out["streams"] = [s.summary() for s in self.cfg.streams if hasattr(s, "summary")]
         if self.warning:
             out["warning"] = self.warning
         if self.recorder is not None or self.cfg.record:

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from app.pipeline import LivePose, Pipeline
+from app.pipeline import LivePose, Pipeline, Sink
 from app.recording import Recording
 from calibration import Calibration
 from drivers.hub import HubFrame
@@ -118,13 +118,18 @@ class ReplayResult:
 
 def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] | None = None,
                      insoles: bool | None = None, calibration: Calibration | None = None,
-                     progress: Callable[[int, int, int], None] | None = None) -> ReplayResult:
+                     progress: Callable[[int, int, int], None] | None = None, sinks: Sequence[Sink] = (),
+                     pace: Callable[[float], None] | None = None) -> ReplayResult:
     """Run ``rec``'s raw stream through a Pipeline with ``poser``.
 
     sensors: the recorded sites whose measurements the poser gets (default all; the
     others are inpainted, as live with a smaller suit); insoles: see ``resolve_insoles``;
     calibration: use this one from the first frame instead of the recorded ones;
     progress(done_frames, total_frames, poses) is called about every 1% of the stream.
+    sinks: get the replay as a live session's sinks would (frames, calibrations, poses,
+    and the recorded events at their times), and are closed at the end; pace(t) is called
+    before the frame of time ``t`` is pushed (``app.streams.pacing.Pacer`` holds it back
+    to real time).
     """
     use = resolve_sensors(rec, sensors)
     ins = resolve_insoles(rec, insoles)
@@ -132,7 +137,9 @@ def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] 
         raise ValueError(f"{rec.path} holds no calibration (the session never calibrated); nothing to replay")
     cals = [(-np.inf, calibration)] if calibration is not None else sorted(rec.calibrations, key=lambda c: c[0])
     stream = _Stream(rec)
-    pipe = Pipeline(poser, rec.sites, active_sites=use, insoles=ins)
+    pipe = Pipeline(poser, rec.sites, active_sites=use, insoles=ins, sinks=sinks)
+    events = sorted(rec.events, key=lambda e: e[0]) if sinks else []
+    e = 0  # next event to pass on
     poses: list[LivePose] = []
     k = 0  # next calibration to apply
     used = 0
@@ -140,6 +147,11 @@ def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] 
     every = max(n // 100, 1)
     for i in range(n):
         t = stream.t[i]
+        if pace is not None:
+            pace(float(t))
+        while e < len(events) and events[e][0] <= t:
+            pipe.event(*events[e])
+            e += 1
         took_effect_now = False
         while k < len(cals) and t >= cals[k][0]:
             pipe.set_calibration(cals[k][1], float(max(cals[k][0], t)))
@@ -154,6 +166,8 @@ def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] 
             poses += pipe.push(stream.frame(i))
         if progress is not None and (i % every == 0 or i == n - 1):
             progress(i + 1, n, len(poses))
+    for ev in events[e:]:
+        pipe.event(*ev)
     pipe.close()
     return ReplayResult(poses=poses, sensors=use, insoles=ins, hub_frames=n, calibrations_used=used,
                         stats=pipe.stats.summary())

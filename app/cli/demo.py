@@ -8,6 +8,7 @@ and the live poser reconstructs the body from the chosen sensors at 20 Hz.
     imucap demo [--motion walk|jog|squat|lunge|jump|arm_raises|stand | --file MOTIONFILE]
                 [--sensors SITE,...] [--insoles] [--protocol xbus|bno08x-rvc|xsens-can|dualsense|mixed]
                 [--seconds N] [--record FILE.h5] [--model SPEC] [--steps K] [--headless --json]
+                [--stream lsl,vmc,vrchat [--stream-host HOST]]
 
 ``--seconds N``: headless, the whole session lasts N s, calibration included (a short N
 gets a proportionally shorter protocol); with the window, the clip's length (it loops,
@@ -15,8 +16,13 @@ and every loop calibrates again, as the subject would after taking the sensors o
 
 ``--headless --json`` prints one JSON object: frames, fps, latency_p50_ms/p99_ms, per-site
 packets/errors/gaps, calibration_residual_deg, ga_deg against the synthesized truth,
-model, steps (and more, see ``DemoSession.result``). Without weights for the default
-model the floor baseline runs instead and the output says so loudly.
+model, steps (and more, see ``DemoSession.result``; with ``--stream``, what each stream sent).
+Without weights for the default model the floor baseline runs instead and the output says
+so loudly.
+
+``--stream lsl,vmc,vrchat`` also sends the live body to other programs (a lab recorder,
+an avatar app, VRChat), to this machine unless ``--stream-host`` names another: see
+docs/streams.md.
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ import sys
 from pathlib import Path
 
 from app.demo_session import DEFAULT_SENSORS, PROTOCOL_CHOICES, DemoConfig, DemoSession
+from app.streams import add_stream_arguments, parse_stream_spec, sinks_from_args
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -49,6 +56,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-noise", action="store_true", help="ideal sensors (no noise, mounting or heading errors)")
     p.add_argument("--threads", type=int, default=1, help="torch threads for inference (0 = torch's default)")
+    add_stream_arguments(p)
     p.add_argument("--headless", action="store_true", help="no window")
     p.add_argument("--json", action="store_true", help="headless: print one JSON object")
     p.set_defaults(func=run)
@@ -63,6 +71,7 @@ def config_from_args(args: argparse.Namespace) -> DemoConfig:
     if args.file is not None and not Path(args.file).exists():
         raise FileNotFoundError(f"motion file {args.file} not found")
     seconds = args.seconds if args.seconds is not None else (20.0 if args.headless else 60.0)
+    parse_stream_spec(args.stream)  # a bad --stream fails here; the sinks open when the session starts
     return DemoConfig(
         motion=args.motion, file=args.file, sensors=tuple(parse_sites(args.sensors)), insoles=args.insoles,
         protocol=args.protocol, seconds=seconds, model=args.model, steps=args.steps, seed=args.seed,
@@ -81,8 +90,15 @@ def run(args: argparse.Namespace) -> int:
                           "or under a virtual display: `xvfb-run -a imucap demo`")
         from app.gui.main_window import run_gui
 
+        cfg.streams = sinks_from_args(args)
         return run_gui(cfg)
-    session = DemoSession(cfg)
+    cfg.streams = sinks_from_args(args)
+    try:
+        session = DemoSession(cfg)
+    except BaseException:
+        for s in cfg.streams:
+            s.close()
+        raise
     if session.warning:
         print(session.warning, file=sys.stderr)
     if not args.json:

@@ -4,6 +4,7 @@
     imucap replay REC.h5 [--model diffusion|regressor|floor|PATH.pt] [--sensors SITE,...]
                   [--insoles/--no-insoles] [--steps K] [--seed S] [--threads N] [--height M]
                   [--out FILE.{bvh,csv,h5,mot}]... [--json] [--no-progress]
+                  [--stream lsl,vmc,vrchat [--stream-host HOST] [--stream-speed X]]
     imucap export REC.h5 --out FILE.{bvh,csv,h5,mot} [--out ...] [--height M] [--json]
 
 ``replay`` re-runs the poser over the recording's raw sensor stream with the recorded
@@ -12,6 +13,10 @@ others are inpainted, as with a smaller suit live). Progress goes to stderr; ``-
 prints one JSON object on stdout (frames, duration_s, sensors, insoles, model, steps,
 vs_recorded_ga_deg = how far the re-run is from the live reconstruction, outputs ...).
 ``--out`` writes the re-run poses (repeat it for several formats).
+
+``--stream`` sends the replayed body to other programs as a live session would
+(docs/streams.md), at the recording's own pace (``--stream-speed X``: X times real time,
+0 = as fast as it goes), with the recorded markers.
 
 ``export`` writes the poses stored in the recording (the live reconstruction).
 
@@ -32,6 +37,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from app.streams import add_stream_arguments, parse_stream_spec, sinks_from_args, stream_summary
+from app.streams.pacing import Pacer
 
 OUT_HELP = "write the poses to FILE; format by extension: .bvh, .csv, .h5/.hdf5, .mot (repeatable)"
 
@@ -67,6 +75,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="score against the motion a simulated subject played (imucap devices simulate --truth): "
                         "ga_deg of this replay, recorded_ga_deg of the live reconstruction")
     p.add_argument("--no-progress", action="store_true", help="no progress lines on stderr")
+    add_stream_arguments(p, replay=True)
     p.set_defaults(func=run_replay)
 
     e = subparsers.add_parser("export", help="write a recording's reconstruction as BVH, CSV, HDF5 or OpenSim .mot",
@@ -140,6 +149,8 @@ def run_replay(args: argparse.Namespace) -> int:
     from inference.poser.poser import Poser, resolve_model
 
     _check_outs(args.out)
+    streaming = bool(parse_stream_spec(args.stream))  # a bad --stream fails before any work
+    pacer = Pacer(args.stream_speed) if streaming else None
     truth = None
     if args.truth is not None:
         from app.capture.simulate import read_truth
@@ -170,8 +181,13 @@ def run_replay(args: argparse.Namespace) -> int:
         print(f"replay: {args.recording} ({rec.n_frames} hub frames, {len(rec.calibrations)} calibration(s)), "
               f"sensors {','.join(sensors)}{' + insoles' if insoles else ''}, model {label}, {steps} step(s)",
               file=sys.stderr, flush=True)
+    sinks = sinks_from_args(args, clock_map=pacer.to_monotonic) if pacer is not None else []
+    if sinks and not args.no_progress:
+        pace = f"{args.stream_speed:g}x real time" if args.stream_speed > 0 else "as fast as it goes"
+        print(f"replay: streaming {args.stream} to {args.stream_host}, {pace}", file=sys.stderr, flush=True)
     t0 = time.perf_counter()
-    res = replay_recording(rec, poser, sensors=sensors, insoles=insoles, progress=_Progress(not args.no_progress))
+    res = replay_recording(rec, poser, sensors=sensors, insoles=insoles, progress=_Progress(not args.no_progress),
+                           sinks=sinks, pace=pacer)
     held_out = None
     left_out = [s for s in rec.sites if s not in res.sensors]
     if args.held_out:
@@ -208,6 +224,7 @@ def run_replay(args: argparse.Namespace) -> int:
         **compare_to_recorded(rec, res.poses),
         **({"held_out": held_out} if held_out is not None else {}),
         "outputs": outputs, "seconds": round(seconds, 2),
+        **({"streams": stream_summary(sinks)} if sinks else {}),
     }
     if truth is not None:
         from app.replay import truth_errors
