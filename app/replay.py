@@ -221,21 +221,29 @@ __all__ = ["replay_recording", "resolve_sensors", "resolve_insoles", "recording_
            "held_out_errors", "ReplayResult", "SITES"]
 
 
-def truth_errors(times: np.ndarray, R: np.ndarray, truth) -> dict[str, Any]:
+def truth_errors(times: np.ndarray, R: np.ndarray, truth, max_lag: float = 0.2) -> dict[str, Any]:
     """GA (deg) of reconstructed global orientations ``R`` (T,24,3,3) at monotonic session
     ``times`` against a simulator's truth (``app.capture.simulate.Truth``), over the
     activity (the calibration protocol before it is not what a user records), and per
-    segment for the ones a reader asks about."""
+    segment. A frame's session time is when its samples arrived, which trails the moment
+    the simulator played it by the transport's latency; the truth is compared at the lag
+    (within ``max_lag`` s, reported as ``truth_lag_s``) that fits best, as a motion-capture
+    system is synchronised to another before they are compared."""
     from inference.body.skeleton import SEGMENTS
 
     times = np.asarray(times, float)
     keep = times >= truth.t0 + truth.activity_start
     if not keep.any():
         return {"ga_deg": None, "truth_frames": 0, "truth_note": "no reconstructed frame in the activity"}
-    idx = truth.frame_at(times[keep])
-    inside = (times[keep] - truth.t0) * truth.fps < len(truth.rot) - 0.5
-    Rp, Rt = np.asarray(R)[keep][inside], truth.rot[idx[inside]]
-    ga = global_angle_error(Rp, Rt)
+    tk = times[keep]
+    inside = (tk - truth.t0) * truth.fps < len(truth.rot) - 0.5
+    Rp, tk = np.asarray(R)[keep][inside], tk[inside]
+    best = None
+    for lag in np.arange(-max_lag, max_lag + 1e-9, 1.0 / truth.fps):
+        ga = global_angle_error(Rp, truth.rot[truth.frame_at(tk - lag)])
+        if best is None or ga.mean() < best[0]:
+            best = (float(ga.mean()), float(lag), ga)
+    Rt = truth.rot[truth.frame_at(tk - best[1])]
     seg = np.rad2deg(matrix_angle_between(Rp, Rt)).mean(axis=0)
-    return {"ga_deg": float(ga.mean()), "truth_frames": int(len(ga)),
+    return {"ga_deg": best[0], "truth_lag_s": round(best[1], 4), "truth_frames": int(len(best[2])),
             "ga_segment_deg": {SEGMENTS[k]: round(float(seg[k]), 2) for k in range(len(SEGMENTS))}}

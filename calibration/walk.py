@@ -20,6 +20,13 @@ so each sensor's own displacement, measured in its own reference frame, says whe
 
 The heading's spread over the walk's thirds is reported: a walk that curves or a sensor
 whose heading drifts shows there (``calibration.quality``).
+
+Thighs and shanks have a second witness that needs no acceleration: in gait they swing
+about the body's left-right axis, fastest when the lower end swings forward, so the
+horizontal part of their peak angular velocity points to the subject's right. A sensor
+whose orientation comes from an on-board AHRS during fast swings (a DualSense on a shank)
+leaks gravity into its free acceleration and walks a crooked path; its swing axis stays
+right. For those segments the estimate whose thirds agree better is taken.
 """
 
 from __future__ import annotations
@@ -113,6 +120,42 @@ def walk_displacements(quat: np.ndarray, free_acc: np.ndarray | None, acc: np.nd
     return disp, thirds
 
 
+SWING_SEGMENTS = ("l_thigh", "r_thigh", "l_shank", "r_shank")
+
+
+def swing_forward(quat: np.ndarray, present: np.ndarray, fps: float, window: tuple[int, int]) -> tuple[
+        np.ndarray, np.ndarray]:
+    """Per sensor, the forward direction (S,2) in its reference frame from its swing axis,
+    and the same from each third of the walk (S,3,2): the mean of the fastest tenth of
+    the horizontal angular velocities, turned from "right" to "forward" (z cross it)."""
+    from inference.body.rotations import so3_log
+
+    a, b = window
+    S = quat.shape[1]
+    fwd = np.full((S, 2), np.nan)
+    thirds = np.full((S, 3, 2), np.nan)
+    for k in range(S):
+        ok = present[a:b, k] & np.all(np.isfinite(quat[a:b, k]), -1)
+        if ok.mean() < 0.8:
+            continue
+        R = quat_to_matrix(np.where(ok[:, None], quat[a:b, k], [1.0, 0, 0, 0]))
+        w = so3_log(R[1:] @ np.swapaxes(R[:-1], -1, -2))[:, :2] * fps  # world-frame rate, horizontal
+        w = w[ok[1:] & ok[:-1]]
+        if len(w) < 30:
+            continue
+
+        def peak_dir(v: np.ndarray) -> np.ndarray:
+            mag = np.linalg.norm(v, axis=-1)
+            top = v[mag >= np.quantile(mag, 0.9)]
+            right = top.mean(0)
+            return np.array([-right[1], right[0]])  # z x right = forward
+
+        fwd[k] = peak_dir(w)
+        for j, part in enumerate(np.array_split(w, 3)):
+            thirds[k, j] = peak_dir(part)
+    return fwd, thirds
+
+
 def _angle_between_2d(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     cross = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
     dot = np.sum(u * v, -1)
@@ -159,9 +202,19 @@ def calibrate_walk(
             f"walk: the sensors moved {np.nanmax(path) if np.isfinite(path).any() else 0:.1f} m at most "
             f"(at least {MIN_WALK_M:g} m needed); walk 4-6 steps straight forward, then stand still")
     valid &= path >= MIN_WALK_M
-    heading = -np.arctan2(disp[:, 1], disp[:, 0])
-    heading[~valid] = 0.0
+    direction = disp.copy()
     spread = np.nanmax(_angle_between_2d(thirds, disp[:, None, :]), axis=1)
+    swing, swing_thirds = swing_forward(quat, ok, fps, (windows.npose[1], windows.stand[0]))
+    source = ["displacement"] * S
+    for k, s in enumerate(sites):
+        if s not in SWING_SEGMENTS or not np.isfinite(swing[k]).all():
+            continue
+        sw_spread = float(np.nanmax(_angle_between_2d(swing_thirds[k], swing[k][None])))
+        if not spread[k] <= sw_spread:  # the swing's thirds agree better (or the walk gave nothing)
+            direction[k], spread[k], source[k] = swing[k], sw_spread, "swing"
+            valid[k] |= bool(st.still[k])
+    heading = -np.arctan2(direction[:, 1], direction[:, 0])
+    heading[~valid] = 0.0
     R_WG = _rz(heading)
     R_GS = np.where(ok[sl][..., None, None], quat_to_matrix(np.where(ok[sl][..., None], quat[sl], [1.0, 0, 0, 0])),
                     np.nan)
@@ -180,4 +233,4 @@ def calibrate_walk(
     resid[~valid] = np.nan
     cal = Calibration(sites=sites, R_WG=R_WG, R_SB=R_SB, acc_offset=offset, valid=valid, R_known=np.eye(3),
                       residual_world_deg=resid, residual_tpose_deg=resid)
-    return cal, WalkResult(sites, heading, path, spread, {"npose_stillness": st})
+    return cal, WalkResult(sites, heading, path, spread, {"npose_stillness": st, "heading_source": source})

@@ -184,8 +184,59 @@ def _signals(args: argparse.Namespace, sites: list[str]):
     return spinning_signals(sites, seconds=30.0)
 
 
+def cmd_simulate_setup(args: argparse.Namespace) -> int:
+    """A whole setup's devices, worn by one simulated subject, until the session ends or Ctrl-C."""
+    from app.capture.setup_file import SetupError, load_setup
+    from app.capture.simulate import SimulatedSetup, SimulatedSubject, Unplug
+    from inference.signals.synthesis import NoiseModel
+
+    try:
+        setup = load_setup(args.setup)
+        unplug = [Unplug.parse(u) for u in args.unplug]
+        activity = _activity(args.motion, args.activity_seconds, args.seed, setup.subject.height_m)
+        noise = NoiseModel.typical() if args.noise == "typical" else NoiseModel()
+        subject = SimulatedSubject(setup, activity, lead_in=args.lead_in, seed=args.seed, noise=noise)
+        sim = SimulatedSetup(subject, unplug)
+        sim.start()
+    except (SetupError, ValueError, OSError) as exc:
+        print(f"imucap devices simulate: {exc}", file=sys.stderr)
+        return 2
+    try:
+        if args.truth:
+            sim.write_truth(args.truth)
+        for name, d in sim.devices.items():
+            print(f"{name} {d.url}", flush=True)
+        print(f"simulating {sim.duration:.1f} s ({setup.calibration} calibration, then {args.motion})", flush=True)
+        sim.run(args.seconds or None)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        sim.stop()
+    print(json.dumps(sim.stats()), file=sys.stderr)
+    return 0
+
+
+def _activity(motion: str, seconds: float, seed: int, height: float):
+    """A procedural motion kind, or a motion file (BVH, ASF/AMC, AMASS) facing forward."""
+    from sim_devices.motions import KINDS, generate
+
+    if motion in KINDS:
+        return generate(motion, seconds=seconds, seed=seed, height=height)
+    from inference.evaluation.runner import face_forward
+    from inference.loaders import load_motion
+
+    return face_forward(load_motion(motion))
+
+
 def cmd_simulate(args: argparse.Namespace) -> int:
     from sim_devices.devices import INSOLE_PROTOCOLS, DeviceFaults, make_sim_device
+
+    if args.setup:
+        return cmd_simulate_setup(args)
+    if not args.protocol:
+        print("imucap devices simulate: give --protocol (one device) or --setup FILE (a whole setup)",
+              file=sys.stderr)
+        return 2
 
     site = "insoles" if args.protocol in INSOLE_PROTOCOLS else args.site
     sites = ["l_foot", "r_foot"] if site == "insoles" else [site]
@@ -241,9 +292,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_identify_parser(sub, discover)
 
     ps = sub.add_parser("simulate", help="run a simulated device; prints the URL to open")
-    ps.add_argument(
-        "--protocol", required=True, choices=["xbus", "bno08x-rvc", "xsens-can", "dualsense", "moticon-udp"]
-    )
+    ps.add_argument("--protocol", choices=["xbus", "bno08x-rvc", "xsens-can", "dualsense", "moticon-udp"],
+                    help="one device of this protocol (or --setup for all of a setup file's devices)")
+    ps.add_argument("--setup", help="make every device of this setup file appear at its URL, worn by a simulated "
+                                    "subject who follows the setup's calibration protocol, then --motion")
+    ps.add_argument("--truth", help="with --setup: write the motion played here (.npz), for imucap replay --truth")
+    ps.add_argument("--lead-in", type=float, default=8.0,
+                    help="with --setup: seconds the subject waits in the first pose before the protocol")
+    ps.add_argument("--activity-seconds", type=float, default=20.0,
+                    help="with --setup: length of a procedural --motion")
+    ps.add_argument("--unplug", action="append", default=[], metavar="DEVICE:AT:SECONDS",
+                    help="with --setup: unplug DEVICE AT s into the activity for SECONDS (repeatable)")
     ps.add_argument("--site", default="pelvis", help="sensor site whose signals are replayed")
     ps.add_argument("--motion", default="walk", help="procedural motion kind, or 'spin' (analytic)")
     ps.add_argument("--noise", choices=["none", "typical"], default="typical")

@@ -1,0 +1,182 @@
+"""A simulated subject wearing a setup's devices: every device appears at the URL the
+setup names (a pty linked at the serial path, a CAN channel on a bus that crosses
+processes, the HID seam's socket, a UDP port), playing a subject who follows the setup's
+calibration protocol and then a motion.
+
+Each sensor has its own heading reference and mounting rotation (the noise model's
+``typical``: headings uniform in +-180 deg, straps 15 deg off), so the capture's
+calibration has to find them, as with real sensors. The motion played is written to a
+truth file, on the same monotonic clock the capture records with, so a recording can be
+scored against it (``imucap replay REC --truth TRUTH``).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from app.capture.setup_file import Setup
+from calibration.protocol import Protocol, WalkProtocol, synthesize_session, synthesize_walk_session
+from drivers.urls import parse_url
+from inference.body.motion import Motion
+from inference.signals.site_signals import SiteSignals
+from inference.signals.synthesis import NoiseModel
+from sim_devices.devices import DeviceFaults, SimDevice, make_sim_device
+
+INSOLES = "insoles"
+TRUTH_FORMAT = "imucap-truth"
+
+
+@dataclass
+class Unplug:
+    """Pull ``device``'s plug ``at`` s after the activity starts, for ``seconds``."""
+
+    device: str
+    at: float
+    seconds: float
+
+    @classmethod
+    def parse(cls, text: str) -> Unplug:
+        try:
+            name, at, dur = text.split(":")
+            return cls(name, float(at), float(dur))
+        except ValueError:
+            raise ValueError(f"--unplug {text!r}: expected DEVICE:AT:SECONDS, e.g. l_wrist:5:5") from None
+
+
+@dataclass
+class SimulatedSubject:
+    setup: Setup
+    activity: Motion
+    lead_in: float = 8.0  # extra seconds of N-pose (or table) before the protocol: the capture starts later
+    seed: int = 0
+    noise: NoiseModel = field(default_factory=NoiseModel.typical)
+    signals: SiteSignals | None = None
+    truth: Motion | None = None
+
+    def synthesize(self) -> tuple[SiteSignals, Motion]:
+        from sim_devices.motions import generate
+
+        sites = tuple(self.setup.sites())
+        if self.setup.insoles is not None:
+            sites += tuple(s for s in ("l_foot", "r_foot") if s not in sites)
+        act = self.activity.resample(60.0)
+        if self.setup.calibration == "walk":
+            walk = generate("walk", seconds=6.0, seed=self.seed + 7, height=act.body.height)
+            walk = Motion(rot=walk.rot, root=walk.root, fps=walk.fps, body=act.body, name="walk")
+            proto = WalkProtocol(npose=WalkProtocol().npose + self.lead_in)
+            sig, truth = synthesize_walk_session(act, walk, proto, noise=self.noise, rng=self.seed, sites=sites)
+        else:
+            proto = Protocol(table=7.0 + self.lead_in, strap=2.0, tpose=6.0, blend=1.0)
+            sig, truth = synthesize_session(act, proto, noise=self.noise, rng=self.seed, sites=sites)
+        self.signals, self.truth = sig, truth
+        return sig, truth
+
+
+def sim_device_for(url: str, name: str, signals: SiteSignals, faults: DeviceFaults) -> SimDevice:
+    """The simulated device that answers at ``url`` (its scheme decides the protocol)."""
+    u = parse_url(url)
+    kw: dict[str, Any] = {}
+    if u.scheme in ("xbus", "bno08x-rvc"):
+        kw["link_path"] = u.path
+    elif u.scheme == "xsens-can":
+        kw.update(interface=u.netloc, channel=u.path.lstrip("/"), id_offset=u.get_int("id_offset", 0))
+    elif u.scheme == "dualsense":
+        if u.netloc != "unix":
+            raise ValueError(f"{url}: a simulated DualSense needs the HID seam's socket: dualsense://unix/PATH")
+        kw["socket_path"] = u.path
+    elif u.scheme == "moticon-udp":
+        host, _, port = u.netloc.rpartition(":")
+        kw.update(host=host or "127.0.0.1", port=int(port))
+    else:
+        raise ValueError(f"{url}: no simulated twin for {u.scheme!r}")
+    if u.scheme == "moticon-udp":
+        return make_sim_device(u.scheme, signals, INSOLES, faults=faults, name=INSOLES, **kw)
+    return make_sim_device(u.scheme, signals, name, faults=faults, name=name, **kw)
+
+
+class SimulatedSetup:
+    """The running simulation: devices started, truth known."""
+
+    def __init__(self, subject: SimulatedSubject, unplug: list[Unplug] | None = None) -> None:
+        sig, truth = subject.synthesize() if subject.signals is None else (subject.signals, subject.truth)
+        self.subject, self.signals, self.truth = subject, sig, truth
+        act0 = float(sig.meta["activity_start"])
+        self.devices: dict[str, SimDevice] = {}
+        for k, (name, url) in enumerate(subject.setup.urls().items()):
+            cuts = [(u.at + act0, u.seconds) for u in unplug or [] if u.device == name]
+            f = DeviceFaults(clock_offset=50.0 * (k + 1), drift_ppm=(-1) ** k * 15.0 * (k + 1), disconnects=cuts,
+                             seed=subject.seed + k)
+            self.devices[name] = sim_device_for(url, name, sig, f)
+        missing = [u.device for u in unplug or [] if u.device not in self.devices]
+        if missing:
+            raise ValueError(f"--unplug: no device {missing[0]!r} in the setup ({', '.join(self.devices)})")
+        self.t0: float | None = None
+
+    def start(self) -> SimulatedSetup:
+        for d in self.devices.values():
+            d.start()
+        self.t0 = float(np.mean([d._t0 for d in self.devices.values()]))
+        return self
+
+    def stop(self) -> None:
+        for d in self.devices.values():
+            d.stop()
+
+    @property
+    def duration(self) -> float:
+        return len(self.signals) / self.signals.fps
+
+    def stats(self) -> dict[str, dict[str, int]]:
+        return {n: dict(d.stats) for n, d in self.devices.items()}
+
+    def write_truth(self, path: str | Path) -> Path:
+        """The motion played, with the monotonic time of its first frame and the activity's
+        start: what ``imucap replay --truth`` scores a recording against."""
+        path = Path(path)
+        tr = self.truth
+        tmp = path.with_name(path.name + ".tmp.npz")
+        np.savez_compressed(
+            tmp, format=TRUTH_FORMAT, rot=tr.rot.astype(np.float32), root=tr.root.astype(np.float32),
+            fps=float(tr.fps), t0=float(self.t0 if self.t0 is not None else 0.0),
+            activity_start=float(self.signals.meta["activity_start"]), height=float(tr.body.height),
+            offsets=tr.body.offsets, sites=np.array(self.subject.setup.sites()),
+            protocol=self.subject.setup.calibration)
+        tmp.replace(path)
+        return path
+
+    def run(self, seconds: float | None = None) -> None:
+        end = time.monotonic() + (self.duration if seconds is None else seconds)
+        while time.monotonic() < end:
+            time.sleep(0.1)
+
+
+@dataclass
+class Truth:
+    rot: np.ndarray
+    root: np.ndarray
+    fps: float
+    t0: float
+    activity_start: float
+    height: float
+    offsets: np.ndarray
+
+    def frame_at(self, t: np.ndarray) -> np.ndarray:
+        """Index of the truth frame at monotonic session time(s) ``t`` (clipped)."""
+        return np.clip(np.rint((np.asarray(t) - self.t0) * self.fps).astype(int), 0, len(self.rot) - 1)
+
+
+def read_truth(path: str | Path) -> Truth:
+    try:
+        z = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{path}: not a truth file ({exc})") from None
+    with z:
+        if "format" not in z or str(z["format"]) != TRUTH_FORMAT:
+            raise ValueError(f"{path}: not an imucap truth file (written by 'imucap devices simulate --truth')")
+        return Truth(z["rot"].astype(np.float64), z["root"].astype(np.float64), float(z["fps"]), float(z["t0"]),
+                     float(z["activity_start"]), float(z["height"]), z["offsets"].astype(np.float64))
