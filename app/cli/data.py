@@ -1,7 +1,7 @@
 """`imucap data ...`: look at motion files, build the training dataset, plot synthesized
 signals, and generate procedural motions.
 
-    imucap data inspect FILE [--json]
+    imucap data inspect PATH... [--json]
     imucap data build --data PATH... --out DIR [--json]
     imucap data plot FILE --out PNG [--sites a,b,c]
     imucap data generate KIND --out FILE.npz [--height H] [--speed V] [--seconds S] [--seed N]
@@ -47,18 +47,81 @@ def inspect_motion(path: str | Path) -> dict:
         "root_z_max_m": float(m.root[:, 2].max()),
         "min_foot_z_m": float(cp[..., 2].min()),
         "root_path_m": float(np.linalg.norm(np.diff(m.root[:, :2], axis=0), axis=-1).sum()),
+        "layout": str(m.meta.get("layout", m.meta.get("skeleton", _format_of(path)))),
+        **({"declared_fps": float(m.meta["declared_fps"])} if "declared_fps" in m.meta else {}),
     }
 
 
+def inspect_many(paths: list[str | Path]) -> dict:
+    """Every motion file under ``paths`` inspected, the ones that fail kept with their
+    error instead of stopping the walk, and totals per skeleton layout: a new dataset is
+    checked in one go, and a file no loader can read shows up by name."""
+    from inference.loaders import MotionFormatError, find_motion_files
+
+    files: list[dict] = []
+    failed: list[dict] = []
+    for f in find_motion_files(list(paths)):
+        try:
+            files.append(inspect_motion(f))
+        except (MotionFormatError, ValueError, OSError) as exc:
+            failed.append({"source": str(f), "error": str(exc)})
+    return {"files": files, "failed": failed, "layouts": _layout_totals(files)}
+
+
+def _layout_totals(files: list[dict]) -> dict[str, dict]:
+    """Per layout: how much there is, at which rates, and the range of body heights."""
+    out: dict[str, dict] = {}
+    for layout in sorted({f["layout"] for f in files}):
+        group = [f for f in files if f["layout"] == layout]
+        heights = [f["height_m"] for f in group]
+        out[layout] = {
+            "files": len(group),
+            "frames": sum(f["frames"] for f in group),
+            "fps": sorted({round(f["fps"], 3) for f in group}),
+            "minutes": sum(f["duration_s"] for f in group) / 60.0,
+            "height_m": [min(heights), max(heights)],
+        }
+    return out
+
+
+def _print_many(report: dict) -> None:
+    """One line per file, then one per layout; failures to stderr, where a script looks."""
+    rows = [(f["name"], f["layout"], f["frames"], f"{f['fps']:g}", f"{f['duration_s']:.1f}", f"{f['height_m']:.2f}",
+             f"{f['min_foot_z_m'] * 100:.1f}") for f in report["files"]]
+    head = ("file", "layout", "frames", "fps", "s", "height_m", "min_foot_cm")
+    widths = [max(len(str(r[k])) for r in [head, *rows]) for k in range(len(head))]
+    for r in [head, *rows]:
+        print("  ".join(str(v).ljust(w) for v, w in zip(r, widths)))
+    print()
+    for layout, t in report["layouts"].items():
+        print(f"{layout}: {t['files']} files, {t['frames']} frames at {', '.join(f'{v:g}' for v in t['fps'])} fps, "
+              f"{t['minutes']:.1f} min, height {t['height_m'][0]:.2f}-{t['height_m'][1]:.2f} m")
+    for f in report["failed"]:
+        print(f"failed: {f['error']}", file=sys.stderr)
+
+
+def _print_one(info: dict) -> None:
+    w = max(len(k) for k in info)
+    for k, v in info.items():
+        print(f"{k:<{w}}  {v:.4g}" if isinstance(v, float) else f"{k:<{w}}  {v}")
+
+
 def _cmd_inspect(args: argparse.Namespace) -> int:
-    info = inspect_motion(args.file)
+    """One file: its summary, as before (a file that fails is an error). Folders or
+    several files: a report that carries on past files that fail, exit code 1 if any did."""
+    if len(args.paths) == 1 and not Path(args.paths[0]).is_dir():
+        info = inspect_motion(args.paths[0])
+        if args.json:
+            print(json.dumps(info))
+        else:
+            _print_one(info)
+        return 0
+    report = inspect_many(args.paths)
     if args.json:
-        print(json.dumps(info))
+        print(json.dumps(report))
     else:
-        w = max(len(k) for k in info)
-        for k, v in info.items():
-            print(f"{k:<{w}}  {v:.4g}" if isinstance(v, float) else f"{k:<{w}}  {v}")
-    return 0
+        _print_many(report)
+    return 1 if report["failed"] else 0
 
 
 def _cmd_build(args: argparse.Namespace) -> int:
@@ -169,8 +232,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     data = subparsers.add_parser("data", help="motion files: inspect, build the dataset, plot, generate")
     sub = data.add_subparsers(dest="data_command", required=True)
 
-    p = sub.add_parser("inspect", help="summary of one motion file")
-    p.add_argument("file")
+    p = sub.add_parser("inspect", help="summary of a motion file, or of every one under folders (per layout)")
+    p.add_argument("paths", nargs="+", metavar="PATH", help="a motion file, or files and folders")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_cmd_inspect)
 

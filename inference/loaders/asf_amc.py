@@ -15,7 +15,7 @@ import numpy as np
 
 from inference.body.motion import Motion, MotionFormatError
 from inference.body.rotations import euler_to_matrix, matrix_about_axis
-from inference.loaders.joint_maps import ASF, match_joint_map
+from inference.loaders.joint_maps import ACCLAIM_FPS, ASF, match_joint_map
 from inference.loaders.retarget import SourceSkeleton, retarget, world_map
 from inference.loaders.text import read_text_lines
 
@@ -276,7 +276,17 @@ def find_asf(amc_path: Path) -> Path:
     raise MotionFormatError(str(amc_path), f"cannot find its .asf skeleton in {folder} ({len(asfs)} candidates)")
 
 
-_FPS_IN_NAME = re.compile(r"_(\d{2,3})\.amc", re.IGNORECASE)
+# HDM05 writes the rate after the take number (``HDM_bd_squat_003_120.amc``); CMU names a
+# take ``<subject>_<take>.amc`` and writes no rate anywhere, so a lone trailing number is
+# a take, never a rate (``01_01.amc`` read as 1 frame/s before this asked for both).
+_FPS_IN_NAME = re.compile(r"_\d+_(\d{2,3})\.amc(\.gz)?$", re.IGNORECASE)
+
+
+def amc_frame_rate(path: str | Path) -> float:
+    """Frames per second of an AMC take: from an HDM05-style name, else CMU's 120 Hz (the
+    AMC format itself has no field for it)."""
+    m = _FPS_IN_NAME.search(Path(path).name)
+    return float(m.group(1)) if m else ACCLAIM_FPS
 
 
 def load_amc(path: str | Path, asf_path: str | Path | None = None, fps: float | None = None) -> Motion:
@@ -284,11 +294,11 @@ def load_amc(path: str | Path, asf_path: str | Path | None = None, fps: float | 
     asf = parse_asf(asf_path or find_asf(path))
     amc = parse_amc(path, asf)
     if fps is None:
-        m = _FPS_IN_NAME.search(path.name)
-        fps = float(m.group(1)) if m else 120.0  # HDM05 and CMU capture at 120 Hz
+        fps = amc_frame_rate(path)
     src = to_source_skeleton(asf, amc, fps)
     jmap = match_joint_map(src.names, str(path), maps=(ASF,))
     W = world_map(np.array([0.0, 1.0, 0.0]))  # Acclaim is Y-up
     name = path.name.removesuffix(".gz").removesuffix(".amc")
     return retarget(src, jmap, asf.scale, W, name=name, source=str(path),
-                    meta={"format": "asf/amc", "skeleton": Path(asf.path).name, "units": "acclaim"})
+                    meta={"format": "asf/amc", "skeleton": Path(asf.path).name, "layout": jmap.name,
+                          "units": "acclaim"})

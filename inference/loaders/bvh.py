@@ -6,14 +6,16 @@ The parser keeps line numbers so a malformed file is reported where it breaks.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from inference.body.body import ANKLE_Z, HIP_Z
 from inference.body.motion import Motion, MotionFormatError
-from inference.body.rotations import euler_to_matrix
+from inference.body.rotations import euler_to_matrix, matrix_angle_between
 from inference.loaders.joint_maps import match_joint_map
-from inference.loaders.retarget import SourceSkeleton, detect_up_axis, pick_scale, retarget, world_map
+from inference.loaders.retarget import JointMap, SourceSkeleton, detect_up_axis, pick_scale, retarget, world_map
 from inference.loaders.text import read_text_lines
 
 # units a BVH may be in; chosen by the resulting body height (BVH does not say)
@@ -211,17 +213,52 @@ def parse_bvh(path: str | Path) -> SourceSkeleton:
                           fps=1.0 / frame_time, end_sites=ends)
 
 
+# frame 0 is taken for a conversion's zero pose when its root is not turned at all and no
+# joint that drives a segment of ours is turned further than this (deg): cgspeed's Daz
+# files hold each subject's calibration stance there, up to 10.6 deg (subject 08's knee)
+_AT_REST_DEG = 15.0
+
+
+def opens_with_zero_pose(src: SourceSkeleton, jmap: JointMap) -> bool:
+    """Whether frame 0 holds the rig's zero pose (a T-pose) rather than the take: a
+    captured root is never turned by exactly nothing, nor a captured body a T-pose."""
+    if float(np.degrees(matrix_angle_between(src.glob[0, 0], np.eye(3)))) > 1e-3:
+        return False
+    joints = [src.index(n) for n in jmap.required() if src.parents[src.index(n)] >= 0]
+    local = [src.glob[0, src.parents[j]].T @ src.glob[0, j] for j in joints]
+    return max(float(np.degrees(matrix_angle_between(R, np.eye(3)))) for R in local) < _AT_REST_DEG
+
+
+def drop_lead_in(src: SourceSkeleton, jmap: JointMap) -> SourceSkeleton:
+    """The take without the frames a conversion put before it (``JointMap.lead_in``):
+    they would teach the model a T-pose snapping into motion in 60 ms."""
+    n = jmap.lead_in
+    if n == 0 or src.glob.shape[0] <= n + 1 or not opens_with_zero_pose(src, jmap):
+        return src
+    return replace(src, glob=src.glob[n:], pos=src.pos[n:])
+
+
+def height_in_units(src: SourceSkeleton, jmap: JointMap) -> float:
+    """Rough body height in the file's units, from the left leg's bone lengths (hip to
+    knee to ankle, Drillis & Contini: 0.491 of height). Bone lengths hold in any pose, so
+    neither a take that opens crouched or tumbling (bvh_cgspeed/09_10 read as inches when
+    its first frame decided) nor a zero pose that is no pose at all (iClone's vertical
+    line) can mislead it, as a head-to-feet distance could."""
+    hip, knee, ankle = (src.rest[src.index(jmap.segments[f"l_{s}"])] for s in ("thigh", "shank", "foot"))
+    return float(np.linalg.norm(knee - hip) + np.linalg.norm(ankle - knee)) / (HIP_Z - ANKLE_Z)
+
+
 def load_bvh(path: str | Path) -> Motion:
     path = str(path)
     src = parse_bvh(path)
     jmap = match_joint_map(src.names, path)
+    src = drop_lead_in(src, jmap)
+    meta: dict = {"format": "bvh", "skeleton": jmap.name, "layout": jmap.name}
+    if jmap.capture_fps is not None and abs(src.fps - jmap.capture_fps) > 1e-3 * jmap.capture_fps:
+        meta["declared_fps"] = src.fps
+        src = replace(src, fps=jmap.capture_fps)
     up = detect_up_axis(src, jmap)
     W = world_map(up)
-    # height in source units from the animation's first frame (feet to head, /0.87 head ratio)
-    head = src.pos[0, src.index(jmap.segments["head"])]
-    feet = src.pos[0, [src.index(jmap.segments["l_toes"]), src.index(jmap.segments["r_toes"])]]
-    h_units = float(abs((head - feet.mean(axis=0)) @ up)) / 0.85
-    unit, scale = pick_scale(h_units, BVH_UNITS)
+    unit, scale = pick_scale(height_in_units(src, jmap), BVH_UNITS)
     name = Path(path).name.removesuffix(".gz").removesuffix(".bvh")
-    return retarget(src, jmap, scale, W, name=name, source=path,
-                    meta={"format": "bvh", "skeleton": jmap.name, "units": unit})
+    return retarget(src, jmap, scale, W, name=name, source=path, meta={**meta, "units": unit})

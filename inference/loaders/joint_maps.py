@@ -5,8 +5,13 @@ refused with the joints it lacks, rather than guessed at."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from inference.body.motion import MotionFormatError
 from inference.loaders.retarget import JointMap
+
+# what the Acclaim sources we know (HDM05, CMU) capture at: AMC files do not say
+ACCLAIM_FPS = 120.0
 
 
 def _sides(template: dict[str, str]) -> dict[str, str]:
@@ -36,7 +41,7 @@ BANDAI = JointMap(
     roll_quarters={"spine1": 1, "l_collar": 3, "r_collar": 3, "r_thigh": 2},
 )
 
-# The CMU names with our segments' meaning, as ``imucap export`` writes them (app/export_bvh.py)
+# The CMU names with our segments' meaning, as ``imucap export`` writes them (app/export/bvh.py)
 _CMU_SEGMENTS = {
     "pelvis": "Hips", "spine1": "LowerBack", "spine2": "Spine", "spine3": "Spine1", "neck": "Neck",
     "head": "Head", "collar": "{Side}Shoulder", "upperarm": "{Side}Arm", "forearm": "{Side}ForeArm",
@@ -55,6 +60,30 @@ CMU_CGSPEED = JointMap(
     name="cmu31-cgspeed",
     segments=_sides({**_CMU_SEGMENTS, "hand": "{Side}FingerBase", "fingers": "{Side}HandIndex1"}),
     orient=_sides({"forearm": "{Side}Hand"}),
+)
+
+# cgspeed's "Daz-friendly" release of the CMU conversion: Daz Studio joint names, a T-pose
+# at zero rotation, no toe joint (the foot bone's end site is where CMU's toes bone
+# starts: the ball of the foot, so our toes joint goes there) and fingers of its own.
+# The Acclaim radius and wrist bones became one ``{s}ForeArm`` that is a pure hinge (its
+# rotation relative to ``{s}Shldr`` keeps one axis, measured on 05_01, 09_01, 12_01),
+# and the wrist's pronation went into ``{s}Hand`` together with the wrist's flexion. A
+# forearm sensor turns with the pronation, not with the flexion, so our forearm takes
+# the hand's twist about the forearm (``twist``); our hand is the whole ``{s}Hand``.
+CMU_DAZ = JointMap(
+    name="cmu-daz",
+    segments=_sides({
+        "pelvis": "hip", "spine1": "abdomen", "spine2": "chest", "neck": "neck", "head": "head",
+        "collar": "{s}Collar", "upperarm": "{s}Shldr", "forearm": "{s}ForeArm", "hand": "{s}Hand",
+        "fingers": "{s}Mid1", "thigh": "{s}Thigh", "shank": "{s}Shin", "foot": "{s}Foot",
+    }),
+    split={"spine3": 0.5, "l_toes": 1.0, "r_toes": 1.0},
+    twist=_sides({"forearm": "{s}Hand"}),
+    # all 40 takes in this layout open with the T-pose at frame 0 (root unturned) and ease
+    # into the take over the next frames, every joint along the same curve (speed relative
+    # to frame 1->2: 0.94, 1, 0.89, 0.61, 0.24, 0.06, 0.14, 0.09, then the take's own,
+    # 0.01 in a still one): the capture starts at frame 8
+    lead_in=8,
 )
 
 # Mixamo-style and most game skeletons
@@ -86,7 +115,41 @@ ASF = JointMap(
     orient=_sides({"forearm": "{s}wrist"}),
 )
 
-BVH_MAPS = (BANDAI, CMU_CGSPEED, CMU_BVH, MIXAMO)
+# Reallusion's Character Creator rig (CC_Base_*), as the iClone retargeting of the CMU
+# takes exports it. Every bone points along its parent's Y at zero rotation (a vertical
+# line: the legs point up), so the T-pose comes from bone directions alone (retarget).
+# Twist bones (``*Twist01/02``) are skinning helpers on side branches: the elbow is a
+# pure hinge in ``{L}_Upperarm``'s frame (the forearm turns relative to it about one axis,
+# < 1 deg of twist in 005_01, 005_12, 006_05), so that bone carries the humerus's whole
+# axial rotation and is our upper arm, while ``{L}_UpperarmTwist01/02`` unwind part of
+# it for the mesh. ``{L}_Forearm`` is a hinge too: the pronation sits in ``{L}_Hand``,
+# and the twist bones carry only part of it (``ForearmTwist02``, the child-most, ends up
+# turned by 0.2-0.8 of the hand's twist, varying by clip). So neither the child-most
+# twist bone nor the hand's parent frame (``{L}_Forearm``) has the full pronation: our
+# forearm is ``{L}_Forearm`` turned by the hand's twist about the forearm (``twist``),
+# as for CMU_DAZ, and our hand is the whole ``{L}_Hand``.
+ICLONE_CC = JointMap(
+    name="iclone-cc",
+    segments=_sides({
+        "pelvis": "CC_Base_Hip", "spine1": "CC_Base_Waist", "spine2": "CC_Base_Spine01",
+        "spine3": "CC_Base_Spine02", "neck": "CC_Base_NeckTwist01", "head": "CC_Base_Head",
+        "collar": "CC_Base_{L}_Clavicle", "upperarm": "CC_Base_{L}_Upperarm", "forearm": "CC_Base_{L}_Forearm",
+        "hand": "CC_Base_{L}_Hand", "fingers": "CC_Base_{L}_Mid1", "thigh": "CC_Base_{L}_Thigh",
+        "shank": "CC_Base_{L}_Calf", "foot": "CC_Base_{L}_Foot", "toes": "CC_Base_{L}_ToeBase",
+    }),
+    twist=_sides({"forearm": "CC_Base_{L}_Hand"}),
+)
+
+# CMU's Acclaim skeleton written to BVH bone for bone under its ASF names, the root
+# renamed ``hip`` (bvh_cgspeed/16_01 and 16_02 come so): each joint is the start of its
+# bone and turns it, as in the ASF, so the ASF map holds. Such a file's frame time is the
+# converter's guess, as AMC carries no rate: these two say 30 fps, but their jumps fall
+# at 9.95 and 9.99 m/s^2 when read at CMU's 120 Hz (0.62 at 30 Hz).
+ACCLAIM_BVH = replace(
+    ASF, name="acclaim-bvh", segments={**ASF.segments, "pelvis": "hip"}, capture_fps=ACCLAIM_FPS,
+)
+
+BVH_MAPS = (BANDAI, CMU_CGSPEED, CMU_BVH, CMU_DAZ, ICLONE_CC, ACCLAIM_BVH, MIXAMO)
 
 
 def _strip_prefix(name: str) -> str:
@@ -103,8 +166,8 @@ def match_joint_map(names: list[str], path: str, maps: tuple[JointMap, ...] = BV
             if len(plain) != len(names) or any(plain[k] != k for k in jm.required()):
                 segs = {s: plain[n] for s, n in jm.segments.items()}
                 orient = {s: plain[n] for s, n in jm.orient.items()}
-                return JointMap(name=jm.name, segments=segs, split=jm.split, roll_quarters=jm.roll_quarters,
-                                orient=orient)
+                twist = {s: plain[n] for s, n in jm.twist.items()}
+                return replace(jm, segments=segs, orient=orient, twist=twist)
             return jm
         if best is None or len(missing) < best[0]:
             best = (len(missing), jm, missing)

@@ -94,6 +94,12 @@ class JointMap:
     roll_quarters: dict[str, int] = field(default_factory=dict)
     orient: dict[str, str] = field(default_factory=dict)
     twist: dict[str, str] = field(default_factory=dict)
+    # frames a conversion spends easing from its zero pose at frame 0 into the take: not
+    # part of the capture, dropped when a file opens with that pose (joint_maps.CMU_DAZ)
+    lead_in: int = 0
+    # the rate every file of this layout was captured at, where the files' own frame time
+    # is a converter's guess (joint_maps.ACCLAIM_BVH); None: trust the file
+    capture_fps: float | None = None
 
     def required(self) -> set[str]:
         return set(self.segments.values()) | set(self.orient.values()) | set(self.twist.values())
@@ -141,6 +147,29 @@ def world_map(up: np.ndarray) -> np.ndarray:
     return W
 
 
+# beyond this angle between a zero-pose bone and its T-pose direction the smallest
+# rotation's axis is set by the rig's stray millimetres, not by anything meaningful
+_OPPOSITE_COS = -0.9  # about 154 deg
+
+
+def bone_turn(a: np.ndarray, b: np.ndarray, forward: np.ndarray) -> np.ndarray:
+    """The rotation taking bone direction ``a`` onto ``b`` in the T-pose: the smallest
+    one, which inherits the parent's roll, unless ``a`` points nearly opposite ``b``. Then
+    the smallest rotation's axis is arbitrary (a rig whose zero pose is a vertical line,
+    iClone's Character Creator, has its legs pointing up and 0.5 deg off straight), and a
+    wrong one rolls the leg half a turn: the knee would bend forwards. Such a bone turns
+    half a turn about the body's ``forward`` axis instead, through the frontal plane, as
+    the same rig's arms reach the T-pose (up to sideways, about forward), then the small
+    rest of the way."""
+    a = a / np.linalg.norm(a)
+    b = b / np.linalg.norm(b)
+    if a @ b > _OPPOSITE_COS:
+        return quat_to_matrix(quat_between_vectors(a, b))
+    n = forward - (forward @ a) * a
+    half = quat_to_matrix(quat_about_axis(n / np.linalg.norm(n), np.pi))
+    return quat_to_matrix(quat_between_vectors(half @ a, b)) @ half
+
+
 def tpose_rotations(
     src: SourceSkeleton, jmap: JointMap, W: np.ndarray, ours_to_src: dict[int, int], src_child: dict[int, list[int]]
 ) -> np.ndarray:
@@ -170,7 +199,7 @@ def tpose_rotations(
             Q[j] = Qp
             continue
         target = Wt @ TPOSE_DIRECTIONS[i]
-        Q[j] = quat_to_matrix(quat_between_vectors(Qp @ d0, target)) @ Qp
+        Q[j] = bone_turn(Qp @ d0, target, Wt @ np.array([1.0, 0.0, 0.0])) @ Qp
         k = jmap.roll_quarters.get(SEGMENTS[i], 0) if lying_rig else 0
         if k % 4:
             # the rig rolls this joint's axes by k quarter turns about the bone (JointMap)
