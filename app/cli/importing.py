@@ -1,6 +1,7 @@
 """`imucap import`: another system's logged session -> an imucap session recording.
 
-    imucap import LOG_DIR --out SESSION.h5 [--format ximu3] [--map NAME=SITE ...] [--height M] [--json]
+    imucap import FOLDER_OR_FILES... --out SESSION.h5 [--format auto|ximu3|mtmanager|dot]
+                  [--map ID=SITE ...] [--height M] [--json]
 
 Why: a researcher's sessions are often logged with the sensor maker's own software. Once
 imported, ``imucap replay`` reconstructs them with any model, sensor subset or step list,
@@ -9,9 +10,27 @@ here. The import keeps the raw stream (on the 60 Hz grid the live hub uses, by t
 app's slerp resampler) and adds one calibration, computed from the standing start
 (``calibration.standing``: the log has no table or T-pose window).
 
-Formats: ``ximu3``, the x-IMU3 GUI's data logs (``drivers.ximu3``). Device names map to
-sites by the names the x-IMU3 suits use ("Left Lower Leg" -> l_shank, ...; see
-``DEVICE_SITES``), or by ``--map "Left Lower Leg=l_shank"``.
+Formats (``--format auto``, the default, tells them apart):
+- ``ximu3``: the x-IMU3 GUI's data logs (``drivers.ximu3``): one folder holding a folder
+  per device.
+- ``mtmanager``: MT Manager text/CSV exports (MTi, MTw Awinda), one file per sensor;
+- ``dot``: Xsens DOT app CSV exports, one file per sensor (``drivers.xsens_export``).
+  Give the folder holding them (its .txt/.csv files that are exports are read, others
+  are listed as ignored) or the files themselves.
+
+Sensors map to sites by ``--map ID=SITE``, where ID is any name the sensor goes by: its
+device name or tag (x-IMU3 device name, DOT tag), its id (x-IMU3 serial, MT Manager
+Device ID, DOT address) or its file's stem. Without a map, a name that says a segment
+maps by itself: site names, the names suits use ("Left Lower Leg" -> l_shank, see
+``DEVICE_SITES``) and OpenSense-style bone names ("LFemur", "tibia_r_imu", see ``BONES``).
+
+An export without Gyr_* columns (the DOT app's default Quat + FreeAcc) is recorded
+without gyro, as it was logged; the standing calibration, which needs a rate to find
+the still start, gets one from the orientation (``gyro_from_orientation``).
+
+Sensors whose clocks are not one (a DOT set that was not synchronised) are aligned at
+their first samples, which is only as good as their simultaneous start; the summary says
+which was done (``clock``).
 """
 
 from __future__ import annotations
@@ -21,20 +40,29 @@ import json
 import math
 import re
 import sys
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from app.recording import Recorder
+from calibration.core import Calibration
 from calibration.standing import calibrate_standing
+from drivers.device_log import DeviceLog
 from drivers.hub import HubFrame
-from drivers.ximu3 import DeviceLog, read_log
+from drivers.ximu3 import read_log
+from drivers.xsens_export import LAYOUTS, detect_layout, read_exports
+from inference.body.rotations import quat_conjugate, quat_multiply, quat_to_axis_angle
 from inference.body.skeleton import N_CONTACTS, SITES, parse_sites
 from inference.signals.resample import to_grid
 
 RATE = 60.0
+FORMATS = ("auto", "ximu3", *LAYOUTS)
+SOURCE_TITLES = {"ximu3": "x-IMU3 log", **{k: v.title for k, v in LAYOUTS.items()}}
+EXPORT_SUFFIXES = (".txt", ".csv", ".tsv")
+GYRO_WINDOW_S = 0.2  # wide enough that orientation jitter does not read as motion, short against a step
 # normalised device name -> site (words as suits and their GUIs name the segments)
 DEVICE_SITES: dict[str, str] = {
     "pelvis": "pelvis", "hips": "pelvis", "sacrum": "pelvis", "torso": "torso", "chest": "torso",
@@ -44,21 +72,58 @@ DEVICE_SITES: dict[str, str] = {
         ("hand", "wrist"), ("upper leg", "thigh"), ("thigh", "thigh"), ("lower leg", "shank"),
         ("shank", "shank"), ("shin", "shank"), ("foot", "foot"))},
 }
+# bone names as OpenSense and many lab tags use them, with a side letter or word before or after
+BONES: dict[str, str] = {"femur": "thigh", "tibia": "shank", "calcn": "foot", "humerus": "upperarm",
+                         "radius": "wrist", "ulna": "wrist", "hand": "wrist", "foot": "foot", "thigh": "thigh",
+                         "shank": "shank", "upperarm": "upperarm", "forearm": "wrist", "wrist": "wrist"}
+_SIDES = (("left", "l"), ("right", "r"), ("l", "l"), ("r", "r"))
 
 
 def _norm(name: str) -> str:
     return re.sub(r"[\s_\-]+", " ", name.strip().lower())
 
 
+def _compact(name: str) -> str:
+    """Letters only, without a trailing "imu": ``femur_r_imu`` -> ``femurr``."""
+    n = re.sub(r"[^a-z]", "", name.lower())
+    return n[:-3] if n.endswith("imu") and len(n) > 3 else n
+
+
+def _bone_site(name: str) -> str | None:
+    """The site of a bone-style name (``LFemur``, ``tibia_r``, ``LeftFoot``), if it is one."""
+    n = _compact(name)
+    compact_sites = {k.replace(" ", ""): v for k, v in DEVICE_SITES.items()}
+    if n in compact_sites:
+        return compact_sites[n]
+    for bone, site in BONES.items():
+        for side, s in _SIDES:
+            if n in (side + bone, bone + side):
+                return f"{s}_{site}"
+    return None
+
+
 def site_for(name: str, mapping: dict[str, str]) -> str | None:
-    """The site a device name stands for: an explicit ``--map`` entry, a site name, or a
-    segment name from ``DEVICE_SITES``; None if none applies."""
+    """The site a device name stands for: an explicit ``--map`` entry, a site name, a
+    segment name from ``DEVICE_SITES`` or a bone name from ``BONES``; None if none applies."""
     if name in mapping:
         return mapping[name]
     n = _norm(name)
     if n.replace(" ", "_") in SITES:
         return n.replace(" ", "_")
-    return DEVICE_SITES.get(n)
+    return DEVICE_SITES.get(n) or _bone_site(name)
+
+
+@dataclass
+class Source:
+    """One device's log and the names ``--map`` may call it by, the most telling first."""
+
+    log: DeviceLog
+    ids: tuple[str, ...]
+    file: str = ""
+
+    @property
+    def label(self) -> str:
+        return self.ids[0] if not self.file else f"{self.ids[0]} ({Path(self.file).name})"
 
 
 @dataclass
@@ -73,59 +138,118 @@ class Imported:
     forward_G: list[float]
     forward_from: str
     devices: dict[str, dict[str, Any]]
+    format: str = "ximu3"
+    clock: str = "shared"
+    ignored: list[str] = field(default_factory=list)
 
 
-def import_ximu3(log_dir: str | Path, out: str | Path, mapping: dict[str, str] | None = None,
-                 height: float | None = None) -> Imported:
-    """Read an x-IMU3 log, put it on the 60 Hz grid, calibrate it from its standing start
-    and write it as a session recording at ``out``."""
-    mapping = mapping or {}
-    logs = read_log(log_dir)
-    by_site: dict[str, DeviceLog] = {}
+def _unique(names: Sequence[str]) -> tuple[str, ...]:
+    return tuple(dict.fromkeys(n for n in names if n))
+
+
+def _key(name: str) -> str:
+    return re.sub(r"[^0-9a-z]", "", name.lower())
+
+
+def _site_of(src: Source, mapping: dict[str, str]) -> str | None:
+    """The site of one device: ``--map`` by any of its ids (exactly, else ignoring case and
+    separators, so ``D4:CA:6E:F1:78:60`` matches ``D4CA6EF17860``), else by a name that says it."""
+    loose = {_key(k): v for k, v in mapping.items()}
+    for i in src.ids:
+        if i in mapping:
+            return mapping[i]
+    for i in src.ids:
+        if _key(i) in loose:
+            return loose[_key(i)]
+    return next((s for s in (site_for(i, {}) for i in src.ids) if s), None)
+
+
+def _assign_sites(sources: Sequence[Source], mapping: dict[str, str]) -> dict[str, Source]:
+    """site -> its device; refuses devices without a site and two devices on one site."""
+    by_site: dict[str, Source] = {}
     unknown = []
-    for d in logs:
-        site = site_for(d.name, mapping)
+    for src in sources:
+        site = _site_of(src, mapping)
         if site is None:
-            unknown.append(d.name)
+            unknown.append(src)
             continue
         site = parse_sites([site])[0]
         if site in by_site:
-            raise ValueError(f"devices {by_site[site].name!r} and {d.name!r} both map to {site}; use --map")
-        by_site[site] = d
+            raise ValueError(f"sensors {by_site[site].label} and {src.label} both map to {site}; use --map ID=SITE")
+        by_site[site] = src
     if unknown:
-        raise ValueError(f"no site for device(s) {', '.join(map(repr, unknown))}; pass --map 'NAME=SITE' "
-                         f"(sites: {', '.join(SITES)})")
-    sites = tuple(s for s in SITES if s in by_site)  # canonical order
-    t_start = min(float(d.t[0]) for d in by_site.values())
-    t_end = max(float(d.t[-1]) for d in by_site.values())
-    t0 = math.ceil(t_start * RATE) / RATE
-    n = int(math.floor((t_end - t0) * RATE)) + 1
-    S = len(sites)
-    quat = np.full((n, S, 4), np.nan)
-    vec = np.full((n, S, 2, 3), np.nan)  # specific force, gyro
-    for k, s in enumerate(sites):
-        d = by_site[s]
-        tg, q, v, ok = to_grid(d.t, d.quat, np.stack([d.acc, d.gyro], axis=1), fps=RATE, t0=t0)
+        example = unknown[0].ids[0]
+        raise ValueError(f"no site for sensor(s) {', '.join(s.label for s in unknown)}; map each with --map ID=SITE "
+                         f"(e.g. --map '{example}=pelvis'; sites: {', '.join(SITES)})")
+    return by_site
+
+
+def gyro_from_orientation(t: np.ndarray, quat: np.ndarray, window_s: float = GYRO_WINDOW_S) -> np.ndarray:
+    """(N, 3) angular rate in the sensor frame (rad/s) from orientations R_GS (N, 4) at
+    times t: the least-squares slope of the rotation from each sample to its neighbours
+    within ``window_s`` (fewer at the ends). A slope over a window, not a difference of
+    two samples, so that orientation jitter does not read as motion."""
+    n = len(t)
+    h = max(1, int(round(window_s / float(np.median(np.diff(t))) / 2)))
+    i = np.arange(n)
+    steps = [np.clip(i + j, 0, n - 1) for j in range(-h, h + 1)]
+    dt = np.stack([t[k] - t for k in steps])  # (W, N)
+    rot = np.stack([quat_to_axis_angle(quat_multiply(quat_conjugate(quat), quat[k])) for k in steps])  # (W, N, 3)
+    dt_c = dt - dt.mean(axis=0)
+    rot_c = rot - rot.mean(axis=0)
+    return np.einsum("wn,wnc->nc", dt_c, rot_c) / np.sum(dt_c**2, axis=0)[:, None]
+
+
+def _check_acc(src: Source) -> Source:
+    """The device, refused where its log has no acceleration at all: the model needs it."""
+    if not np.isfinite(src.log.acc).any():
+        raise ValueError(f"{src.label}: no acceleration columns (Acc_* or FreeAcc_*); export them too")
+    return src
+
+
+def _rate_for_calibration(d: DeviceLog) -> np.ndarray:
+    """(N, 3) the device's gyro, or where its log has none, its rate from orientation."""
+    return d.gyro if np.isfinite(d.gyro).any() else gyro_from_orientation(d.t, d.quat)
+
+
+def _align_clocks(by_site: dict[str, Source]) -> str:
+    """Keep the devices' own times when they share a clock (their spans overlap and no
+    header says otherwise); else put each one's first sample at 0. Returns which."""
+    logs = [s.log for s in by_site.values()]
+    unsynced = any(d.info.get("syncstatus", "").strip().lower().startswith("un") for d in logs)
+    if not unsynced and max(d.t[0] for d in logs) < min(d.t[-1] for d in logs):
+        return "shared"
+    for d in logs:
+        d.t = d.t - d.t[0]
+    return "aligned at each device's first sample (clocks not shared)"
+
+
+def _on_grid(by_site: dict[str, Source], sites: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """(quat (n,S,4), vectors (n,S,3,3): specific force, gyro as logged and the rate for
+    calibration) of every device on one RATE grid, NaN where a device did not deliver."""
+    logs = [by_site[s].log for s in sites]
+    t0 = math.ceil(min(float(d.t[0]) for d in logs) * RATE) / RATE
+    n = int(math.floor((max(float(d.t[-1]) for d in logs) - t0) * RATE)) + 1
+    quat = np.full((n, len(sites), 4), np.nan)
+    vec = np.full((n, len(sites), 3, 3), np.nan)
+    for k, d in enumerate(logs):
+        v = np.stack([d.acc, d.gyro, _rate_for_calibration(d)], axis=1)
+        tg, q, v, ok = to_grid(d.t, d.quat, v, fps=RATE, t0=t0)
         idx = np.rint((tg - t0) * RATE).astype(int)
         keep = (idx >= 0) & (idx < n) & ok
         quat[idx[keep], k] = q[keep]
         vec[idx[keep], k] = v[keep]
-    present = np.all(np.isfinite(quat), axis=-1)
-    acc, gyro = vec[:, :, 0], vec[:, :, 1]
-    cal = calibrate_standing(sites, quat, acc=acc, gyro=gyro, present=present, rate=RATE)
+    return quat, vec
+
+
+def _record(out: str | Path, sites: tuple[str, ...], meta: dict[str, Any], quat: np.ndarray, acc: np.ndarray,
+            gyro: np.ndarray, present: np.ndarray, cal: Calibration) -> None:
+    """Write the grid as a session recording, the calibration at the stand's last frame."""
     still = int(cal.meta["still_frames"])
-    meta: dict[str, Any] = {
-        "source": "x-IMU3 log", "log": str(log_dir), "sensors": list(sites), "insoles": False,
-        "devices": {s: {"name": by_site[s].name, "serial": by_site[s].serial} for s in sites},
-        "calibration": "standing start (calibration/standing.py)", "stride_scale": True,
-        "pelvis_odometry": True,
-    }
-    if height is not None:
-        meta["body_height_m"] = float(height)
     rec = Recorder(out, sites, metadata=meta)
     try:
-        nan3 = np.full((S, 3), np.nan)
-        for i in range(n):
+        nan3 = np.full((len(sites), 3), np.nan)
+        for i in range(len(quat)):
             rec.on_frame(HubFrame(t=i / RATE, index=i, sites=sites, quat=quat[i], free_acc=nan3, acc=acc[i],
                                   gyro=gyro[i], present=present[i], insole_force=np.full(2, np.nan),
                                   contacts=np.zeros(N_CONTACTS, bool), insole_present=False))
@@ -133,36 +257,132 @@ def import_ximu3(log_dir: str | Path, out: str | Path, mapping: dict[str, str] |
                 rec.on_calibration(cal, i / RATE)
     finally:
         rec.close()
-    devices = {s: {"name": by_site[s].name, "samples": int(len(by_site[s].t)), "rate_hz": round(by_site[s].rate_hz, 1),
-                   "grid_present": round(float(present[:, k].mean()), 3), "skipped": by_site[s].skipped}
-               for k, s in enumerate(sites)}
+
+
+def _device_summary(src: Source, present: np.ndarray) -> dict[str, Any]:
+    d = src.log
+    out = {"name": d.name, "samples": int(len(d.t)), "rate_hz": round(d.rate_hz, 1),
+           "grid_present": round(float(present.mean()), 3), "skipped": d.skipped}
+    if src.file:
+        gyro = d.info.get("gyro_from", "")
+        out.update(id=d.serial, file=src.file, acc_from=d.info.get("acc_from", ""),
+                   gyro_from=gyro if gyro != "none" else "not in the export (calibrated on the rate from orientation)")
+    return out
+
+
+def import_sources(sources: Sequence[Source], out: str | Path, fmt: str, log: str,
+                   mapping: dict[str, str] | None = None, height: float | None = None) -> Imported:
+    """Put the devices of one logged session on the 60 Hz grid, calibrate them from their
+    standing start and write them as a session recording at ``out``."""
+    by_site = {s: _check_acc(src) for s, src in _assign_sites(sources, mapping or {}).items()}
+    sites = tuple(s for s in SITES if s in by_site)  # canonical order
+    clock = _align_clocks(by_site)
+    quat, vec = _on_grid(by_site, sites)
+    acc, gyro, cal_rate = vec[:, :, 0], vec[:, :, 1], vec[:, :, 2]
+    present = np.all(np.isfinite(quat), axis=-1)
+    cal = calibrate_standing(sites, quat, acc=acc, gyro=cal_rate, present=present, rate=RATE)
+    meta: dict[str, Any] = {
+        "source": SOURCE_TITLES[fmt], "log": log, "sensors": list(sites), "insoles": False,
+        "devices": {s: {"name": by_site[s].log.name, "serial": by_site[s].log.serial} for s in sites},
+        "calibration": "standing start (calibration/standing.py)", "stride_scale": True,
+        "pelvis_odometry": True, "clock": clock,
+    }
+    if height is not None:
+        meta["body_height_m"] = float(height)
+    _record(out, sites, meta, quat, acc, gyro, present, cal)
+    n, still = len(quat), int(cal.meta["still_frames"])
+    devices = {s: _device_summary(by_site[s], present[:, k]) for k, s in enumerate(sites)}
     return Imported(Path(out), sites, n, round(n / RATE, 3), round(still / RATE, 3),
-                    [round(float(x), 4) for x in cal.meta["forward_G"]], str(cal.meta["forward_from"]), devices)
+                    [round(float(x), 4) for x in cal.meta["forward_G"]], str(cal.meta["forward_from"]), devices,
+                    format=fmt, clock=clock)
+
+
+def import_ximu3(log_dir: str | Path, out: str | Path, mapping: dict[str, str] | None = None,
+                 height: float | None = None) -> Imported:
+    """An x-IMU3 log folder as a session recording at ``out`` (``import_sources``)."""
+    sources = [Source(d, _unique([d.name, d.serial])) for d in read_log(log_dir)]
+    return import_sources(sources, out, "ximu3", str(log_dir), mapping, height)
+
+
+def import_xsens(files: Sequence[str | Path], out: str | Path, layout: str | None = None,
+                 mapping: dict[str, str] | None = None, height: float | None = None) -> Imported:
+    """Xsens export files of one session (one per sensor; ``layout`` "mtmanager" or "dot",
+    else told by each file) as a session recording at ``out`` (``import_sources``)."""
+    files = [Path(f) for f in files]
+    logs = read_exports(files, layout)
+    fmt = layout or logs[0].info["layout"]
+    sources = [Source(d, _unique([d.name, d.serial, f.stem]), str(f)) for d, f in zip(logs, files)]
+    return import_sources(sources, out, fmt, ", ".join(map(str, files)), mapping, height)
+
+
+def _is_ximu3_log(path: Path) -> bool:
+    return path.is_dir() and any(d.is_dir() and (d / "Inertial.csv").is_file() and (d / "Quaternion.csv").is_file()
+                                 for d in path.iterdir())
+
+
+def _export_files(paths: Sequence[Path], fmt: str) -> tuple[list[Path], list[Path], str | None]:
+    """(export files, files of the given folders that are not exports, their one layout or
+    None when only given files say it): folders give their export files, files are taken
+    as given. Refuses an import of nothing and one of both layouts at once."""
+    files, ignored = [], []
+    for p in paths:
+        if not p.is_dir():
+            files.append(p)
+            continue
+        for f in sorted(q for q in p.iterdir() if q.is_file() and q.suffix.lower() in EXPORT_SUFFIXES):
+            (files if detect_layout(f) else ignored).append(f)
+    if not files:
+        raise ValueError(f"{', '.join(map(str, paths))}: no x-IMU3 device folders and no Xsens export files "
+                         f"({'/'.join(EXPORT_SUFFIXES)})")
+    if fmt != "auto":
+        return files, ignored, fmt
+    layouts = {detect_layout(f) for f in files} - {None}
+    if len(layouts) > 1:
+        raise ValueError("both MT Manager and DOT exports given; import each session on its own")
+    return files, ignored, next(iter(layouts), None)
+
+
+def import_paths(paths: Sequence[str | Path], out: str | Path, fmt: str = "auto",
+                 mapping: dict[str, str] | None = None, height: float | None = None) -> Imported:
+    """The CLI's import: an x-IMU3 log folder, or Xsens export folders and files (module docstring)."""
+    paths = [Path(p) for p in paths]
+    if fmt not in FORMATS:
+        raise ValueError(f"unknown format {fmt!r} (known: {', '.join(FORMATS)})")
+    for p in paths:
+        if not p.exists():
+            raise FileNotFoundError(f"{p}: no such file or folder")
+    if fmt == "ximu3" or (fmt == "auto" and len(paths) == 1 and _is_ximu3_log(paths[0])):
+        if len(paths) != 1:
+            raise ValueError("an x-IMU3 log is one folder; give just that folder")
+        return import_ximu3(paths[0], out, mapping, height)
+    files, ignored, layout = _export_files(paths, fmt)
+    res = import_xsens(files, out, layout, mapping, height)
+    res.ignored = [str(f) for f in ignored]
+    return res
 
 
 def _mapping(items: list[str]) -> dict[str, str]:
     out = {}
     for item in items:
         if "=" not in item:
-            raise ValueError(f"--map {item!r}: expected NAME=SITE")
+            raise ValueError(f"--map {item!r}: expected ID=SITE")
         name, site = item.rsplit("=", 1)
         out[name.strip()] = parse_sites([site.strip()])[0]
     return out
 
 
 def run_import(args: argparse.Namespace) -> int:
-    if args.format != "ximu3":
-        raise ValueError(f"unknown format {args.format!r}")
-    res = import_ximu3(args.log, args.out, _mapping(args.map), args.height)
-    summary = {"recording": str(res.path), "sites": list(res.sites), "frames": res.frames,
+    res = import_paths(args.logs, args.out, args.format, _mapping(args.map), args.height)
+    summary = {"recording": str(res.path), "format": res.format, "sites": list(res.sites), "frames": res.frames,
                "duration_s": res.duration_s, "still_start_s": res.still_s, "forward_G": res.forward_G,
-               "forward_from": res.forward_from,
-               "devices": res.devices}
+               "forward_from": res.forward_from, "clock": res.clock, "devices": res.devices, "ignored": res.ignored}
     if args.json:
         print(json.dumps(summary))
     else:
-        print(f"imported {len(res.sites)} sensors ({', '.join(res.sites)}), {res.duration_s} s, calibrated on the "
-              f"first {res.still_s} s standing -> {res.path}")
+        print(f"imported {len(res.sites)} sensors ({', '.join(res.sites)}) from an {SOURCE_TITLES[res.format]}, "
+              f"{res.duration_s} s, calibrated on the first {res.still_s} s standing -> {res.path}")
+        if res.ignored:
+            print(f"ignored (not Xsens exports): {', '.join(res.ignored)}")
     sys.stdout.flush()
     return 0
 
@@ -170,14 +390,16 @@ def run_import(args: argparse.Namespace) -> int:
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("import", help="turn another system's logged session into a session recording",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("log", type=Path, help="the log folder (x-IMU3: the folder holding one folder per device)")
+    p.add_argument("logs", type=Path, nargs="+", metavar="FOLDER_OR_FILES",
+                   help="an x-IMU3 log folder, or Xsens export folders/files (one file per sensor)")
     p.add_argument("--out", type=Path, required=True, help="the session recording to write (.h5)")
-    p.add_argument("--format", default="ximu3", choices=["ximu3"], help="the log's format (default ximu3)")
-    p.add_argument("--map", action="append", default=[], metavar="NAME=SITE",
-                   help="device name -> site, where the name does not say it (repeatable)")
+    p.add_argument("--format", default="auto", choices=FORMATS, help="the log's format (default: told from the files)")
+    p.add_argument("--map", action="append", default=[], metavar="ID=SITE",
+                   help="sensor name, id or file stem -> site, where the name does not say it (repeatable)")
     p.add_argument("--height", type=float, default=None, help="the subject's height in m (stored for replay)")
     p.add_argument("--json", action="store_true", help="print one JSON summary on stdout")
     p.set_defaults(func=run_import)
 
 
-__all__ = ["import_ximu3", "site_for", "DEVICE_SITES", "register"]
+__all__ = ["BONES", "DEVICE_SITES", "FORMATS", "Imported", "Source", "gyro_from_orientation", "import_paths",
+           "import_sources", "import_xsens", "import_ximu3", "register", "site_for"]

@@ -20,10 +20,11 @@ from __future__ import annotations
 import csv
 import os
 import re
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from drivers.device_log import DeviceLog
 
 G = 9.81
 _FOLDER = re.compile(r"^(?P<name>.+?)\s+(?P<serial>[0-9A-Fa-f]{6,})\s*(\((?P<iface>[^)]*)\))?$")
@@ -31,26 +32,6 @@ _FOLDER = re.compile(r"^(?P<name>.+?)\s+(?P<serial>[0-9A-Fa-f]{6,})\s*(\((?P<ifa
 
 class LogError(ValueError):
     """A folder that is not an x-IMU3 device log, or one without usable samples."""
-
-
-@dataclass
-class DeviceLog:
-    """One device's samples, joined on timestamp and in time order. t: (N,) s on the
-    log's shared clock; quat: (N, 4) (w, x, y, z) sensor -> Earth; acc: (N, 3) specific
-    force (m/s^2, sensor frame); gyro: (N, 3) rad/s. skipped: rows that were malformed,
-    non-finite or duplicated (counted, not fatal)."""
-
-    name: str
-    serial: str
-    t: np.ndarray
-    quat: np.ndarray
-    acc: np.ndarray
-    gyro: np.ndarray
-    skipped: dict[str, int] = field(default_factory=dict)
-
-    @property
-    def rate_hz(self) -> float:
-        return float(1.0 / np.median(np.diff(self.t))) if len(self.t) > 1 else float("nan")
 
 
 def _read_csv(path: Path, columns: int) -> tuple[np.ndarray, int]:

@@ -1,0 +1,164 @@
+"""Synthesized signals written as Xsens exports (the layouts ``drivers.xsens_export``
+reads), so importing a lab's MT Manager or DOT session is tested end to end without the
+sensors.
+
+Like the real files (see the readers' docstrings for the public samples they follow):
+one file per sensor; MT Manager's ``//`` preamble, tab- or comma-separated, PacketCounter
+wrapping at 2^16 and SampleTimeFine in 10 kHz ticks, Gyr_* in rad/s, file named
+``MT_<station>_<take>_<device id>.txt``; the DOT app's ``sep=,`` and ``Key:,value``
+preamble, SampleTimeFine in microseconds, Gyr_* in deg/s, Euler in degrees, file named
+``<tag>_<address>_<date>_<time>.csv``. The sensors of one session share one clock, which
+starts close enough to 2^32 ticks to wrap during the session. A dropped packet is a row
+missing from every file; a blanked cell is written empty.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from drivers.xsens_export import DOT, MTMANAGER, G
+from inference.body.rotations import quat_conjugate, quat_rotate, quat_to_euler, quat_to_matrix
+from inference.signals.site_signals import SiteSignals
+
+WRAP = 2**32
+MAG_EARTH = np.array([0.0, 0.45, -0.89])  # a.u.: north along +Y (ENU), dipping down
+Values = Callable[[SiteSignals, int], np.ndarray]  # (signals, site index) -> (T, n) one site's columns
+
+
+def _free_acc(sig: SiteSignals, k: int) -> np.ndarray:
+    """What an Xsens reports as free acceleration: its own specific force turned to Earth
+    by its own orientation, gravity removed (unsmoothed, unlike ``sig.free_acc``)."""
+    return quat_rotate(sig.quat[:, k], sig.specific_force[:, k]) - np.array([0.0, 0.0, G])
+
+
+def _euler_deg(sig: SiteSignals, k: int) -> np.ndarray:
+    """(roll, pitch, yaw) in degrees, Xsens's order R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    return np.degrees(quat_to_euler(sig.quat[:, k], "ZYX"))[:, ::-1]
+
+
+def _matrix_columns(sig: SiteSignals, k: int) -> np.ndarray:
+    """Mat[1][1], Mat[2][1], Mat[3][1], Mat[1][2], ...: R_GS column by column."""
+    return np.swapaxes(quat_to_matrix(sig.quat[:, k]), -1, -2).reshape(-1, 9)
+
+
+def _mag(sig: SiteSignals, k: int) -> np.ndarray:
+    return quat_rotate(quat_conjugate(sig.quat[:, k]), np.broadcast_to(MAG_EARTH, sig.quat[:, k, 1:].shape))
+
+
+# a column group -> (its column names, its values)
+MT_GROUPS: dict[str, tuple[tuple[str, ...], Values]] = {
+    "acc": (("Acc_X", "Acc_Y", "Acc_Z"), lambda s, k: s.specific_force[:, k]),
+    "freeacc": (("FreeAcc_X", "FreeAcc_Y", "FreeAcc_Z"), _free_acc),
+    "gyr": (("Gyr_X", "Gyr_Y", "Gyr_Z"), lambda s, k: s.gyro[:, k]),
+    "mag": (("Mag_X", "Mag_Y", "Mag_Z"), _mag),
+    "quat": (("Quat_q0", "Quat_q1", "Quat_q2", "Quat_q3"), lambda s, k: s.quat[:, k]),
+    "matrix": (tuple(f"Mat[{r}][{c}]" for c in (1, 2, 3) for r in (1, 2, 3)), _matrix_columns),
+    "euler": (("Roll", "Pitch", "Yaw"), _euler_deg),
+}
+DOT_GROUPS: dict[str, tuple[tuple[str, ...], Values]] = {
+    "quat": (("Quat_W", "Quat_X", "Quat_Y", "Quat_Z"), lambda s, k: s.quat[:, k]),
+    "euler": (("Euler_X", "Euler_Y", "Euler_Z"), _euler_deg),
+    "freeacc": (("FreeAcc_X", "FreeAcc_Y", "FreeAcc_Z"), _free_acc),
+    "acc": (("Acc_X", "Acc_Y", "Acc_Z"), lambda s, k: s.specific_force[:, k]),
+    "gyr": (("Gyr_X", "Gyr_Y", "Gyr_Z"), lambda s, k: np.degrees(s.gyro[:, k])),
+}
+MT_DEFAULT = ("acc", "gyr", "mag", "quat")
+DOT_DEFAULT = ("quat", "freeacc")
+
+
+def _table(sig: SiteSignals, k: int, groups: Mapping[str, tuple[tuple[str, ...], Values]],
+           chosen: Sequence[str]) -> tuple[list[str], np.ndarray]:
+    """(column names, (T, n) values) of one site for the chosen groups."""
+    names: list[str] = []
+    values = []
+    for g in chosen:
+        cols, fn = groups[g]
+        names += cols
+        values.append(np.asarray(fn(sig, k), dtype=np.float64).reshape(len(sig.t), -1))
+    return names, np.concatenate(values, axis=1)
+
+
+def _lines(counter: np.ndarray, fine: np.ndarray | None, values: np.ndarray, delimiter: str, counter_width: int,
+           blank: set[tuple[int, int]]) -> list[str]:
+    """Data lines; ``blank`` holds (row, value column) cells left empty."""
+    out = []
+    for i, (c, row) in enumerate(zip(counter, values)):
+        cells = [f"{int(c):0{counter_width}d}"] + ([] if fine is None else [str(int(fine[i]))])
+        cells += ["" if (i, j) in blank else f"{v:.6f}" for j, v in enumerate(row)]
+        out.append(delimiter.join(cells))
+    return out
+
+
+def _blank_cells(names: list[str], blank: Sequence[tuple[int, str]]) -> set[tuple[int, int]]:
+    return {(row, names.index(col)) for row, col in blank}
+
+
+def write_mtmanager_exports(sig: SiteSignals, folder: str | os.PathLike, ids: Mapping[str, str],
+                            columns: Sequence[str] = MT_DEFAULT, delimiter: str = "\t", time: bool = True,
+                            t0_ticks: int = WRAP - 20_000, counter0: int = 65_400, drop: Sequence[int] = (),
+                            blank: Sequence[tuple[int, str]] = (), long_header: bool = False) -> list[Path]:
+    """One MT Manager export per site of ``sig`` (ids: site -> device id) in ``folder``.
+    columns: groups of ``MT_GROUPS`` after PacketCounter (and SampleTimeFine unless
+    ``time`` is False: time by counter and rate, as the OpenSim example files do);
+    drop: sample indices lost from every file; blank: (row, column name) cells left empty."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    keep = np.setdiff1d(np.arange(len(sig.t)), np.asarray(drop, dtype=int))
+    counter = (counter0 + keep) % MTMANAGER.counter_wrap
+    fine = (t0_ticks + np.rint(sig.t[keep] / MTMANAGER.tick_s).astype(np.int64)) % WRAP if time else None
+    ext = ".txt" if delimiter == "\t" else ".csv"
+    paths = []
+    for k, site in enumerate(sig.sites):
+        names, values = _table(sig, k, MT_GROUPS, columns)
+        head = ["PacketCounter"] + (["SampleTimeFine"] if time else []) + names
+        path = folder / f"MT_012005D6_000-000_{ids[site]}{ext}"
+        text = _mt_preamble(ids[site], sig.fps, long_header) + [delimiter.join(head)]
+        text += _lines(counter, fine, values[keep], delimiter, 5, _blank_cells(names, blank))
+        path.write_text("\n".join(text) + "\n")
+        paths.append(path)
+    return paths
+
+
+def _mt_preamble(device_id: str, rate: float, long_header: bool) -> list[str]:
+    """MT Manager's preamble: the short one of older versions (no device id; the file name
+    carries it) or the grouped one of newer versions."""
+    if not long_header:
+        return ["// Start Time: Unknown", f"// Update Rate: {rate:.1f}Hz", "// Filter Profile: human (46.1)",
+                "// Option Flags: AHS Disabled ICC Disabled ", "// Firmware Version: 4.0.2"]
+    return ["// General information: ", "//  MT Manager version: 2022.2.0", "// Device information: ",
+            f"//  DeviceId: {device_id}", "//  ProductCode: MTW2-3A7G6", "//  Firmware Version: 4.4.0",
+            "// Device settings: ", "//  Filter Profile: human(46.1)", f"//  Update Rate: {rate:.1f}Hz",
+            "// Coordinate system: ENU"]
+
+
+def write_dot_exports(sig: SiteSignals, folder: str | os.PathLike, tags: Mapping[str, str],
+                      columns: Sequence[str] = DOT_DEFAULT, t0_us: int = WRAP - 3_000_000,
+                      drop: Sequence[int] = (), blank: Sequence[tuple[int, str]] = ()) -> list[Path]:
+    """One DOT app export per site of ``sig`` (tags: site -> the tag the user gave the
+    sensor) in ``folder``; columns: groups of ``DOT_GROUPS`` after PacketCounter and
+    SampleTimeFine (default the app's Quat + FreeAcc); drop, blank as for MT Manager."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    keep = np.setdiff1d(np.arange(len(sig.t)), np.asarray(drop, dtype=int))
+    fine = (t0_us + np.rint(sig.t[keep] / DOT.tick_s).astype(np.int64)) % WRAP
+    paths = []
+    for k, site in enumerate(sig.sites):
+        names, values = _table(sig, k, DOT_GROUPS, columns)
+        address = f"D4CA6EF1{0x7200 + k:04X}"
+        pad = "," * (len(names) + 1)
+        text = ["sep=,", f"DeviceTag:,{tags[site]}{pad}", f"FirmwareVersion:,2.0.0{pad}", f"AppVersion:,2021.0{pad}",
+                f"SyncStatus:,Synced{pad}", f"OutputRate:,{sig.fps:g}Hz{pad}", f"FilterProfile:,General{pad}",
+                f"StartTime: ,2024-05-02_10:00:00_000 GMT+1{pad}", "\u00a9 Xsens Technologies B. V. 2005-2024", "",
+                ",".join(["PacketCounter", "SampleTimeFine", *names])]
+        text += _lines(keep + 1, fine, values[keep], ",", 1, _blank_cells(names, blank))
+        path = folder / f"{tags[site]}_{address}_20240502_100000.csv"
+        path.write_text("\n".join(text) + "\n", encoding="utf-8")
+        paths.append(path)
+    return paths
+
+
+__all__ = ["DOT_GROUPS", "MT_GROUPS", "write_dot_exports", "write_mtmanager_exports"]
