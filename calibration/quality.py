@@ -11,7 +11,7 @@ protocol is a few seconds of known motion, and gait is regular enough to check a
   more than 10 deg (a curved walk, or a sensor whose heading drifts);
 - **probably on another segment**: the segment's swing in the sagittal plane during the
   walk is outside what that segment does in gait: on synthesized walks trunk 2-3 deg,
-  thigh 40-41, shank 74-82, foot ~85; on twelve Bandai walks (normal to stylised) pelvis
+  thigh 40-41, shank 74-82, foot ~85; on six Bandai walks (styles active, angry, childish) pelvis
   8-12, head 13-25, thigh 33-56, shank 55-79, foot 59-106. The limits below hold all of
   these; the arms are not checked (their swing is personal: 32-154 deg);
 - **probably on the wrong side**: in gait the pelvis turns toward the leg that swings
@@ -19,7 +19,8 @@ protocol is a few seconds of known motion, and gait is regular enough to check a
   arms swing opposite to the legs. The correlation of each limb sensor's sagittal angle
   with the pelvis heading (pelvis worn) has a known sign per side; a sensor whose sign
   is the other side's is flagged, and a flagged left/right pair is reported as swapped.
-  On normal Bandai walks the legs score 0.6-0.99 and the arms 0.4-0.9 on their own side;
+  On Bandai walks of the active and angry styles thighs score 0.61-0.77, shanks 0.43-0.82,
+  feet 0.12-0.66 and the arms 0.45-0.90 on their own side;
   a stylised "childish" walk scores near zero (no flag: below the thresholds) except
   for its flailing arms, hence the arms' stricter threshold.
 """

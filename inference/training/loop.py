@@ -52,7 +52,7 @@ from inference.features.mirror import MirrorAveraged, mirror_features, mirror_po
 from inference.model.config import ModelConfig, atomic_torch_save
 from inference.model.denoiser import deepened_state_dict
 from inference.model.diffusion import Schedule, inpaint, paper_steps, parse_steps
-from inference.model.files import build_model, save_model
+from inference.model.files import MODEL_FORMAT, build_model, save_model
 from inference.model.regressor import random_observation_mask
 from inference.training.augment import rotate_yaw, scale_features
 from inference.training.config import CHECKPOINT_FORMAT, LAST, LOG_FILE, MODEL_FILE, VAL_SITES, TrainConfig
@@ -253,6 +253,15 @@ def validate(model: nn.Module, val_set: Dataset, ctx: StepContext) -> dict[str, 
 
 # --------------------------------------------------------------------------- the trainer
 
+def init_from_model_file(obj: dict) -> dict:
+    """A model file (shipped weights: the EMA weights, fp16, and the normaliser) as the
+    starting point of a fine-tune, in the shape ``--init`` takes from a checkpoint. The
+    optimiser starts afresh; the normaliser stays the model's, as its weights expect it."""
+    sd = {k: v.float() if v.is_floating_point() else v for k, v in obj["state_dict"].items()}
+    return {"format": CHECKPOINT_FORMAT, "kind": obj["kind"], "model_config": obj["model_config"], "ema": sd,
+            "model": sd, "norm_mean": obj["norm_mean"], "norm_std": obj["norm_std"], "step": obj.get("step", 0)}
+
+
 def lr_at(step: int, cfg: TrainConfig) -> float:
     """Linear warm-up, then cosine decay to lr_min at cfg.steps."""
     if step < cfg.warmup:
@@ -345,8 +354,10 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
     init: dict | None = None
     if init_from is not None and ckpt is None:
         init = torch.load(init_from, map_location="cpu", weights_only=False)
-        if init.get("format") != CHECKPOINT_FORMAT:
-            raise ValueError(f"--init {init_from}: not an imucap training checkpoint (last.pt)")
+        if isinstance(init, dict) and init.get("format") == MODEL_FORMAT:
+            init = init_from_model_file(init)
+        if not isinstance(init, dict) or init.get("format") != CHECKPOINT_FORMAT:
+            raise ValueError(f"--init {init_from}: not an imucap training checkpoint (last.pt) or model file")
         # dropout is training behaviour, not architecture: a fine-tune may switch it
         init_model = replace(ModelConfig.from_dict(init["model_config"]), dropout=cfg.model.dropout)
         deeper = replace(init_model, layers=cfg.model.layers) == cfg.model and cfg.model.layers > init_model.layers

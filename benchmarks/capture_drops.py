@@ -1,0 +1,120 @@
+"""How many frames a headless capture drops: six sensors over three protocols plus insoles,
+simulated in their own process at their real rates, captured and recorded by `imucap
+capture` in another, for SECONDS after calibration.
+
+    .venv/bin/python benchmarks/capture_drops.py --seconds 60 [--json]
+
+Prints the 60 Hz hub frames and 20 Hz poses expected from the recording's time span, the
+ones missing (index gaps), the pipeline's own drop count and the latency. Run on an idle
+machine: on two shared cores a test suite next to it is what it measures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import socket
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from app.capture.simulate import read_truth  # noqa: E402
+from app.recording import read_recording  # noqa: E402
+
+CLI = [sys.executable, "-m", "app.cli.main"]
+
+
+def setup_text(tmp: Path) -> str:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    group = f"239.{random.randint(1, 254)}.{random.randint(1, 254)}.{random.randint(1, 254)}"
+    return f"""[subject]
+id = "bench"
+height = 1.75
+
+[sensors]
+pelvis  = "xbus://{tmp}/pelvis?baud=115200"
+head    = "bno08x-rvc://{tmp}/head"
+l_wrist = "xsens-can://udp_multicast/{group}?id_offset=0x100"
+r_wrist = "xsens-can://udp_multicast/{group}?id_offset=0x200"
+l_shank = "bno08x-rvc://{tmp}/l_shank"
+r_shank = "xbus://{tmp}/r_shank?baud=115200"
+
+[insoles]
+url = "moticon-udp://127.0.0.1:{port}"
+"""
+
+
+def gaps(index: np.ndarray) -> int:
+    d = np.diff(np.asarray(index, np.int64))
+    return int(np.sum(np.maximum(d - 1, 0)))
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seconds", type=float, default=60.0, help="capture after calibration")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    tmp = Path(tempfile.mkdtemp(prefix="imucap-drops-"))
+    setup = tmp / "setup.toml"
+    setup.write_text(setup_text(tmp))
+    truth, rec = tmp / "truth.npz", tmp / "rec.h5"
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    sim = subprocess.Popen([*CLI, "devices", "simulate", "--setup", str(setup), "--motion", "walk",
+                            "--activity-seconds", str(args.seconds + 10), "--truth", str(truth), "--lead-in", "15"],
+                           stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env, cwd=REPO)
+    try:
+        for line in sim.stdout:
+            if line.startswith("simulating"):
+                break
+        total = 15 + 7 + 4 + 3.5 + 1 + args.seconds
+        cap = subprocess.run([*CLI, "capture", "--setup", str(setup), "--headless", "--record", str(rec),
+                              "--seconds", f"{total:.0f}", "--json", "--countdown", "1"],
+                             stdin=subprocess.DEVNULL, capture_output=True, text=True, env=env, cwd=REPO)
+    finally:
+        sim.terminate()
+        sim.wait(10)
+    if cap.returncode != 0:
+        print(cap.stderr[-2000:], file=sys.stderr)
+        return 1
+    res = json.loads(cap.stdout.strip().splitlines()[-1])
+    r = read_recording(rec)
+    tr = read_truth(truth)
+    t_cal = r.calibrations[0][0] if r.calibrations else float("nan")
+    raw_t, raw_i = r.raw["t"], r.raw["index"]
+    live = raw_t > t_cal
+    rec_t, rec_i = r.recon["t"], r.recon["index"]
+    span = float(raw_t[live][-1] - raw_t[live][0]) if live.any() else 0.0
+    hub_expected = int(raw_i[live][-1] - raw_i[live][0] + 1) if live.any() else 0
+    hub_missing = gaps(raw_i[live])
+    pose_expected = int(round(span * 20)) + 1
+    pose_missing = max(pose_expected - len(rec_t), 0)
+    out = {
+        "seconds_after_calibration": round(span, 1), "calibrated": res["calibrated"],
+        "hub_frames_expected": hub_expected, "hub_frames_missing": hub_missing,
+        "hub_missing_pct": round(100 * hub_missing / max(hub_expected, 1), 3),
+        "poses_expected": pose_expected, "poses_recorded": int(len(rec_t)), "poses_missing": pose_missing,
+        "poses_missing_pct": round(100 * pose_missing / max(pose_expected, 1), 3),
+        "pose_index_gaps": gaps(rec_i), "pipeline_dropped": res["pipeline"].get("dropped"),
+        "latency_p50_ms": res["latency_p50_ms"], "latency_p99_ms": res["latency_p99_ms"],
+        "activity_start_s": round(tr.activity_start, 1),
+    }
+    if args.json:
+        print(json.dumps(out))
+    else:
+        for k, v in out.items():
+            print(f"{k:28s} {v}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
