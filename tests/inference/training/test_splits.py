@@ -32,3 +32,38 @@ def test_one_source_only_is_left_alone():
     ds = _ds(["bandai/a.bvh", "bandai/b.bvh"])
     w = ds.weights.copy()
     np.testing.assert_allclose(balance_sources(ds, 0.5).weights, w)
+
+
+def test_three_sources_get_their_shares():
+    from inference.training.splits import balance_shares
+
+    names = ["/d/bandai/d1/walk_1.bvh", "/d/bandai/d2/run_2.bvh", "/d/hdm05/bd/HDM_bd_squat_001_120.amc",
+             "/d/hdm05/bd/HDM_bd_squat_001_120.amc@x1.25", "/d/cmu/asf_amc/01/01_01.amc.gz",
+             "/d/cmu/bvh_iclone/005_02.bvh.gz"]
+    ds = balance_shares(_ds(names), {"bandai": 0.3, "hdm05": 0.35, "cmu": 0.35})
+    assert ds.weights[:2].sum() == pytest.approx(0.3) and ds.weights[2:4].sum() == pytest.approx(0.35)
+    assert ds.weights[4:].sum() == pytest.approx(0.35)
+    # a source that is absent gives its share to the others in proportion
+    ds = balance_shares(_ds(names[:4]), {"bandai": 0.3, "hdm05": 0.35, "cmu": 0.35})
+    assert ds.weights[:2].sum() == pytest.approx(0.3 / 0.65)
+
+
+def test_cmu_subject_from_every_layout():
+    from inference.training.splits import cmu_subject
+
+    assert cmu_subject("cmu/asf_amc/07/07_01.amc.gz") == "07"
+    assert cmu_subject("cmu/bvh_cgspeed/16_02.bvh.gz") == "16"
+    assert cmu_subject("cmu/bvh_iclone/005_13.bvh.gz") == "05"
+
+
+@pytest.mark.data
+def test_cmu_split_is_by_subject(shared_data):
+    from inference.training.splits import CMU_VAL_SUBJECTS, cmu_subject, cmu_train_files, cmu_val_files
+
+    if not (shared_data / "cmu").is_dir():
+        pytest.skip("no CMU data")
+    train, val = cmu_train_files(shared_data), cmu_val_files(shared_data)
+    assert train and val
+    assert {cmu_subject(f) for f in val} == set(CMU_VAL_SUBJECTS)
+    assert not {cmu_subject(f) for f in train} & set(CMU_VAL_SUBJECTS)
+    assert not any(f.name.startswith("09_10") for f in train + val)

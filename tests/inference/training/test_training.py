@@ -21,7 +21,7 @@ from inference.model.files import build_model, load_model
 from inference.training.augment import rotate_yaw, scale_features
 from inference.training.config import LossWeights, TrainConfig
 from inference.training.data import feature_stats, synthetic_dataset
-from inference.training.loop import EMA, StepContext, batch_loss, train
+from inference.training.loop import EMA, StepContext, batch_loss, export_model, train
 from inference.training.losses import contact_offsets_for, motion_losses
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -431,6 +431,24 @@ def test_init_from_starts_a_new_run_from_another_runs_weights(tmp_path):
     with pytest.raises(ValueError, match="differs"):
         train(_cfg(steps=1, model={**TINY, "ff": TINY["ff"] * 2}), tmp_path / "other", progress=False,
               init_from=tmp_path / "base" / "last.pt")
+
+
+def test_init_from_a_model_file_fine_tunes_the_shipped_kind_of_file(tmp_path):
+    """A shipped weights file (EMA weights in fp16, the normaliser) starts a fine-tune the
+    way a checkpoint does: with lr 0 the run's weights are the file's, cast to float32."""
+    base = train(_cfg(steps=2), tmp_path / "base", progress=False)
+    assert base.step == 2
+    export_model(tmp_path / "base" / "last.pt", tmp_path / "w.pt", fp16=True)
+    shipped = torch.load(tmp_path / "w.pt", weights_only=False)
+    res = train(_cfg(steps=1, lr=0.0, lr_min=0.0), tmp_path / "ft", progress=False, init_from=tmp_path / "w.pt")
+    assert res.step == 1
+    out = torch.load(tmp_path / "ft" / "last.pt", weights_only=False)
+    for k, v in shipped["state_dict"].items():
+        assert torch.allclose(out["model"][k], v.float()), k
+    assert np.array_equal(out["norm_mean"], shipped["norm_mean"])
+    torch.save({"x": 1}, tmp_path / "junk.pt")
+    with pytest.raises(ValueError, match="checkpoint .last.pt. or model file"):
+        train(_cfg(steps=1), tmp_path / "junk", progress=False, init_from=tmp_path / "junk.pt")
 
 
 def test_deeper_model_starts_from_a_shallower_ones_outputs(tmp_path):
