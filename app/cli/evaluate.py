@@ -116,6 +116,7 @@ def run(args: argparse.Namespace) -> int:
         load_motions,
         report_markdown,
     )
+    from inference.evaluation.subjects import per_subject, per_subject_markdown
     from inference.metrics.errors import paired_difference
     from inference.model.diffusion import parse_steps
     from inference.poser.poser import default_steps, mirror_for, noise_mode_for, resolve_model
@@ -177,6 +178,7 @@ def run(args: argparse.Namespace) -> int:
     keep = args.export_dir is not None
     result, clips = one(args.model, sites, args.insoles, keep=keep, label=f"{args.model} {','.join(sites)}")
     result["per_clip"] = [{"name": c.name, **c.metrics.summary()} for c in clips]
+    result["per_subject"] = per_subject([c.metrics for c in clips])
     result["truth_repaired"] = repaired
 
     if args.against is not None:
@@ -188,6 +190,7 @@ def run(args: argparse.Namespace) -> int:
                                      "jitter_ratio", "re2_m", "re5_m", "re10_m")},
             "differences": {m: d.as_dict() for m, d in diffs.items()},
             "per_clip": [{"name": c.name, **c.metrics.summary()} for c in other_clips],
+            "per_subject": per_subject([c.metrics for c in other_clips]),
         }
 
     if args.export_dir is not None:
@@ -217,8 +220,11 @@ def run(args: argparse.Namespace) -> int:
                 rows.append({"label": label, **s})
                 per_clip[label, spec] = [c.metrics for c in set_clips]
         comparisons = compare_rows(per_clip, seed=args.seed)
+        subject_tables = {f"{spec} {label}": per_subject(cs) for (label, spec), cs in per_clip.items()
+                          if spec != "floor" and label in ("6 sites", "3 sites (pelvis, wrists)", "2 sites (shanks)")}
         noise_txt = "with the sensor noise model" if noise is not None else "without sensor noise"
         text = report_markdown(rows) + ("\n" + comparison_markdown(comparisons) if comparisons else "") + (
+            "\n" + per_subject_markdown(subject_tables) if subject_tables else "") + (
             f"\n{len(motions)} clip(s) from {', '.join(map(str, args.data))}; signals synthesized {noise_txt}; "
             f"seed {args.seed}; live poser frame by frame at 20 Hz; mirror averaging: "
             f"{', '.join(sorted({str(r['model']) for r in rows if r.get('mirror')})) or 'none'}"
