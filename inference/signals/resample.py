@@ -15,6 +15,15 @@ finished recording emit its last frames (``flush``). Missing samples (NaN accele
 are left out of the average; an output is missing (NaN) only if its centre sample is.
 
 Decimation phase: 20 Hz frame k is 60 Hz sample 3k (the first sample is always kept).
+
+Causal (``causal=True``, the low-latency mode, docs/latency.md): the same 11 samples but
+trailing (the current one and the ten before it), so a 20 Hz frame is ready the moment its
+own sample arrives instead of 83 ms later. Same smoothing (same magnitude response), but the
+acceleration then lags the orientation by 5 samples: a model must be trained on signals
+filtered this way to read them right, so a model file says which filter it expects
+(``acc_filter_of``). The front is padded with 10 replicas of the first sample; an output is
+missing only if its own (newest) sample is. The centred filter is the default and is
+computed exactly as before.
 """
 
 from __future__ import annotations
@@ -31,11 +40,13 @@ WINDOW_MA = 2 * HALF + 1
 FPS_SIGNAL = 60  # the rate every live stream is put on (the hub's grid) and synthesis works at
 FPS_MODEL = 20  # the model's frame rate
 STEP = FPS_SIGNAL // FPS_MODEL  # 60 Hz -> 20 Hz
+ACC_FILTERS = ("centred", "causal")  # what a model file's meta["acc_filter"] may say
 
 
-def _window_mean(stack: list[np.ndarray]) -> np.ndarray:
+def _window_mean(stack: list[np.ndarray], anchor: int = HALF) -> np.ndarray:
     """Mean of the 11 arrays in `stack` (each (..., 3)), ignoring NaN, summed in list order
-    so the streaming and batch versions give bit-identical results."""
+    so the streaming and batch versions give bit-identical results; missing where
+    ``stack[anchor]`` (the sample the output stands for) is."""
     s = np.zeros_like(stack[0], dtype=np.float64)
     n = np.zeros(stack[0].shape, dtype=np.float64)
     for x in stack:
@@ -44,27 +55,33 @@ def _window_mean(stack: list[np.ndarray]) -> np.ndarray:
         n = n + ok
     with np.errstate(invalid="ignore", divide="ignore"):
         out = s / n
-    centre = stack[HALF]
+    centre = stack[anchor]
     return np.where(np.isfinite(centre), out, np.nan)
 
 
-def moving_average(acc: np.ndarray, step: int = 1) -> np.ndarray:
-    """Centred 11-frame moving average along axis 0 with edge-replicate padding, evaluated
-    at samples 0, step, 2*step, ... (step=1: every sample; step=3: the 20 Hz frames)."""
+def moving_average(acc: np.ndarray, step: int = 1, causal: bool = False) -> np.ndarray:
+    """Centred (or, with ``causal``, trailing) 11-frame moving average along axis 0 with
+    edge-replicate padding, evaluated at samples 0, step, 2*step, ... (step=1: every
+    sample; step=3: the 20 Hz frames)."""
     acc = np.asarray(acc, dtype=np.float64)
     T = acc.shape[0]
     if T == 0:
         return acc.copy()
-    pad = np.concatenate([np.repeat(acc[:1], HALF, 0), acc, np.repeat(acc[-1:], HALF, 0)], axis=0)
+    if causal:
+        pad = np.concatenate([np.repeat(acc[:1], 2 * HALF, 0), acc], axis=0)
+    else:
+        pad = np.concatenate([np.repeat(acc[:1], HALF, 0), acc, np.repeat(acc[-1:], HALF, 0)], axis=0)
     n = len(range(0, T, step))
     # strided views, no copies: window element k of output i is pad[i*step + k]
-    return _window_mean([pad[k: k + (n - 1) * step + 1: step] for k in range(WINDOW_MA)])
+    stack = [pad[k: k + (n - 1) * step + 1: step] for k in range(WINDOW_MA)]
+    return _window_mean(stack, 2 * HALF) if causal else _window_mean(stack)
 
 
-def downsample(acc: np.ndarray, rest: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+def downsample(acc: np.ndarray, rest: np.ndarray | None = None,
+               causal: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
     """Batch 60 -> 20 Hz: smoothed acceleration at every 3rd sample, and `rest` (e.g.
     orientations, contacts: anything not smoothed) taken at the same samples."""
-    a = moving_average(acc, STEP)
+    a = moving_average(acc, STEP, causal)
     r = None if rest is None else np.asarray(rest)[::STEP]
     return a, r
 
@@ -86,12 +103,17 @@ class StreamingResampler:
     """Stateful 60 -> 20 Hz: push one 60 Hz sample at a time; a 20 Hz frame comes out once
     the 5 samples after it have arrived (83 ms look-ahead), ``flush()`` emits the last ones
     at the end of a recording. Output equals ``downsample`` on the whole sequence.
+    ``causal``: the trailing average; a frame comes out with its own sample (no look-ahead)
+    and equals ``downsample(..., causal=True)``.
 
     Internally it keeps the last 11 samples of the *padded* sequence (5 replicas of the
-    first sample in front), so the window of centre sample c is exactly the buffer when
-    padded sample c+10 arrives; one push can complete at most one window."""
+    first sample in front, 10 when causal), so the window of sample c is exactly the buffer
+    when padded sample c+10 arrives; one push can complete at most one window."""
 
-    def __init__(self) -> None:
+    def __init__(self, causal: bool = False) -> None:
+        self.causal = bool(causal)
+        # where in the window the sample an output stands for sits (its time, its payload)
+        self._anchor = 2 * HALF if self.causal else HALF
         self.reset()
 
     def reset(self) -> None:
@@ -106,8 +128,9 @@ class StreamingResampler:
         c = self._next
         if c < self._n_raw and c + 2 * HALF == self._n_pad - 1:
             items = list(self._buf)
-            acc = _window_mean([it[0] for it in items])
-            centre = items[HALF]
+            stack = [it[0] for it in items]
+            acc = _window_mean(stack, self._anchor) if self.causal else _window_mean(stack)
+            centre = items[self._anchor]
             self._next += STEP
             return [Frame20(index=c // STEP, t=centre[2], acc=acc, rest=centre[1])]
         return []
@@ -116,14 +139,15 @@ class StreamingResampler:
         """Add one 60 Hz sample; returns the 20 Hz frames that became ready (0 or 1)."""
         item = (np.asarray(acc, dtype=np.float64), None if rest is None else np.asarray(rest), t)
         if self._n_raw == 0:
-            for _ in range(HALF):
+            for _ in range(self._anchor):
                 self._buf.append(item)
                 self._n_pad += 1
         self._n_raw += 1
         return self._append(item)
 
     def flush(self) -> list[Frame20]:
-        """End of stream: pad with the last sample, emit the frames still pending, reset."""
+        """End of stream: pad with the last sample, emit the frames still pending (none
+        when causal: each left with its own sample), reset."""
         out: list[Frame20] = []
         if self._n_raw:
             last = self._buf[-1]
@@ -184,4 +208,18 @@ def to_grid(
     return tg, qg, ag, valid
 
 
-__all__ = ["moving_average", "downsample", "StreamingResampler", "Frame20", "to_grid", "HALF", "STEP"]
+def acc_filter_of(meta: dict | None) -> str:
+    """The acceleration filter a model was trained on, from its file's metadata: "causal"
+    or "centred". Files from before the causal option say nothing and are centred. The live
+    resampler must filter the same way, or the model reads accelerations 83 ms late."""
+    meta = meta or {}
+    f = meta.get("acc_filter")
+    if f is None:
+        f = "causal" if (meta.get("train_config") or {}).get("causal") else "centred"
+    if f not in ACC_FILTERS:
+        raise ValueError(f"unknown acceleration filter {f!r} in the model file ({', '.join(ACC_FILTERS)})")
+    return f
+
+
+__all__ = ["moving_average", "downsample", "StreamingResampler", "Frame20", "to_grid", "HALF", "STEP",
+           "ACC_FILTERS", "acc_filter_of"]
