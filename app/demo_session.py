@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from app.pipeline import LivePipeline, LivePose, Pipeline, Sink, SuitHub
+from app.pipeline import LivePipeline, LivePose, Pipeline, Sink, SuitHub, close_sink
 
 PROTOCOL_CHOICES = ("xbus", "bno08x-rvc", "xsens-can", "dualsense", "mixed")
 
@@ -43,6 +43,7 @@ class DemoConfig:
     noise: bool = True
     headless: bool = True
     threads: int = 1  # one window per step: 1 intra-op thread is fastest and leaves a core to the drivers/GUI
+    latency: str = "centred"  # app.latency.LATENCY_MODES: "low" waits for no future sample
     calibration_protocol: Any = None  # a calibration.Protocol overriding the default timings
     # sinks streaming the body to other programs (--stream: app.streams.make_stream_sinks builds
     # them, above this module); the session adds them to its pipeline, which closes them
@@ -163,7 +164,11 @@ class DemoSession:
         else:
             self.protocol = Protocol.fitted(cfg.seconds) if cfg.headless else Protocol()
         activity_s = cfg.seconds - self.protocol.prefix + 2.0 if cfg.headless else cfg.seconds
-        self.model, self.model_label, self.warning = resolve_demo_model(cfg.model)
+        from app.latency import model_spec_for, resolve_filter
+
+        self.model, self.model_label, self.warning = resolve_demo_model(model_spec_for(cfg.latency, cfg.model))
+        self.causal, latency_warning = resolve_filter(cfg.latency, self.model)
+        self.warning = "; ".join(w for w in (self.warning, latency_warning) if w) or None
         self.activity = load_activity(cfg, activity_s)
         sites = tuple(cfg.sensors)
         if cfg.insoles:
@@ -175,7 +180,7 @@ class DemoSession:
         self.poser = Poser(self.model, body=self.truth.body, steps=cfg.steps, seed=cfg.seed)
         self.calibrator = Calibrator(cfg.sensors, schedule=self.protocol.schedule())
         self.pipeline = Pipeline(self.poser, cfg.sensors, calibrator=self.calibrator, insoles=cfg.insoles,
-                                 clock=time.monotonic)
+                                 clock=time.monotonic, causal=self.causal)
         self.suit = None
         self.hub: SuitHub | None = None
         self.live: LivePipeline | None = None
@@ -190,8 +195,7 @@ class DemoSession:
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> DemoSession:
         import drivers
-        from drivers.hub import resampler_from_to_grid
-        from inference.signals.resample import to_grid
+        from app.latency import hub_options
         from sim_devices.suit import SimulatedSuit
 
         self.suit = SimulatedSuit(self.signals, self.assignment, seed=self.cfg.seed)
@@ -209,7 +213,7 @@ class DemoSession:
         if self.cfg.record:
             self.start_recording(self.cfg.record)
         devices = {site: drivers.make_device(url) for site, url in self.suit.urls().items()}
-        self.hub = SuitHub(devices, resampler=resampler_from_to_grid(to_grid))
+        self.hub = SuitHub(devices, **hub_options(self.cfg.latency))
         self.hub.start()
         self.live = LivePipeline(self.pipeline, self.hub).start()
         return self
@@ -230,19 +234,7 @@ class DemoSession:
         rec, self.recorder = self.recorder, None
         if rec is None:
             return None
-        done = []
-
-        def detach(p: Pipeline) -> None:
-            if rec in p.sinks:
-                p.sinks.remove(rec)
-            rec.close()
-            done.append(True)
-
-        if self.live is not None and self.live.running:
-            self.live.call(detach)
-            self.live.wait_for(lambda: bool(done), 5.0)
-        if not done:
-            detach(self.pipeline)
+        close_sink(self.live, self.pipeline, rec)
         return rec.path
 
     def stop(self) -> None:
@@ -280,7 +272,7 @@ class DemoSession:
             "mirror": bool(self.poser.mirror),
             "stride_scale": self.poser.stride is not None,
             "pelvis_odometry": self.poser.pelvis_odometry is not None, "sensors": list(c.sensors), "insoles": c.insoles,
-            "protocol": c.protocol,
+            "protocol": c.protocol, "latency": c.latency,
             "assignment": self.assignment, "motion": c.file or c.motion, "seed": c.seed,
             "source": "imucap demo (simulated suit)", "body_height_m": float(self.truth.body.height),
             # the exact bones the poser used, so `imucap replay/export` rebuild the same body
@@ -345,6 +337,8 @@ class DemoSession:
         }
         if self.cfg.streams:
             out["streams"] = [s.summary() for s in self.cfg.streams if hasattr(s, "summary")]
+        out["latency_mode"] = self.cfg.latency
+        out["acc_filter"] = "causal" if self.pipeline.causal else "centred"
         if self.warning:
             out["warning"] = self.warning
         if self.recorder is not None or self.cfg.record:

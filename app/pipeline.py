@@ -48,7 +48,8 @@ class LivePose:
     """One reconstructed 20 Hz frame with where it came from.
 
     t: session time of the 60 Hz sample this frame stands for; t_newest: time of the
-    newest sample that went into it (the resampler looks 5 samples ahead);
+    newest sample that went into it (the centred resampler looks 5 samples ahead; from a
+    hub, the newest device sample itself, else that grid frame's time);
     observed_sites: (13,) which sites were measured in it; insoles: contacts observed;
     latency_ms: emission time minus t_newest (hub wait + queueing + compute), only for
     live sources; compute_ms: time spent in this push.
@@ -154,7 +155,9 @@ class Pipeline:
     ``start_tpose`` calls). active_sites: the sites whose measurements the poser gets
     (default all of ``sites``): the clinician's sensor configuration, changeable live.
     insoles: use the insoles' contacts. clock: the session clock, for latency (None for
-    replay of recorded or synthetic times, where latency means nothing).
+    replay of recorded or synthetic times, where latency means nothing). causal: the
+    resampler's trailing moving average (the low-latency mode, ``app.latency``); None = the
+    filter the poser's model was trained on.
     """
 
     def __init__(
@@ -167,6 +170,7 @@ class Pipeline:
         insoles: bool = False,
         sinks: Iterable[Sink] = (),
         clock: Callable[[], float] | None = None,
+        causal: bool | None = None,
     ) -> None:
         self.poser = poser
         self.sites = tuple(sites)
@@ -179,7 +183,10 @@ class Pipeline:
         self.sinks: list[Sink] = list(sinks)
         self.clock = clock
         self.stats = PipelineStats()
-        self.resampler = StreamingResampler()
+        if causal is None:
+            causal = getattr(poser, "acc_filter", "centred") == "causal"
+        self.causal = bool(causal)
+        self.resampler = StreamingResampler(causal=self.causal)
         self._last_index: int | None = None
         self.insoles = insoles
         self.set_active_sites(active_sites if active_sites is not None else self.sites, insoles)
@@ -276,7 +283,7 @@ class Pipeline:
                 self.stats.resampler_restarts += 1
         self._last_index = frame.index
         acc, rest = self._observe(frame)
-        out += self._resample(frame.t, acc, rest, t_start)
+        out += self._resample(frame.t, acc, rest, t_start, _newest_sample(frame))
         return out
 
     @staticmethod
@@ -301,10 +308,12 @@ class Pipeline:
             rest[-1] = 1.0
         return acc13, rest
 
-    def _resample(self, t: float, acc: np.ndarray, rest: np.ndarray, t_start: float) -> list[LivePose]:
+    def _resample(self, t: float, acc: np.ndarray, rest: np.ndarray, t_start: float,
+                  newest: float | None = None) -> list[LivePose]:
         out = []
         for f20 in self.resampler.push(acc, rest, t):
-            out.append(self._pose(f20.index, f20.t if f20.t is not None else t, t, f20.acc, f20.rest, t_start))
+            out.append(self._pose(f20.index, f20.t if f20.t is not None else t, t if newest is None else newest,
+                                  f20.acc, f20.rest, t_start))
         return out
 
     def _pose(self, index: int, t: float, t_newest: float, acc: np.ndarray, rest: np.ndarray,
@@ -337,6 +346,16 @@ class Pipeline:
 
     def close(self) -> None:
         self._emit("close")
+
+
+def _newest_sample(frame: HubFrame) -> float | None:
+    """Session time of the newest device sample in a hub frame (None when the frame does
+    not say: synthetic and recorded frames)."""
+    st = frame.sample_t
+    if st is None:
+        return None
+    st = st[frame.present & np.isfinite(st)]
+    return float(st.max()) if st.size else None
 
 
 # ---------------------------------------------------------------------------- sources
@@ -520,6 +539,9 @@ class LivePipeline:
                 self._cv.notify_all()
 
     def _ingest(self) -> None:
+        # a source that knows when its next frame is due (the hub) is polled right then: a
+        # fixed timer adds half its period to every frame's latency on average
+        due_in = getattr(self.source, "due_in", None)
         while not self._stop.is_set():
             frames = self.source.poll()
             if frames:
@@ -530,7 +552,10 @@ class LivePipeline:
                             self.pipeline.stats.dropped += 1
                         self._q.append(f)
                     self._cv.notify_all()
-            self._stop.wait(self.poll_interval)
+            wait = self.poll_interval
+            if due_in is not None:
+                wait = min(wait, max(due_in(), 0.0005))
+            self._stop.wait(wait)
 
     def _infer(self) -> None:
         while not self._stop.is_set():
@@ -568,3 +593,21 @@ __all__ = [
     "LivePose", "Sink", "CallbackSink", "PipelineStats", "Pipeline", "SuitHub", "FrameSource",
     "frames_from_signals", "ListSource", "LivePipeline", "STEP", "stride_text",
 ]
+
+
+def close_sink(live: LivePipeline | None, pipeline: Pipeline, sink: Sink, timeout: float = 5.0) -> None:
+    """Take ``sink`` off the pipeline and close it on the pipeline's own thread when it runs
+    (a recorder must not be closed between two of its writes), else here."""
+    done: list[bool] = []
+
+    def detach(p: Pipeline) -> None:
+        if sink in p.sinks:
+            p.sinks.remove(sink)
+        sink.close()
+        done.append(True)
+
+    if live is not None and live.running:
+        live.call(detach)
+        live.wait_for(lambda: bool(done), timeout)
+    if not done:
+        detach(pipeline)

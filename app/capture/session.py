@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from app.capture.setup_file import Setup
-from app.pipeline import LivePipeline, LivePose, Pipeline, Sink, SuitHub
+from app.pipeline import LivePipeline, LivePose, Pipeline, Sink, SuitHub, close_sink
 from calibration import Calibration, GuidedCalibration
 from drivers.base import DeviceEvent
 
@@ -69,6 +69,7 @@ class CaptureOptions:
     on_event: Callable[[SessionEvent], None] | None = None
     metadata: dict[str, Any] = field(default_factory=dict)
     sinks: list[Sink] = field(default_factory=list)  # more consumers of the live body: streams (app.streams)
+    latency: str = "centred"  # app.latency.LATENCY_MODES: "low" waits for no future sample
 
 
 class CaptureSession:
@@ -87,12 +88,16 @@ class CaptureSession:
 
             torch.set_num_threads(opt.threads)
         self.sites = setup.sites()
-        self.model, self.model_label, self.warning = resolve_demo_model(setup.model)
+        from app.latency import model_spec_for, resolve_filter
+
+        self.model, self.model_label, self.warning = resolve_demo_model(model_spec_for(opt.latency, setup.model))
+        causal, latency_warning = resolve_filter(opt.latency, self.model)
+        self.warning = "; ".join(w for w in (self.warning, latency_warning) if w) or None
         steps = setup.steps
         self.poser = Poser(self.model, body=Body.from_height(setup.subject.height_m), steps=steps)
         self.guided = GuidedCalibration(self.sites, setup.calibration, countdown=opt.countdown, timeout=opt.timeout)
         self.pipeline = Pipeline(self.poser, self.sites, calibrator=self.guided, insoles=setup.insoles is not None,
-                                 clock=time.monotonic)
+                                 clock=time.monotonic, causal=causal)
         self.watch = _Watch(self)
         self.pipeline.add_sink(self.watch)
         for sink in opt.sinks:
@@ -110,15 +115,15 @@ class CaptureSession:
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> CaptureSession:
         import drivers
-        from drivers.hub import resampler_from_to_grid
-        from inference.signals.resample import to_grid
 
         devices = {}
         for name, url in self.setup.urls().items():
             devices[name] = drivers.make_device(url)
         if self.options.record is not None:
             self.start_recording(self.options.record)
-        self.hub = SuitHub(devices, resampler=resampler_from_to_grid(to_grid), on_event=self._device_event)
+        from app.latency import hub_options
+
+        self.hub = SuitHub(devices, **hub_options(self.options.latency), on_event=self._device_event)
         self.started_at = time.monotonic()
         self.guided.reset(self.started_at)
         self.hub.start()
@@ -151,7 +156,7 @@ class CaptureSession:
             "setup": {"sites": {k: e.url for k, e in s.sensors.items()}, "insoles": s.insoles,
                       "calibration": s.calibration, "file": str(s.path) if s.path else None},
             "sensors": list(self.sites), "insoles": s.insoles is not None, "model": self.model_label,
-            "steps": s.steps,
+            "steps": s.steps, "latency": self.options.latency,
             "body_height_m": s.subject.height_m, **self.options.metadata,
         }
 
@@ -176,19 +181,7 @@ class CaptureSession:
         rec, self.recorder = self.recorder, None
         if rec is None:
             return None
-        done: list[bool] = []
-
-        def detach(p: Pipeline) -> None:
-            if rec in p.sinks:
-                p.sinks.remove(rec)
-            rec.close()
-            done.append(True)
-
-        if self.live is not None and self.live.running:
-            self.live.call(detach)
-            self.live.wait_for(lambda: bool(done), 5.0)
-        if not done:
-            detach(self.pipeline)
+        close_sink(self.live, self.pipeline, rec)
         return rec.path
 
     # ------------------------------------------------------------------ events
