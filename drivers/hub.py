@@ -23,6 +23,12 @@ Why each piece exists:
   sample held, missing when older than ``staleness``. The app injects
   inference's slerp resampler (``resampler=``) to interpolate instead; drivers
   cannot import it (layering), hence the callable.
+- ``latency``: how far behind now the grid runs. Interpolating needs the sample
+  *after* a grid time, so it waits for the next sample of every site; holding
+  only needs the sample at or before it to have been read, a few milliseconds
+  (the low-latency mode, docs/latency.md).
+- Each frame says which sample of each site went into it last (``sample_t``,
+  ``sample_counter``), so a latency measurement starts at a real sample.
 """
 
 from __future__ import annotations
@@ -45,30 +51,47 @@ Resampler = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], tuple[np.
 
 class ClockModel:
     """session_time ~= offset + slope * device_time, refitted every ``refit`` samples
-    over the last ``window`` pairs. Reset when the device clock jumps (a device
-    restart after a reconnect)."""
+    over the last ``window`` pairs.
 
-    def __init__(self, window: int = 2048, refit: int = 32, jump: float = 1.0) -> None:
+    Reset (the pairs forgotten, the fitted rate kept: a reboot moves a clock's zero, not
+    its oscillator) when the device clock jumps: backwards at all (a restart from zero
+    after a brown-out or reconnect), forwards by more than ``ahead`` (a sample cannot
+    arrive before it was sent, so an arrival that much earlier than predicted means the
+    device time leapt), or by more than ``jump`` either way. Without the forward check a
+    leap of 50 ms .. 1 s was absorbed by the lower envelope and then bent the next fit,
+    whose window straddled it: streams stayed ~50 ms apart for the whole window."""
+
+    def __init__(self, window: int = 2048, refit: int = 32, jump: float = 1.0, ahead: float = 0.005,
+                 max_rate_error: float = 0.05) -> None:
         self.window = window
         self.refit = refit
         self.jump = jump
+        self.ahead = ahead
+        self.max_rate_error = max_rate_error
         self._dev: deque[float] = deque(maxlen=window)
         self._arr: deque[float] = deque(maxlen=window)
         self.slope = 1.0
         self.offset: float | None = None
         self._since = 0
+        self._floor_d: float | None = None  # device time of the last sample on the envelope
         self.resets = 0
 
     def update(self, device_t: float, arrival_t: float) -> float:
         if self.offset is not None:
-            pred = self.offset + self.slope * device_t
-            if abs(arrival_t - pred) > self.jump or (self._dev and device_t < self._dev[-1]):
+            resid = arrival_t - (self.offset + self.slope * device_t)
+            # a slope that is off lets the prediction run ahead of the arrivals by up to
+            # max_rate_error per second since a sample last sat on the envelope: not a jump
+            early = self.ahead + self.max_rate_error * (device_t - (self._floor_d or device_t))
+            if resid < -early or abs(resid) > self.jump or (self._dev and device_t < self._dev[-1]):
                 self.reset()
+            elif resid <= self.ahead:
+                self._floor_d = device_t
         self._dev.append(device_t)
         self._arr.append(arrival_t)
         self._since += 1
         if self.offset is None:
-            self.offset = arrival_t - device_t
+            self.offset = arrival_t - self.slope * device_t
+            self._floor_d = device_t
         elif self._since >= (self.refit if len(self._dev) < 256 else 4 * self.refit):
             # once the window holds seconds of data the slope hardly moves between fits;
             # fitting 4x less often saves most of the hub's numpy time at 13 x 100 Hz
@@ -85,7 +108,9 @@ class ClockModel:
         self._since = 0
         d = np.fromiter(self._dev, float)
         a = np.fromiter(self._arr, float)
-        if d.size >= 64 and d[-1] - d[0] > 1.0:
+        # half a second of pairs already pins a clock that is off by percents far better
+        # than the nominal rate does (a 3 % slow clock drifts 15 ms in that time)
+        if d.size >= 32 and d[-1] - d[0] > 0.5:
             chunk = max(8, d.size // 32)
             n = d.size // chunk * chunk
             r = (a[-n:] - d[-n:]).reshape(-1, chunk)
@@ -95,7 +120,9 @@ class ClockModel:
             den = float(np.dot(dc, dc))
             if den > 0:
                 slope = float(np.dot(dc, am - am.mean()) / den)
-                if 0.99 < slope < 1.01:  # a clock off by more than 1% is a broken fit, not drift
+                # a device clock can be off by percents (a BNO08x's time is its counter over a
+                # nominal 100 Hz its oscillator does not quite keep); beyond a few it is a broken fit
+                if abs(slope - 1.0) < self.max_rate_error:
                     self.slope = slope
         self.offset = float(np.min(a - self.slope * d))
 
@@ -103,10 +130,11 @@ class ClockModel:
         return (self.offset or 0.0) + self.slope * device_t
 
     def reset(self) -> None:
+        """Forget the pairs and the offset; keep the fitted rate (same oscillator)."""
         self._dev.clear()
         self._arr.clear()
         self.offset = None
-        self.slope = 1.0
+        self._floor_d = None
         self._since = 0
         self.resets += 1
 
@@ -128,6 +156,11 @@ class HubFrame:
     contacts: np.ndarray
     insole_present: bool
     lost: dict[str, int] = field(default_factory=dict)
+    # per site: session time and wire packet counter of the newest sample that went into
+    # this frame (NaN where none did or the device sends no counter); None from sources
+    # that are not a hub (synthetic frames, recordings)
+    sample_t: np.ndarray | None = None
+    sample_counter: np.ndarray | None = None
 
 
 @dataclass
@@ -140,11 +173,12 @@ class HubStats:
 
 class _Ring:
     """Recent samples of one device as rows of a float array: t, quat(4), free_acc(3),
-    acc(3), gyro(3); NaN where the device does not report a quantity. Rows are
+    acc(3), gyro(3), packet counter; NaN where the device does not report a quantity. Rows are
     contiguous (the buffer is twice the capacity and slides back when full), so the
     grid code works on array views without per-sample Python."""
 
-    COLS = 14
+    COLS = 15
+    COUNTER = 14
 
     def __init__(self, capacity: int = 512) -> None:
         self.cap = capacity
@@ -172,6 +206,7 @@ class _Ring:
             self.start, self.end = 0, keep
         block = self.buf[self.end : self.end + n]
         block[:, 0] = ts
+        block[:, self.COUNTER] = [np.nan if s.counter is None else s.counter for s in samples]
         for name, a, b in self._FIELDS:
             vals = [getattr(s, name) for s in samples]
             if all(v is not None for v in vals):
@@ -459,6 +494,13 @@ class Hub:
         self.stats.frames += len(frames)
         return frames
 
+    def due_in(self) -> float:
+        """Seconds until ``poll`` has the next frame (<= 0: now), so a consumer can wake
+        then instead of polling on a timer of its own and adding up to a period."""
+        if self._next_index is None:
+            return 0.0
+        return self._next_index / self.rate + self.latency - self.clock()
+
     def frames(self, duration: float | None = None) -> Iterator[HubFrame]:
         """Yield frames as they become due, for ``duration`` seconds (or until stopped)."""
         end = None if duration is None else self.clock() + duration
@@ -477,9 +519,9 @@ class Hub:
                 lost[name] = tr.lost_pending
                 tr.lost_pending = 0
         if self.resampler is None:
-            quat, free, acc, gyro, present = self._hold_all(sites, grid)
+            quat, free, acc, gyro, present, newest = self._hold_all(sites, grid)
         else:
-            quat, free, acc, gyro, present = self._per_site(sites, grid)
+            quat, free, acc, gyro, present, newest = self._per_site(sites, grid)
         force = np.full((G, 2), np.nan)
         contacts = np.zeros((G, 4), bool)
         ins_ok = np.zeros(G, bool)
@@ -510,6 +552,8 @@ class Hub:
                 contacts[g],
                 bool(ins_ok[g]),
                 lost if g == 0 else {},
+                newest[g, :, 0],
+                newest[g, :, 1],
             )
             for g in range(G)
         ]
@@ -523,6 +567,7 @@ class Hub:
         acc = np.full((G, S, 3), np.nan)
         gyro = np.full((G, S, 3), np.nan)
         present = np.zeros((G, S), bool)
+        newest = np.full((G, S, 2), np.nan)  # session time, packet counter
         for k, name in enumerate(sites):
             tr = self.tracks[name]
             if not len(tr.ring):
@@ -550,9 +595,14 @@ class Hub:
             acc[:, k] = rows[ii, 8:11]
             gyro[:, k] = rows[ii, 11:14]
             present[:, k] = ok
+            # interpolation reads the sample after the grid time too (and so waits for it)
+            last = np.minimum(idx + 1, ts.size - 1) if self.resampler is not None and tr.ring.has["quat"] else ii
+            newest[:, k, 0] = ts[last]
+            newest[:, k, 1] = rows[last, _Ring.COUNTER]
         for arr in (quat, free, acc, gyro):
             arr[~present] = np.nan
-        return quat, free, acc, gyro, present
+        newest[~present] = np.nan
+        return quat, free, acc, gyro, present, newest
 
     def _hold_all(self, sites: tuple[str, ...], grid: np.ndarray) -> tuple[np.ndarray, ...]:
         """Latest-sample hold for every site at once: the last ``W`` rows of every
@@ -583,10 +633,11 @@ class Hub:
             spans = self.tracks[name].gap_spans
             for a, b in spans:
                 ok[k] &= ~((grid > a) & (grid < b))
-        rows = block[ks, ii].transpose(1, 0, 2).copy()  # (G, S, 14)
+        rows = block[ks, ii].transpose(1, 0, 2).copy()  # (G, S, 15)
         present = ok.T.copy()
         rows[~present] = np.nan
-        return rows[:, :, 1:5], rows[:, :, 5:8], rows[:, :, 8:11], rows[:, :, 11:14], present
+        newest = rows[:, :, [0, _Ring.COUNTER]]
+        return rows[:, :, 1:5], rows[:, :, 5:8], rows[:, :, 8:11], rows[:, :, 11:14], present, newest
 
     def _trim(self) -> None:
         """Forget gap spans that are older than anything a future frame can ask for."""
