@@ -7,7 +7,7 @@ and the live poser reconstructs the body from the chosen sensors at 20 Hz.
 
     imucap demo [--motion walk|jog|squat|lunge|jump|arm_raises|stand | --file MOTIONFILE]
                 [--sensors SITE,...] [--insoles] [--protocol xbus|bno08x-rvc|xsens-can|dualsense|mixed]
-                [--seconds N] [--record FILE.h5] [--model SPEC] [--steps K] [--headless --json]
+                [--seconds N] [--record FILE.h5] [--model SPEC] [--steps K] [--latency centred|low] [--headless --json]
                 [--stream lsl,vmc,vrchat [--stream-host HOST]]
 
 ``--seconds N``: headless, the whole session lasts N s, calibration included (a short N
@@ -56,9 +56,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-noise", action="store_true", help="ideal sensors (no noise, mounting or heading errors)")
     p.add_argument("--threads", type=int, default=1, help="torch threads for inference (0 = torch's default)")
+    p.add_argument("--latency", default="centred", choices=("centred", "low"),
+                   help="low: wait for no future sample (trailing acceleration filter, the hub holds the latest "
+                        "sample; docs/latency.md); default centred, as the shipped model was trained")
     add_stream_arguments(p)
     p.add_argument("--headless", action="store_true", help="no window")
     p.add_argument("--json", action="store_true", help="headless: print one JSON object")
+    p.add_argument("--screenshot", help="with the window: save it to this PNG after --quit-after seconds")
+    p.add_argument("--quit-after", type=float, default=0.0, help="with the window: close it after this many seconds")
     p.set_defaults(func=run)
 
 
@@ -76,6 +81,7 @@ def config_from_args(args: argparse.Namespace) -> DemoConfig:
         motion=args.motion, file=args.file, sensors=tuple(parse_sites(args.sensors)), insoles=args.insoles,
         protocol=args.protocol, seconds=seconds, model=args.model, steps=args.steps, seed=args.seed,
         record=args.record, noise=not args.no_noise, headless=args.headless, threads=args.threads,
+        latency=args.latency,
     )
 
 
@@ -91,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
         from app.gui.main_window import run_gui
 
         cfg.streams = sinks_from_args(args)
+        cfg.extra["args"] = args
         return run_gui(cfg)
     cfg.streams = sinks_from_args(args)
     try:

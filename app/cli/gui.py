@@ -1,0 +1,36 @@
+"""`imucap gui`: the window, with the last setup file (or the one given) loaded.
+
+    imucap gui [--setup FILE] [--tab TAB] [--screenshot PNG --quit-after S]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+
+def run(args: argparse.Namespace) -> int:
+    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY") or os.environ.get("QT_QPA_PLATFORM")):
+        raise OSError("no display to open the window on: run it on a desktop, or under a virtual display: "
+                      "`xvfb-run -a imucap gui`")
+    from app.gui.main import TABS, run_window
+
+    def setup(win) -> None:
+        if args.setup:
+            win.setup_panel.open(args.setup)
+        else:
+            win.open_last_setup()
+        if args.tab:
+            win.tabs.setCurrentIndex(TABS.index(args.tab))
+
+    return run_window(setup, args)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("gui", help="the window: set up, calibrate, watch live, record, replay, export")
+    p.add_argument("--setup", help="open this setup file (default: the last one opened or saved)")
+    p.add_argument("--tab", choices=("Setup", "Devices", "Calibration", "Live", "Recordings", "Replay"),
+                   help="start on this tab")
+    p.add_argument("--screenshot", help="save the window to this PNG after --quit-after seconds")
+    p.add_argument("--quit-after", type=float, default=0.0, help="close the window after this many seconds")
+    p.set_defaults(func=run)

@@ -1,0 +1,169 @@
+"""Recordings: the sessions in the setup's recordings folder, newest first, with subject,
+date, length and sensors, to open in the replay.
+
+Why read only attributes and two time stamps: a folder holds hundreds of sessions of
+minutes each; reading each one whole to list it would take the folder's size in I/O,
+while the header and the first and last raw time take a few small reads per file.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from PySide6 import QtCore, QtWidgets
+
+from app.gui.workers import Jobs
+
+COLUMNS = ("file", "subject", "date", "length", "sensors", "markers", "model")
+
+
+@dataclass
+class RecordingInfo:
+    path: Path
+    subject: str = ""
+    created: str = ""
+    seconds: float | None = None
+    sensors: tuple[str, ...] = ()
+    insoles: bool = False
+    markers: int = 0
+    model: str = ""
+    problem: str | None = None
+
+
+def _last_finite(ds) -> float | None:
+    """The last written time of a dataset whose unwritten rows read NaN (a live or killed
+    recording): read backwards a chunk at a time, usually once."""
+    n = ds.shape[0]
+    step = 1024
+    end = n
+    while end > 0:
+        block = np.asarray(ds[max(0, end - step):end], dtype=float)
+        ok = np.flatnonzero(np.isfinite(block))
+        if len(ok):
+            return float(block[ok[-1]])
+        end -= step
+    return None
+
+
+def recording_info(path: Path) -> RecordingInfo:
+    """The header of one recording, or a ``problem`` saying why it cannot be listed."""
+    from app.recording import open_recording
+
+    info = RecordingInfo(path)
+    try:
+        with open_recording(path) as f:
+            meta = json.loads(f.attrs.get("metadata", "{}"))
+            info.sensors = tuple(json.loads(f.attrs.get("sites", "[]")))
+            created = f.attrs.get("created", "")
+            info.created = created.decode() if isinstance(created, bytes) else str(created)
+            subject = meta.get("subject")
+            info.subject = subject.get("id", "") if isinstance(subject, dict) else str(subject or "")
+            info.insoles = bool(meta.get("insoles"))
+            info.model = str(meta.get("model") or "")
+            t = f["raw/t"]
+            if t.shape[0]:
+                first = float(t[0])
+                last = _last_finite(t)
+                if np.isfinite(first) and last is not None:
+                    info.seconds = last - first
+            if "events/kind" in f:
+                kinds = np.asarray(f["events/kind"][:])
+                info.markers = int(np.sum(kinds == b"marker"))
+    except Exception as exc:  # a damaged or foreign file is listed with its problem, not fatal
+        info.problem = " ".join(str(exc).split())
+    if not info.created:
+        info.created = time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(path.stat().st_mtime))
+    return info
+
+
+def scan_folder(folder: Path) -> list[RecordingInfo]:
+    files = sorted(Path(folder).glob("*.h5"), key=lambda p: p.stat().st_mtime, reverse=True)
+    return [recording_info(p) for p in files]
+
+
+def fmt_length(seconds: float | None) -> str:
+    if seconds is None:
+        return "–"
+    m, s = divmod(int(round(seconds)), 60)
+    return f"{m}:{s:02d}"
+
+
+class RecordingsPanel(QtWidgets.QWidget):
+    openRequested = QtCore.Signal(str)
+
+    def __init__(self, jobs: Jobs, report: Callable[[str, str], None],
+                 parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.jobs, self.report = jobs, report
+        self.folder: Path | None = None
+        self.infos: list[RecordingInfo] = []
+        lay = QtWidgets.QVBoxLayout(self)
+        row = QtWidgets.QHBoxLayout()
+        self.folder_label = QtWidgets.QLabel("no folder")
+        refresh = QtWidgets.QPushButton("Refresh")
+        refresh.clicked.connect(self.refresh)
+        other = QtWidgets.QPushButton("Open a recording…")
+        other.clicked.connect(self._open_other)
+        self.open_button = QtWidgets.QPushButton("Open in replay")
+        self.open_button.clicked.connect(self._open_selected)
+        row.addWidget(self.folder_label, 1)
+        for b in (refresh, other, self.open_button):
+            row.addWidget(b)
+        lay.addLayout(row)
+        self.table = QtWidgets.QTableWidget(0, len(COLUMNS))
+        self.table.setHorizontalHeaderLabels(COLUMNS)
+        self.table.verticalHeader().setVisible(False)
+        self.table.setSelectionBehavior(QtWidgets.QAbstractItemView.SelectionBehavior.SelectRows)
+        self.table.setSelectionMode(QtWidgets.QAbstractItemView.SelectionMode.SingleSelection)
+        self.table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
+        hh = self.table.horizontalHeader()
+        hh.setSectionResizeMode(QtWidgets.QHeaderView.ResizeMode.ResizeToContents)
+        hh.setSectionResizeMode(4, QtWidgets.QHeaderView.ResizeMode.Stretch)
+        self.table.doubleClicked.connect(lambda _i: self._open_selected())
+        lay.addWidget(self.table, 1)
+
+    def set_folder(self, folder: Path) -> None:
+        if folder != self.folder:
+            self.folder = Path(folder)
+            self.refresh()
+
+    def refresh(self) -> None:
+        if self.folder is None:
+            return
+        self.folder_label.setText(f"<b>{self.folder}</b> (scanning…)")
+        if not self.folder.is_dir():
+            self._listed([])
+            return
+        self.jobs.run("scan-recordings", scan_folder, self.folder, on_done=self._listed,
+                      on_error=lambda e: self.report(f"cannot list {self.folder}: {e}", "error"))
+
+    def _listed(self, infos: list[RecordingInfo]) -> None:
+        self.infos = infos
+        self.folder_label.setText(f"<b>{self.folder}</b>: {len(infos)} recording(s)")
+        self.table.setRowCount(len(infos))
+        for r, i in enumerate(infos):
+            sensors = ", ".join(i.sensors) + (" + insoles" if i.insoles else "")
+            vals = (i.path.name, i.subject, i.created.replace("T", " ")[:19], fmt_length(i.seconds),
+                    i.problem or sensors, str(i.markers), i.model)
+            for c, v in enumerate(vals):
+                item = QtWidgets.QTableWidgetItem(v)
+                item.setToolTip(str(i.path) if c == 0 else v)
+                self.table.setItem(r, c, item)
+
+    def _open_selected(self) -> None:
+        rows = self.table.selectionModel().selectedRows()
+        if not rows:
+            self.report("select a recording first", "warning")
+            return
+        self.openRequested.emit(str(self.infos[rows[0].row()].path))
+
+    def _open_other(self) -> None:
+        path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Open a recording", str(self.folder or ""),
+                                                        "Recordings (*.h5 *.hdf5)")
+        if path:
+            self.openRequested.emit(path)

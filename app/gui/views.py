@@ -1,0 +1,66 @@
+"""Which skeleton view this machine gets: the GL one, or the QPainter one when OpenGL
+cannot be imported or no GL context can be made.
+
+Why a probe before creating the GL widget: a QOpenGLWidget on a machine without working
+GL does not fail when it is made, it shows black (or aborts later), so the context is
+tried first; ``IMUCAP_NO_GL=1`` forces the fallback (and lets a test see it).
+"""
+
+from __future__ import annotations
+
+import os
+
+from PySide6 import QtCore, QtGui, QtWidgets
+
+_GL_OK: bool | None = None
+GL_PROBLEM: str | None = None
+
+
+def share_gl_contexts() -> None:
+    """Call before the QApplication exists. pyqtgraph compiles some shader programs once
+    per class, so every GL view (live and replay) must share one set of GL resources; on
+    separate contexts the second view fails to draw its joints."""
+    if QtCore.QCoreApplication.instance() is None:
+        QtCore.QCoreApplication.setAttribute(QtCore.Qt.ApplicationAttribute.AA_ShareOpenGLContexts)
+
+
+share_gl_contexts()
+
+
+def gl_available() -> bool:
+    global _GL_OK, GL_PROBLEM
+    if _GL_OK is not None:
+        return _GL_OK
+    if os.environ.get("IMUCAP_NO_GL"):
+        _GL_OK, GL_PROBLEM = False, "IMUCAP_NO_GL is set"
+        return False
+    try:
+        import OpenGL.GL  # noqa: F401
+        import pyqtgraph.opengl  # noqa: F401
+    except Exception as exc:  # ImportError, or PyOpenGL failing to find a library
+        _GL_OK, GL_PROBLEM = False, f"OpenGL cannot be imported ({exc})"
+        return False
+    if not QtCore.QCoreApplication.testAttribute(QtCore.Qt.ApplicationAttribute.AA_ShareOpenGLContexts):
+        _GL_OK, GL_PROBLEM = False, "the application was made before GL context sharing was asked for"
+        return False
+    ctx = QtGui.QOpenGLContext()
+    if not ctx.create() or not ctx.isValid():
+        _GL_OK, GL_PROBLEM = False, "no OpenGL context can be created"
+        return False
+    _GL_OK = True
+    return True
+
+
+def make_skeleton_view(parent: QtWidgets.QWidget | None = None, figures: int = 1) -> QtWidgets.QWidget:
+    """A SkeletonView, or a Skeleton2DView when GL is not there (``GL_PROBLEM`` says why)."""
+    global _GL_OK, GL_PROBLEM
+    if gl_available():
+        try:
+            from app.gui.skeleton_view import SkeletonView
+
+            return SkeletonView(parent, figures=figures)
+        except Exception as exc:  # the widget itself failed: fall back rather than lose the window
+            _GL_OK, GL_PROBLEM = False, f"the 3D view failed ({exc})"
+    from app.gui.view2d import Skeleton2DView
+
+    return Skeleton2DView(parent, figures=figures)
