@@ -1,0 +1,106 @@
+"""A long live session, to see what drifts: resident memory, latency, queues, drops.
+
+    .venv/bin/python benchmarks/soak.py --minutes 60 [--slice 5] [--json]
+
+The simulated suit (six sensors and insoles over their real transports: ptys, CAN, UDP)
+plays a walk at real rate into the hub, the pipeline and the shipped model, recording on
+(the recording is deleted at the end unless --keep). Every --slice minutes one row: the
+process's resident memory, latency p50/p99 of that slice's poses, the hub's and the
+pipeline's queue depths, the frames dropped and filled in the slice, and the recording's
+size. A live demo that lagged further behind the longer it ran (TransPose's issue 55)
+shows here as a latency that climbs from slice to slice; a leak as a memory that does.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from app.demo_session import DemoConfig, DemoSession  # noqa: E402
+from app.pipeline import Sink  # noqa: E402
+
+
+def rss_mb() -> float:
+    """Current resident set size (not the peak ru_maxrss): what a leak makes grow."""
+    with open("/proc/self/statm") as f:
+        pages = int(f.read().split()[1])
+    return pages * resource.getpagesize() / 2**20
+
+
+class SliceLatency(Sink):
+    """Latencies of the poses since the last ``take``."""
+
+    def __init__(self) -> None:
+        self.lat: list[float] = []
+
+    def on_pose(self, pose) -> None:
+        if pose.latency_ms is not None:
+            self.lat.append(pose.latency_ms)
+
+    def take(self) -> list[float]:
+        out, self.lat = self.lat, []
+        return out
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--minutes", type=float, default=60.0)
+    ap.add_argument("--slice", type=float, default=5.0, help="minutes per row")
+    ap.add_argument("--keep", action="store_true", help="keep the recording")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    rec = Path(tempfile.mkdtemp(prefix="imucap-soak-")) / "soak.h5"
+    # a minute's walk that loops, calibration protocol included each time (headless=False is
+    # the window's looping session, without a window)
+    cfg = DemoConfig(motion="walk", insoles=True, protocol="mixed", seconds=60.0, headless=False, record=str(rec))
+    session = DemoSession(cfg)
+    lat = SliceLatency()
+    session.pipeline.add_sink(lat)
+    rows = []
+    session.start()
+    t0 = time.monotonic()
+    last = session.pipeline.stats.summary()
+    try:
+        for k in range(int(np.ceil(args.minutes / args.slice))):
+            end = t0 + min((k + 1) * args.slice, args.minutes) * 60
+            while time.monotonic() < end:
+                time.sleep(1.0)
+            st = session.pipeline.stats.summary()
+            live = session.live.stats() if session.live else {}
+            hub_q = max((len(tr.queue) for tr in session.hub.tracks.values()), default=0) if session.hub else 0
+            ls = lat.take()
+            rows.append({
+                "slice": k + 1, "minute": round((time.monotonic() - t0) / 60, 1), "rss_mb": round(rss_mb(), 1),
+                "latency_p50_ms": round(float(np.percentile(ls, 50)), 1) if ls else None,
+                "latency_p99_ms": round(float(np.percentile(ls, 99)), 1) if ls else None,
+                "poses": st["poses"] - last["poses"], "dropped": st["dropped"] - last["dropped"],
+                "filled": st["frames_filled"] - last["frames_filled"], "pipeline_queue": live.get("queued"),
+                "hub_queue_max": hub_q, "recording_mb": round(rec.stat().st_size / 2**20, 1) if rec.exists() else 0,
+            })
+            last = st
+            print(json.dumps(rows[-1]) if args.json else "  ".join(f"{k}={v}" for k, v in rows[-1].items()),
+                  flush=True)
+    finally:
+        session.stop()
+        if not args.keep:
+            rec.unlink(missing_ok=True)
+    if len(rows) > 2:
+        first, end = rows[1], rows[-1]  # the first slice holds the warm-up (model load, calibration)
+        summary = {"rss_change_pct": round(100 * (end["rss_mb"] / first["rss_mb"] - 1), 1),
+                   "p99_change_pct": (round(100 * (end["latency_p99_ms"] / first["latency_p99_ms"] - 1), 1)
+                                      if end["latency_p99_ms"] and first["latency_p99_ms"] else None)}
+        print(json.dumps(summary) if args.json else f"last vs second slice: {summary}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
