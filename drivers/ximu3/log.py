@@ -35,9 +35,12 @@ class LogError(ValueError):
 
 
 def _read_csv(path: Path, columns: int) -> tuple[np.ndarray, int]:
-    """Rows of ``columns`` numbers (header skipped); malformed rows are counted."""
+    """Rows of ``columns`` numbers (header skipped); malformed rows are counted.
+
+    Bytes that are not UTF-8 (a damaged sector, a file from another tool) only spoil
+    the rows they are in, as the replacement character makes those rows malformed."""
     rows, bad = [], 0
-    with open(path, newline="") as f:
+    with open(path, newline="", encoding="utf-8", errors="replace") as f:
         reader = csv.reader(f)
         next(reader, None)
         for row in reader:

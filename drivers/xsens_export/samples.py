@@ -222,7 +222,8 @@ def _kept_rows(table: Table, t: np.ndarray, q_ok: np.ndarray) -> tuple[np.ndarra
     skipped = {"no_time": int((~np.isfinite(t)).sum()), "no_orientation": int((np.isfinite(t) & ~q_ok).sum())}
     idx = np.flatnonzero(keep)
     order = idx[np.argsort(t[idx], kind="stable")]
-    later = np.concatenate([[True], np.diff(t[order]) > 0])
+    later = np.ones(order.size, bool)  # also when no row has both (an empty diff)
+    later[1:] = np.diff(t[order]) > 0
     skipped["duplicate"] = int((~later).sum())
     rows = order[later]
     if rows.size < 2:

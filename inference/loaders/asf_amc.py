@@ -64,6 +64,14 @@ def _floats(path: str, line_no: int, parts: list[str], n: int, what: str) -> np.
     return v
 
 
+def _word(path: str, line_no: int, parts: list[str], what: str) -> str:
+    """The value after a keyword (``angle deg``, ``name lfemur``); a keyword alone on its
+    line is a damaged file, not an IndexError."""
+    if len(parts) < 2:
+        raise MotionFormatError(path, f"{what}: no value after {parts[0]!r}", line_no)
+    return parts[1]
+
+
 def parse_asf(path: str | Path) -> AsfSkeleton:
     path = str(path)
     lines = read_text_lines(path)
@@ -90,12 +98,12 @@ def parse_asf(path: str | Path) -> AsfSkeleton:
             if key == "length":
                 length_unit = float(_floats(path, n, parts[1:], 1, "units length")[0])
             elif key == "angle":
-                angle_deg = parts[1].lower().startswith("deg")
+                angle_deg = _word(path, n, parts, "units angle").lower().startswith("deg")
         elif section == "root":
             if key == "order":
                 root_order = [p.upper() for p in parts[1:]]
             elif key == "axis":
-                root_axis = parts[1].upper()
+                root_axis = _word(path, n, parts, "root axis").upper()
             elif key == "position":
                 root_pos = _floats(path, n, parts[1:], 3, "root position")
             elif key == "orientation":
@@ -114,7 +122,7 @@ def parse_asf(path: str | Path) -> AsfSkeleton:
                 cur = None
             elif cur is not None:
                 if key == "name":
-                    cur["name"] = parts[1]
+                    cur["name"] = _word(path, n, parts, "bone name")
                 elif key == "direction":
                     cur["direction"] = _floats(path, n, parts[1:], 3, "bone direction")
                 elif key == "length":
@@ -143,6 +151,8 @@ def parse_asf(path: str | Path) -> AsfSkeleton:
     while queue:
         b = queue.pop(0)
         for c in children.get(b, []):
+            if c in order:  # listed under two parents, or a loop (which would never end)
+                raise MotionFormatError(path, f":hierarchy reaches bone {c!r} twice (a loop or two parents)")
             order.append(c)
             queue.append(c)
     orphans = set(bones) - set(order)
