@@ -134,6 +134,8 @@ def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] 
     use = resolve_sensors(rec, sensors)
     ins = resolve_insoles(rec, insoles)
     if calibration is None and not rec.calibrations:
+        if any(line.startswith("calibration") for line in rec.damage):
+            raise ValueError(f"{rec.path}: its calibration is damaged (see the warnings); nothing to replay")
         raise ValueError(f"{rec.path} holds no calibration (the session never calibrated); nothing to replay")
     cals = [(-np.inf, calibration)] if calibration is not None else sorted(rec.calibrations, key=lambda c: c[0])
     stream = _Stream(rec)

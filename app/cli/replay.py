@@ -90,12 +90,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 # ---------------------------------------------------------------------------- helpers
 
 
-def _open(path: Path):
+def _open(path: Path, command: str):
     from app.recording import read_recording
 
     if not path.exists():
         raise FileNotFoundError(f"recording {path} not found")
-    return read_recording(path)
+    rec = read_recording(path)
+    # whatever failed its checksum or was cut off is left out, never replayed as motion; say what
+    for line in rec.damage:
+        print(f"{command}: warning: {path}: {line}", file=sys.stderr, flush=True)
+    return rec
 
 
 def _check_outs(outs: list[Path]) -> None:
@@ -156,7 +160,7 @@ def run_replay(args: argparse.Namespace) -> int:
         from app.capture.simulate import read_truth
 
         truth = read_truth(args.truth)
-    rec = _open(args.recording)
+    rec = _open(args.recording, "replay")
     sensors = resolve_sensors(rec, args.sensors)
     insoles = resolve_insoles(rec, args.insoles)
     body, note = body_for_recording(rec.metadata, args.height)
@@ -235,6 +239,8 @@ def run_replay(args: argparse.Namespace) -> int:
         summary["recorded_ga_deg"] = live["ga_deg"]
     if note:
         summary["warning"] = note
+    if rec.damage:
+        summary["damage"] = rec.damage
     _emit(summary, args.json)
     return 0
 
@@ -243,7 +249,7 @@ def run_export(args: argparse.Namespace) -> int:
     from app.export.formats import body_for_recording, export_motion, motion_from_recording
 
     _check_outs(args.out)
-    rec = _open(args.recording)
+    rec = _open(args.recording, "export")
     body, note = body_for_recording(rec.metadata, args.height)
     if note:
         print(f"export: warning: {note}", file=sys.stderr)
@@ -256,6 +262,8 @@ def run_export(args: argparse.Namespace) -> int:
     }
     if note:
         summary["warning"] = note
+    if rec.damage:
+        summary["damage"] = rec.damage
     _emit(summary, args.json)
     return 0
 

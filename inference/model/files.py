@@ -4,7 +4,9 @@ training checkpoints. Above the denoiser and the regressor, the one place that k
 from __future__ import annotations
 
 import os
+import zipfile
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
@@ -68,13 +70,66 @@ def save_model(path: str | os.PathLike, model: nn.Module, kind: str, norm_mean: 
     atomic_torch_save(obj, path)
 
 
+class ModelFileError(ValueError):
+    """A model file that cannot be used; the message is one line naming the file."""
+
+    def __init__(self, path: str | os.PathLike, problem: str) -> None:
+        super().__init__(f"{os.fspath(path)}: {problem}")
+        self.path = os.fspath(path)
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else str(exc)
+    return (text.strip().splitlines() or [type(exc).__name__])[0][:200]
+
+
+def _read_file(path: str | os.PathLike) -> Any:
+    """torch.load, with a damaged file named as such: torch's own errors (a zip reader's
+    internals, a pickle's memo) do not say which file or that it is damaged, and torch does
+    not check the archive's CRCs, so a flipped block of weights would load as a model."""
+    def unreadable(exc: BaseException) -> ModelFileError:
+        return ModelFileError(path, f"not a readable model file (truncated or damaged: {_first_line(exc)})")
+
+    if os.path.isfile(path) and os.path.getsize(path) == 0:
+        raise ModelFileError(path, "an empty file, not a model (nothing was written to it)")
+    if zipfile.is_zipfile(path):
+        try:
+            with zipfile.ZipFile(path) as z:
+                bad = z.testzip()
+        except (zipfile.BadZipFile, OSError, EOFError, ValueError) as exc:
+            raise unreadable(exc) from None
+        if bad is not None:
+            raise ModelFileError(path, f"damaged model file (checksum of {bad} failed)")
+    else:
+        try:
+            with open(path, "rb") as fh:
+                zipped = fh.read(4) == b"PK\x03\x04"
+        except OSError:
+            zipped = False
+        if zipped:  # a zip archive (torch's format) whose directory at the end is missing
+            raise ModelFileError(path, "truncated model file (the end of its archive is missing)")
+    try:
+        return torch.load(path, map_location="cpu", weights_only=False)
+    except (FileNotFoundError, IsADirectoryError, PermissionError):
+        raise
+    except Exception as exc:  # noqa: BLE001 - unpickling a broken file fails in many ways
+        raise unreadable(exc) from None
+
+
+def _what(obj: Any) -> str:
+    if isinstance(obj, dict):
+        keys = ", ".join(sorted(map(str, obj))[:6])
+        return f"a dict of {keys}" if keys else "an empty dict"
+    return f"a {type(obj).__name__}"
+
+
 def retag_model(path: str | os.PathLike, dest: str | os.PathLike, meta: dict) -> None:
     """Write model file ``path`` to ``dest`` with ``meta`` merged into its metadata (the
     poser defaults it carries) and every tensor as it was, bit for bit: a shipped file's
     defaults can change without its training run at hand."""
-    obj = torch.load(path, map_location="cpu", weights_only=False)
+    obj = _read_file(path)
     if not isinstance(obj, dict) or obj.get("format") != MODEL_FORMAT or "state_dict" not in obj:
-        raise ValueError(f"{path} is not an imucap model file (a training checkpoint exports with --out RUN)")
+        raise ModelFileError(path, "not an imucap model file (a training checkpoint exports with --out RUN)")
     obj["meta"] = {**(obj.get("meta") or {}), **meta}
     atomic_torch_save(obj, dest)
 
@@ -82,20 +137,32 @@ def retag_model(path: str | os.PathLike, dest: str | os.PathLike, meta: dict) ->
 def load_model(path: str | os.PathLike, use_ema: bool = True) -> LoadedModel:
     """Load an inference model file or a training checkpoint (its EMA weights by default),
     in eval mode, float32, on the CPU."""
-    obj = torch.load(path, map_location="cpu", weights_only=False)
+    obj = _read_file(path)
     if not isinstance(obj, dict) or "model_config" not in obj:
-        raise ValueError(f"{path} is not an imucap model file or training checkpoint")
-    kind = obj["kind"]
-    cfg = ModelConfig.from_dict(obj["model_config"])
-    model = build_model(kind, cfg)
-    if "state_dict" in obj:
-        sd = obj["state_dict"]
-    else:
-        sd = obj["ema"] if use_ema and obj.get("ema") is not None else obj["model"]
-    model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in sd.items()})
+        raise ModelFileError(path, f"not an imucap model file or training checkpoint (it holds {_what(obj)})")
+    try:
+        kind = obj["kind"]
+        cfg = ModelConfig.from_dict(obj["model_config"])
+        model = build_model(kind, cfg)
+        if "state_dict" in obj:
+            sd = obj["state_dict"]
+        else:
+            sd = obj["ema"] if use_ema and obj.get("ema") is not None else obj["model"]
+        norm_mean = np.asarray(obj["norm_mean"], np.float32)
+        norm_std = np.asarray(obj["norm_std"], np.float32)
+    except KeyError as exc:
+        raise ModelFileError(path, f"incomplete model file (no {_first_line(exc)!r})") from None
+    except (ValueError, TypeError, AttributeError) as exc:
+        raise ModelFileError(path, f"not a usable model file ({_first_line(exc)})") from None
+    try:
+        model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in sd.items()})
+    except (RuntimeError, AttributeError, TypeError) as exc:
+        raise ModelFileError(path, f"its weights do not fit the {kind} network its config describes "
+                                   f"({' '.join(str(exc).split())[:200]})") from None
+    if not (np.all(np.isfinite(norm_mean)) and np.all(np.isfinite(norm_std))):
+        raise ModelFileError(path, "damaged model file (non-finite feature normaliser)")
     model.eval()
-    return LoadedModel(model=model, kind=kind, config=cfg, norm_mean=np.asarray(obj["norm_mean"], np.float32),
-                       norm_std=np.asarray(obj["norm_std"], np.float32), step=int(obj.get("step", 0)),
-                       meta=obj.get("meta"))
+    return LoadedModel(model=model, kind=kind, config=cfg, norm_mean=norm_mean, norm_std=norm_std,
+                       step=int(obj.get("step", 0)), meta=obj.get("meta"))
 
 
