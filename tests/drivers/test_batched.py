@@ -260,3 +260,24 @@ def test_a_stalled_rvc_twin_keeps_its_clock_so_the_hub_keeps_the_stream():
             assert present.mean() > 0.9, sim.stats
     finally:
         sim.stop()
+
+
+def test_a_poll_with_nothing_waiting_is_not_an_unplug(tmp_path):
+    """read_many(0.0) on a silent but connected port returns nothing and counts no
+    disconnect (a raw tty reads 0 bytes when empty; only a readable port that reads 0 has
+    hung up)."""
+    import drivers
+    from sim_devices.devices.pty_port import PtyPort
+
+    port = PtyPort(str(tmp_path / "rvc"))
+    port.open()
+    try:
+        dev = drivers.open_device(f"bno08x-rvc://{tmp_path / 'rvc'}")
+        try:
+            for _ in range(50):
+                assert dev.read_many(0.0) == []
+            assert dev.stats.disconnects == 0 and dev.connected
+        finally:
+            dev.close()
+    finally:
+        port.close()
