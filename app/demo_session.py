@@ -44,6 +44,7 @@ class DemoConfig:
     headless: bool = True
     threads: int = 1  # one window per step: 1 intra-op thread is fastest and leaves a core to the drivers/GUI
     latency: str = "centred"  # app.latency.LATENCY_MODES: "low" waits for no future sample
+    runtime: str = "auto"  # the live model call: ONNX Runtime when installed (faster), else torch
     calibration_protocol: Any = None  # a calibration.Protocol overriding the default timings
     # sinks streaming the body to other programs (--stream: app.streams.make_stream_sinks builds
     # them, above this module); the session adds them to its pipeline, which closes them
@@ -177,7 +178,7 @@ class DemoSession:
         self.signals, self.truth = synthesize_session(self.activity, self.protocol, noise=noise, rng=cfg.seed,
                                                       sites=sites)
         self.assignment = assignment_for(cfg.sensors, cfg.protocol, cfg.insoles)
-        self.poser = Poser(self.model, body=self.truth.body, steps=cfg.steps, seed=cfg.seed)
+        self.poser = Poser(self.model, body=self.truth.body, steps=cfg.steps, seed=cfg.seed, runtime=cfg.runtime)
         self.calibrator = Calibrator(cfg.sensors, schedule=self.protocol.schedule())
         self.pipeline = Pipeline(self.poser, cfg.sensors, calibrator=self.calibrator, insoles=cfg.insoles,
                                  clock=time.monotonic, causal=self.causal)
@@ -338,6 +339,7 @@ class DemoSession:
         if self.cfg.streams:
             out["streams"] = [s.summary() for s in self.cfg.streams if hasattr(s, "summary")]
         out["latency_mode"] = self.cfg.latency
+        out["runtime"] = self.poser.runtime
         out["acc_filter"] = "causal" if self.pipeline.causal else "centred"
         if self.warning:
             out["warning"] = self.warning

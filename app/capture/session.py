@@ -94,7 +94,7 @@ class CaptureSession:
         causal, latency_warning = resolve_filter(opt.latency, self.model)
         self.warning = "; ".join(w for w in (self.warning, latency_warning) if w) or None
         steps = setup.steps
-        self.poser = Poser(self.model, body=Body.from_height(setup.subject.height_m), steps=steps)
+        self.poser = Poser(self.model, body=Body.from_height(setup.subject.height_m), steps=steps, runtime="auto")
         self.guided = GuidedCalibration(self.sites, setup.calibration, countdown=opt.countdown, timeout=opt.timeout)
         self.pipeline = Pipeline(self.poser, self.sites, calibrator=self.guided, insoles=setup.insoles is not None,
                                  clock=time.monotonic, causal=causal)

@@ -4,7 +4,13 @@ root correction, FK) with the default model and steps, and of the paper-size mod
 values) measured in the same run, so the two figures share the machine's load.
 
     imucap bench [--json] [--frames N] [--paper-frames N] [--threads N] [--model SPEC]
-                 [--steps K] [--random-weights] [--no-paper] [--mirror/--no-mirror]
+                 [--steps K] [--random-weights] [--no-paper] [--mirror/--no-mirror] [--no-onnx]
+    imucap bench --end-to-end [--json] [--seconds S] [--rounds R] [--model SPEC]
+
+``onnx_p50_ms``/``onnx_p99_ms``: the same loop with the model call through ONNX Runtime
+(when installed; what live sessions then use), right after the torch figures.
+``--end-to-end``: sensor-to-pose latency of the whole live path in both latency modes in
+one run (``centred_p50_ms``, ``low_p50_ms``, ...; app/bench_end_to_end.py, docs/latency.md).
 
 The input is a generated walking clip observed at the paper's 6 sites, fed one 20 Hz frame
 at a time, after a warm-up. benchmarks/bench_poser.py calls the same function. When the
@@ -23,11 +29,12 @@ import numpy as np
 
 
 def bench_poser(model, steps=None, frames: int = 200, warmup: int = 10, label: str = "",
-                seed: int = 0, mirror: bool | None = None) -> dict:
+                seed: int = 0, mirror: bool | None = None, runtime: str = "torch") -> dict:
     """Time ``frames`` calls of ``Poser.step`` (after ``warmup`` untimed ones) for a
     LoadedModel (or None: the floor baseline). Returns p50_ms, p99_ms, mean_ms, max_ms,
     steps (model calls per frame), model, frames, threads, mirror (mirror averaging: each
-    call a batch of two windows; None = the model file's own setting)."""
+    call a batch of two windows; None = the model file's own setting); ``runtime``: the model
+    call's (``inference/model/onnx_runtime.py``: "torch" or "onnx")."""
     import torch
 
     from inference.evaluation.runner import SIX, clip_input, synthetic_motion
@@ -35,7 +42,7 @@ def bench_poser(model, steps=None, frames: int = 200, warmup: int = 10, label: s
 
     motion = synthetic_motion(seconds=max(2.0, (frames + warmup) / 20.0 + 0.5), seed=seed)
     inp = clip_input(motion, SIX)
-    poser = Poser(model, body=motion.body, steps=steps, seed=seed, mirror=mirror)
+    poser = Poser(model, body=motion.body, steps=steps, seed=seed, mirror=mirror, runtime=runtime)
     n = inp.features.shape[0]
     for i in range(warmup):
         poser.step(inp.features[i % n], inp.mask[i % n])
@@ -52,7 +59,7 @@ def bench_poser(model, steps=None, frames: int = 200, warmup: int = 10, label: s
         "mean_ms": round(float(ms.mean()), 3), "max_ms": round(float(ms.max()), 3),
         "steps": len(poser.steps) if kind == "diffusion" else (1 if kind == "regressor" else 0),
         "model": label or kind, "frames": int(frames), "threads": torch.get_num_threads(),
-        "mirror": poser.mirror,
+        "mirror": poser.mirror, "runtime": poser.runtime,
     }
 
 
@@ -81,7 +88,7 @@ def _config_label(model) -> str:
 
 def run_bench(model_spec: str = "diffusion", steps=None, frames: int = 200, paper_frames: int = 10,
               threads: int = 0, random_weights: bool = False, paper: bool = True, warmup: int = 10,
-              mirror: bool | None = None) -> dict:
+              mirror: bool | None = None, onnx: bool = True) -> dict:
     """The `imucap bench` measurement (see the module docstring); returns its JSON object."""
     import torch
 
@@ -106,6 +113,13 @@ def run_bench(model_spec: str = "diffusion", steps=None, frames: int = 200, pape
     st = parse_steps(steps) if steps is not None else None
     out = bench_poser(model, st, frames, warmup, label=_config_label(model), mirror=mirror)
     out["weights"] = weights
+    from inference.model.onnx_runtime import onnxruntime_available
+
+    if onnx and model is not None and model.kind == "diffusion" and onnxruntime_available():
+        # the same loop with the model call through ONNX Runtime (what live sessions use when
+        # it is installed), right after the torch figures above
+        o = bench_poser(model, st, frames, warmup, label=_config_label(model), mirror=mirror, runtime="onnx")
+        out.update(onnx_p50_ms=o["p50_ms"], onnx_p99_ms=o["p99_ms"], onnx=o)
     if out["mirror"]:
         # what the mirror averaging costs, measured in the same run
         out["without_mirror"] = bench_poser(model, st, frames, warmup, label=_config_label(model), mirror=False)
@@ -133,14 +147,26 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="time a randomly initialised default-size model (no weights needed)")
     p.add_argument("--warmup", type=int, default=10, help="untimed frames before timing (default 10)")
     p.add_argument("--no-paper", action="store_true", help="skip the paper-size model")
+    p.add_argument("--no-onnx", action="store_true", help="skip the loop through ONNX Runtime (onnx_p50_ms)")
+    p.add_argument("--end-to-end", action="store_true",
+                   help="sensor-to-pose latency of the live path per latency mode instead (app/bench_end_to_end.py)")
+    p.add_argument("--seconds", type=float, default=10.0, help="--end-to-end: timed seconds per mode and round")
+    p.add_argument("--rounds", type=int, default=2, help="--end-to-end: rounds of both modes, alternating")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.end_to_end:
+        from app.bench_end_to_end import run_end_to_end
+
+        res = run_end_to_end(args.seconds, args.rounds, args.model, threads=args.threads)
+        print(json.dumps(res) if args.json else "\n".join(f"{k}: {v}" for k, v in res.items()))
+        sys.stdout.flush()
+        return 0
     if args.frames < 1 or args.paper_frames < 1:
         raise ValueError("--frames and --paper-frames must be at least 1")
     res = run_bench(args.model, args.steps, args.frames, args.paper_frames, args.threads, args.random_weights,
-                    not args.no_paper, max(0, args.warmup), args.mirror)
+                    not args.no_paper, max(0, args.warmup), args.mirror, onnx=not args.no_onnx)
     if args.json:
         print(json.dumps(res))
     else:
@@ -150,7 +176,7 @@ def run(args: argparse.Namespace) -> int:
                     f"{r['threads']} threads")
 
         print(line(res))
-        for key in ("without_mirror", "paper"):
+        for key in ("without_mirror", "onnx", "paper"):
             if key in res:
                 print(line(res[key]))
     sys.stdout.flush()

@@ -127,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
     headless = args.headless or not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
     term = _Terminal()
     options = CaptureOptions(record=record, calibration=cal, countdown=args.countdown, timeout=args.timeout,
-                             on_event=term.event)
+                             on_event=term.event, latency=args.latency)
     try:
         options.sinks = sinks_from_args(args)
         session = CaptureSession(setup, options)
@@ -184,6 +184,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--calibration", help="reuse the calibration of an earlier recording (or a calibration JSON)")
     p.add_argument("--countdown", type=float, default=3.0, help="seconds counted down before the first step")
     p.add_argument("--timeout", type=float, default=30.0, help="seconds a calibration step may wait")
+    p.add_argument("--latency", default="centred", choices=("centred", "low"),
+                   help="low: wait for no future sample (trailing acceleration filter; docs/latency.md)")
     add_stream_arguments(p)
     p.add_argument("--screenshot", help="with a window: save it to this PNG after --quit-after seconds")
     p.add_argument("--quit-after", type=float, default=0.0)

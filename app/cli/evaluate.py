@@ -79,6 +79,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "scoring (inference.plausibility.repair_feet); off by default so figures stay comparable")
     p.add_argument("--limit", type=int, default=None, help="only the first N motion files (sorted)")
     p.add_argument("--seed", type=int, default=0, help="seed of sensor noise and inpainting noise")
+    p.add_argument("--latency", default="centred", choices=("centred", "low"),
+                   help="low: accelerations through the trailing filter of the low-latency live mode, and the "
+                        "default diffusion model becomes the one trained on it if installed (docs/latency.md)")
     # default 1: the live loop is one small model call per step, and with more threads two
     # evaluations at once spin in OpenMP barriers (~15x slower)
     p.add_argument("--threads", type=int, default=1, help="torch threads (0 = torch's default)")
@@ -153,7 +156,12 @@ def run(args: argparse.Namespace) -> int:
         return models[spec]
 
     def one(spec: str, set_sites, insoles: bool, keep: bool = False, label: str = ""):
-        model = get_model(spec)
+        from app.latency import model_spec_for, resolve_filter
+
+        model = get_model(model_spec_for(args.latency, spec))
+        causal, latency_warning = resolve_filter(args.latency, model)
+        if latency_warning:
+            print(f"evaluate: warning: {latency_warning}", file=sys.stderr)
         kind = "floor" if model is None else model.kind
         st = (steps if steps is not None else default_steps(model)) if kind == "diffusion" else []
         summary, clips = evaluate_motions(motions, model, set_sites, insoles, st or None, noise, args.seed,
@@ -162,7 +170,8 @@ def run(args: argparse.Namespace) -> int:
                                           contact_detector="default" if args.contact_detector else None,
                                           inpaint_noise=args.inpaint_noise, mirror=args.mirror,
                                           stride_scale=args.stride_scale,
-                                          pelvis_odometry="default" if args.pelvis_odometry else None)
+                                          pelvis_odometry="default" if args.pelvis_odometry else None,
+                                          causal=causal)
         summary.update({
             "model": str(spec), "kind": kind, "sensors": list(set_sites),
             "insoles": insoles, "steps": _steps_label(st, kind), "step_list": st if kind == "diffusion" else None,
@@ -172,6 +181,7 @@ def run(args: argparse.Namespace) -> int:
             "mirror": mirror_for(model, args.mirror),
             "stride_scale": args.stride_scale and kind != "floor",
             "pelvis_odometry": args.pelvis_odometry and kind != "floor",
+            "latency_mode": args.latency, "acc_filter": "causal" if causal else "centred",
         })
         return summary, clips
 

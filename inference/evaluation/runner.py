@@ -85,10 +85,11 @@ def face_forward(motion: Motion) -> Motion:
 
 
 def clip_input(motion: Motion, sites: Sequence[str], insoles: bool = False, noise: NoiseModel | None = None,
-               seed: int = 0, align: bool = True) -> ClipInput:
+               seed: int = 0, align: bool = True, causal: bool = False) -> ClipInput:
     """Synthesize a motion's signals at `sites` and turn them into 20 Hz features and
     masks the way the live pipeline does (module docstring), plus the 20 Hz truth.
-    ``align`` first turns the clip to face +X at its start (``face_forward``)."""
+    ``align`` first turns the clip to face +X at its start (``face_forward``); ``causal``:
+    the trailing acceleration filter of the low-latency live mode."""
     sites = parse_sites(list(sites))
     if align:
         motion = face_forward(motion)
@@ -99,7 +100,7 @@ def clip_input(motion: Motion, sites: Sequence[str], insoles: bool = False, nois
     if sites:
         sig = synthesize(motion, noise, rng=seed, sites=tuple(sites))
         raw = sig.meta["free_acc_raw"]  # unsmoothed, as a device streams it
-        acc20, quat20 = downsample(raw, sig.quat)
+        acc20, quat20 = downsample(raw, sig.quat, causal)
         R = quat_to_matrix(quat20)
         for k, s in enumerate(sites):
             seg = SEGMENT_INDEX[SITE_SEGMENT[s]]
@@ -159,16 +160,18 @@ def evaluate_motions(
     mirror: bool | None = None,
     stride_scale: bool = True,
     pelvis_odometry="default",
+    causal: bool = False,
 ) -> tuple[dict, list[ClipResult]]:
     """Evaluate one model and sensor set over motions; returns (pooled summary, per-clip
     results). ``keep`` retains reconstructions (for exports) instead of only metrics;
     ``smoothing=False`` scores the poser's outputs without its 1-Euro filters;
     ``contact_detector`` goes to the poser (None: the model's own contacts), and so do
     ``inpaint_noise`` and ``mirror`` (None: the model file's own), ``stride_scale`` and
-    ``pelvis_odometry``."""
+    ``pelvis_odometry``. ``causal``: the signals through the low-latency mode's trailing
+    acceleration filter (docs/latency.md)."""
     from tqdm import tqdm
 
-    inputs = [clip_input(m, sites, insoles, noise, clip_seed(seed, m.name)) for m in motions]
+    inputs = [clip_input(m, sites, insoles, noise, clip_seed(seed, m.name), causal=causal) for m in motions]
     total = sum(i.features.shape[0] for i in inputs)
     results: list[ClipResult] = []
     with tqdm(total=total, desc=desc, unit="frame", file=sys.stderr, disable=not progress,

@@ -7,6 +7,9 @@ from the previous kept frame (0 for the first frame, which has no predecessor).
 
 Training, evaluation (ground truth) and the poser's output path all go through these two
 functions, so a layout mistake cannot hide in one of them.
+
+``causal``: the trailing moving average of the low-latency mode instead of the centred one
+(``inference.signals.resample``), for a model trained on what that mode feeds it.
 """
 
 from __future__ import annotations
@@ -21,13 +24,13 @@ from inference.signals.resample import STEP, moving_average
 from inference.signals.synthesis import Kinematics, kinematics
 
 
-def features_from_kinematics(kin: Kinematics) -> np.ndarray:
+def features_from_kinematics(kin: Kinematics, causal: bool = False) -> np.ndarray:
     """(T20, 190) float32 from 60 Hz kinematics (see module docstring)."""
     rot = kin.rot[::STEP]
     T20 = rot.shape[0]
     x = np.zeros((T20, N_FEATURES), dtype=np.float64)
     x[:, SL_ROT] = matrix_to_rot6d(rot).reshape(T20, -1)
-    x[:, SL_ACC] = moving_average(kin.site_acc_raw, STEP).reshape(T20, -1)
+    x[:, SL_ACC] = moving_average(kin.site_acc_raw, STEP, causal).reshape(T20, -1)
     root = kin.root[::STEP]
     x[1:, SL_DP] = root[1:, :2] - root[:-1, :2]
     x[:, SL_PZ] = root[:, 2:3]
@@ -35,9 +38,9 @@ def features_from_kinematics(kin: Kinematics) -> np.ndarray:
     return x.astype(np.float32)
 
 
-def features_from_motion(motion: Motion) -> np.ndarray:
+def features_from_motion(motion: Motion, causal: bool = False) -> np.ndarray:
     """(T20, 190) float32 feature frames of a motion (unnormalised)."""
-    return features_from_kinematics(kinematics(motion))
+    return features_from_kinematics(kinematics(motion), causal)
 
 
 motion_to_features = features_from_motion

@@ -67,13 +67,14 @@ from inference.features.mirror import MirrorAveraged
 from inference.model.denoiser import Denoiser, freeze_for_cpu
 from inference.model.diffusion import Schedule, inpaint, paper_steps, parse_steps
 from inference.model.files import LoadedModel, load_model
+from inference.model.onnx_runtime import onnx_net, resolve_runtime
 from inference.model.regressor import regress
 from inference.poser.contact_detector import DETECTOR_THRESHOLD, SHANK_INDEX, ContactDetector, load_detector
 from inference.poser.joint_constraints import constrain_knees
 from inference.poser.pelvis_odometry import PELVIS_INDEX, Odometry, load_odometry
 from inference.poser.smoothing import ROOT_SMOOTHING, ROTATION_SMOOTHING, RotationOneEuro, VectorOneEuro
 from inference.poser.stride import FOOT_SEGMENTS, SHANK_SITES, StrideScale
-from inference.signals.resample import FPS_MODEL
+from inference.signals.resample import FPS_MODEL, acc_filter_of
 
 WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
 DEFAULT_WEIGHTS: dict[str, Path] = {
@@ -274,8 +275,12 @@ class Poser:
         mirror: bool | None = None,
         stride_scale: bool = True,
         pelvis_odometry: Odometry | str | os.PathLike | None = "default",
+        runtime: str = "torch",
     ) -> None:
         self.model = model
+        # the frame-by-frame call through ONNX Runtime where that is faster (live sessions ask
+        # for "auto"; offline runs keep torch's exact results): inference/model/onnx_runtime.py
+        self.runtime = resolve_runtime(runtime) if model is not None and model.kind == "diffusion" else "torch"
         self.kind = "floor" if model is None else model.kind
         if self.kind not in POSER_KINDS:
             raise ValueError(f"cannot pose with a model of kind {self.kind!r}")
@@ -298,6 +303,8 @@ class Poser:
         self.history_mode = history
         self.noise_mode = noise
         self.inpaint_mode = inpaint_mode or meta.get("inpaint_mode") or "paper"
+        # the acceleration filter the model was trained on: the live resampler must match it
+        self.acc_filter = acc_filter_of(meta)
         self.contact_threshold = float(contact_threshold if contact_threshold is not None
                                        else meta.get("contact_threshold", CONTACT_THRESHOLD))
         self.seed = seed
@@ -324,9 +331,13 @@ class Poser:
         if model is not None:
             frozen = freeze and isinstance(model.model, Denoiser)
             batch = 2 if self.mirror else 1
-            self._net = freeze_for_cpu(model.model, batch=batch, window=self.window) if frozen else model.model
-            if self.mirror:
-                self._net = MirrorAveraged(self._net, model.norm_mean, model.norm_std)
+            if frozen and self.runtime == "onnx":
+                eager = MirrorAveraged(model.model, model.norm_mean, model.norm_std) if self.mirror else model.model
+                self._net = onnx_net(eager, 1, self.window, N_FEATURES, model.config.mask_input)
+            if self._net is None:
+                self._net = freeze_for_cpu(model.model, batch=batch, window=self.window) if frozen else model.model
+                if self.mirror:
+                    self._net = MirrorAveraged(self._net, model.norm_mean, model.norm_std)
         if model is not None:
             self._mean = torch.as_tensor(model.norm_mean, dtype=torch.float32)
             self._std = torch.as_tensor(model.norm_std, dtype=torch.float32)

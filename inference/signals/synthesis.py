@@ -235,6 +235,7 @@ def synthesize(
     rng: np.random.Generator | int | None = None,
     sites: tuple[str, ...] | list[str] = SITES,
     mass: float | None = None,
+    causal: bool = False,
 ) -> SiteSignals:
     """Signals of sensors at `sites` (default all 13) and insoles on `motion`, at 60 Hz.
 
@@ -243,7 +244,8 @@ def synthesize(
     module docstring; ``meta`` holds ``R_SB`` (S,3,3) (sensor-to-bone: R_WB = R_WG R_GS
     R_SB), ``R_WG`` (S,3,3) (sensor reference frame -> world), ``heading_rad`` (S,),
     ``acc_bias``/``gyro_bias`` (S,3), and ``free_acc_raw`` (T,S,3), the unsmoothed free
-    acceleration a device would stream (the live resampler applies the moving average)."""
+    acceleration a device would stream (the live resampler applies the moving average).
+    ``causal``: ``free_acc`` smoothed with the trailing average of the low-latency mode."""
     rng = np.random.default_rng(rng)
     m60 = motion.resample(FPS_SIGNAL)
     fps = float(FPS_SIGNAL)
@@ -311,7 +313,7 @@ def synthesize(
         g_meas[out] = g
         contacts[out] = kin.contacts[sl]
         com_z[out] = _com_z(kin.rot[sl], kin.joints[sl], motion.body)
-    free = moving_average(free_raw)
+    free = moving_average(free_raw, causal=causal)
 
     meta = {
         "R_SB": np.swapaxes(R_BS, -1, -2).copy(), "R_WG": R_WG, "heading_rad": heading,

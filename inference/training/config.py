@@ -136,6 +136,11 @@ class TrainConfig:
     infer_steps: str | None = None
     # {"train": spec, "val": spec}, see load_dataset; empty = default_data() (the split)
     data: dict = field(default_factory=dict)
+    # accelerations through the trailing (causal) moving average of the low-latency live mode
+    # instead of the centred one: the model then reads what `--latency low` feeds it. Passed to
+    # the data (load_dataset) and written to the model file (meta "acc_filter"), from which the
+    # poser's pipeline picks its resampler (docs/latency.md)
+    causal: bool = False
 
     def to_dict(self) -> dict:
         d = asdict(self)

@@ -135,8 +135,13 @@ def default_data() -> dict:
     return {"train": {"motion": list(DEFAULT_TRAIN_MOTION)}, "val": {"motion": list(DEFAULT_VAL_MOTION)}}
 
 
-def load_dataset(spec: dict | str) -> Dataset:
+def load_dataset(spec: dict | str, causal: bool = False) -> Dataset:
     """Build a dataset from a config entry.
+
+    ``causal`` (TrainConfig.causal): accelerations through the low-latency mode's trailing
+    filter. Motion specs and factories that take a ``causal`` keyword get it; a spec that
+    says otherwise itself is an error, and so is a prebuilt dataset (npz, synthetic), whose
+    filter cannot be told, under ``causal``.
 
     - ``{"motion": [path, ...], "cache_dir": optional}``: every motion file under those
       paths (relative ones are taken under ``data_root()``) through
@@ -147,18 +152,27 @@ def load_dataset(spec: dict | str) -> Dataset:
     """
     if isinstance(spec, str | os.PathLike):
         spec = {"npz": os.fspath(spec)}
+    said = spec.get("causal", (spec.get("kwargs") or {}).get("causal"))
+    if said is not None and bool(said) != bool(causal):
+        raise ValueError(f"dataset spec says causal={said} but the training config says causal={causal}: "
+                         f"set TrainConfig.causal, the data follows it")
     if "motion" in spec:
         from inference.training.dataset import build_dataset
 
         paths = [p if Path(p).is_absolute() else data_root() / p for p in spec["motion"]]
         return build_dataset(paths, spec.get("cache_dir") or cache_root(),
-                             progress=bool(spec.get("progress", True)))
+                             progress=bool(spec.get("progress", True)), causal=causal)
     if "factory" in spec:
         mod_name, _, attr = spec["factory"].partition(":")
         obj: Any = importlib.import_module(mod_name)
         for part in attr.split("."):
             obj = getattr(obj, part)
-        return obj(**spec.get("kwargs", {}))
+        kwargs = dict(spec.get("kwargs", {}))
+        if causal:
+            kwargs["causal"] = True  # a factory without the keyword fails here, loudly
+        return obj(**kwargs)
+    if causal:
+        raise ValueError(f"causal training needs motion files or a factory that filters them, not {spec!r}")
     if "npz" in spec:
         return ArrayDataset.load_npz(spec["npz"])
     if "synthetic" in spec:

@@ -291,6 +291,7 @@ def build_dataset(
     finder: Callable[[Sequence[str | Path]], list[Path]] | None = None,
     progress: bool = True,
     variant: str = "",
+    causal: bool = False,
 ) -> FeatureDataset:
     """Feature dataset of every motion file under `paths`, cached under `cache_dir`.
 
@@ -298,7 +299,8 @@ def build_dataset(
     a custom loader that changes the motions must name what it does in ``variant`` (it
     keys the cache).
     Files that fail to load are skipped with a warning and listed in ``skipped`` (one bad
-    file must not cost a night's build); the cache is reused when its key matches."""
+    file must not cost a night's build); the cache is reused when its key matches.
+    ``causal``: accelerations through the low-latency mode's trailing filter (cached apart)."""
     if loader is None or finder is None:
         from inference import loaders  # lazy: the loaders pull in parsers training does not need
 
@@ -307,7 +309,7 @@ def build_dataset(
     files = [Path(f) for f in finder(paths)]
     if not files:
         raise FileNotFoundError(f"no motion files found under {', '.join(map(str, paths))}")
-    key = content_key(files, variant)
+    key = content_key(files, ",".join(v for v in (variant, "causal" if causal else "") if v))
     out = cache_path(cache_dir, key)
     if out.exists():
         try:
@@ -325,7 +327,7 @@ def build_dataset(
         try:
             m = loader(f)
             kin = kinematics(m)
-            x = features_from_kinematics(kin)
+            x = features_from_kinematics(kin, causal)
         except (ValueError, OSError, KeyError) as exc:
             log.warning("skipping %s: %s", f, exc)
             skipped.append(f"{f}: {exc}")

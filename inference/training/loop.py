@@ -373,9 +373,9 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
     for turn in (True, False):
         if d.main == turn:
             if train_set is None:
-                train_set = load_dataset(data["train"])
+                train_set = load_dataset(data["train"], causal=cfg.causal)
             if val_set is None and data.get("val"):
-                val_set = load_dataset(data["val"])
+                val_set = load_dataset(data["val"], causal=cfg.causal)
         barrier(d)
 
     if ckpt is not None or init is not None:
@@ -427,7 +427,7 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
             atomic_torch_save(obj, out / f"step_{step:07d}.pt")
         save_model(out / MODEL_FILE, ema.model, cfg.kind, mean_np, std_np, step=step,
                    meta={"val": val, "train_config": cfg.to_dict(), "default_steps": cfg.infer_steps,
-                         "inpaint_mode": inpaint_mode_for(cfg)})
+                         "inpaint_mode": inpaint_mode_for(cfg), "acc_filter": "causal" if cfg.causal else "centred"})
         return last
 
     logf = open(out / LOG_FILE, "a") if d.main else None  # noqa: SIM115
@@ -539,7 +539,8 @@ def export_model(checkpoint: str | os.PathLike, dest: str | os.PathLike, fp16: b
     cfg = dict(ck["train_config"])
     steps = default_steps if default_steps is not None else cfg.get("infer_steps")
     meta = {"val": ck.get("val"), "train_config": cfg, "default_steps": steps,
-            "inpaint_mode": inpaint_mode_for(TrainConfig.from_dict(cfg))}
+            "inpaint_mode": inpaint_mode_for(TrainConfig.from_dict(cfg)),
+            "acc_filter": "causal" if cfg.get("causal") else "centred"}
     meta.update(poser or {})
     save_model(dest, model, ck["kind"], ck["norm_mean"], ck["norm_std"], step=int(ck["step"]), meta=meta, fp16=fp16)
 

@@ -78,10 +78,12 @@ def root_val_files(root: Path | None = None) -> list[Path]:
     return [f for f in find_motion_files((root or data_root()) / "bandai" / "d1") if HELD_OUT_BANDAI_STYLE in f.name]
 
 
-def _build(files: list[Path], progress: bool = True, speed: float = 1.0, repair: bool = False) -> FeatureDataset:
+def _build(files: list[Path], progress: bool = True, speed: float = 1.0, repair: bool = False,
+           causal: bool = False) -> FeatureDataset:
     """The cached feature dataset of ``files``, performed at ``speed`` (copies at another
     speed get their own cache and names ``<file>@x<speed>``, so a clip and its copies stay apart),
-    with broken feet repaired (``plausibility.repair_feet``) when ``repair``."""
+    with broken feet repaired (``plausibility.repair_feet``) when ``repair``, accelerations
+    through the low-latency mode's trailing filter when ``causal``."""
     loader = None
     if speed != 1.0 or repair:
         from inference.loaders import load_motion
@@ -94,15 +96,15 @@ def _build(files: list[Path], progress: bool = True, speed: float = 1.0, repair:
 
     variant = ",".join(v for v in ("" if speed == 1.0 else f"speed={speed:g}", "repair_feet" if repair else "") if v)
     ds = build_dataset(files, cache_root(), loader=loader, finder=lambda paths: [Path(p) for p in paths],
-                       progress=progress, variant=variant)
+                       progress=progress, variant=variant, causal=causal)
     if speed != 1.0:
         ds.names = [f"{n}@x{speed:g}" for n in ds.names]
     return ds
 
 
-def build_files(paths, progress: bool = True) -> FeatureDataset:
+def build_files(paths, progress: bool = True, causal: bool = False) -> FeatureDataset:
     """Feature dataset (cached) of every motion file under ``paths``."""
-    return _build(find_motion_files([Path(p) for p in paths]), progress)
+    return _build(find_motion_files([Path(p) for p in paths]), progress, causal=causal)
 
 
 def _is_hdm05(name: str) -> bool:
@@ -161,7 +163,7 @@ def drop_implausible_clips(ds: FeatureDataset) -> list[str]:
 def train_set(
     progress: bool = True, hdm05_share: float = HDM05_SHARE, hdm05_speeds: Sequence[float] = (),
     energy_per: str = "trial", drop_implausible: bool = False, repair_implausible: bool = False,
-    cmu: bool = False,
+    cmu: bool = False, causal: bool = False,
 ) -> FeatureDataset:
     """The training split. ``hdm05_speeds``: extra copies of the HDM05 clips performed at
     these speed factors (``Motion.at_speed``), sharing the HDM05 half of the draws. Two
@@ -184,17 +186,21 @@ def train_set(
 
     ``cmu``: also the CMU subjects not held out (``CMU_VAL_SUBJECTS``), as a source of
     their own (cached apart, so the Bandai and HDM05 caches stay valid); the draws are then
-    shared ``SHARES_WITH_CMU`` between the three sources."""
+    shared ``SHARES_WITH_CMU`` between the three sources.
+
+    ``causal``: accelerations through the trailing filter of the low-latency mode (a model
+    for ``--latency low``; TrainConfig.causal passes it)."""
     if energy_per not in ("trial", "window"):
         raise ValueError(f"energy_per must be 'trial' or 'window', not {energy_per!r}")
     files = train_files()
-    base = _build(files, progress, repair=repair_implausible)
+    base = _build(files, progress, repair=repair_implausible, causal=causal)
     if hdm05_speeds:
         hdm = [f for f in files if _is_hdm05(str(f))]
-        base = FeatureDataset.concat([base, *(_build(hdm, progress, float(s), repair_implausible)
+        base = FeatureDataset.concat([base, *(_build(hdm, progress, float(s), repair_implausible, causal)
                                               for s in hdm05_speeds)])
     if cmu:
-        base = FeatureDataset.concat([base, _build(cmu_train_files(), progress, repair=repair_implausible)])
+        base = FeatureDataset.concat([base, _build(cmu_train_files(), progress, repair=repair_implausible,
+                                                   causal=causal)])
     if energy_per == "window":
         base.weights = clip_weights(base.energy, [len(c) for c in base.clips])
     if drop_implausible:
@@ -207,8 +213,9 @@ def train_set(
     return balance_sources(base, hdm05_share)
 
 
-def val_set(progress: bool = True, cmu: bool = False) -> FeatureDataset:
+def val_set(progress: bool = True, cmu: bool = False, causal: bool = False) -> FeatureDataset:
     """HDM05 actor dg (and with ``cmu`` the held-out CMU subjects too)."""
     if cmu:
-        return FeatureDataset.concat([_build(val_files(), progress), _build(cmu_val_files(), progress)])
-    return _build(val_files(), progress)
+        return FeatureDataset.concat([_build(val_files(), progress, causal=causal),
+                                      _build(cmu_val_files(), progress, causal=causal)])
+    return _build(val_files(), progress, causal=causal)

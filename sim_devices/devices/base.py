@@ -145,6 +145,15 @@ class SimDevice(ABC):
         self._t0 = 0.0
         self._lock = threading.Lock()
         self.connected = False
+        # (packet counter, monotonic time the packet left) of every packet sent, when asked
+        # for (``log_sends``): the start of an end-to-end latency measurement, taken where
+        # only the device knows it
+        self.send_log: list[tuple[int, float]] | None = None
+
+    def log_sends(self) -> SimDevice:
+        """Keep the send time of every packet from now on (``send_log``)."""
+        self.send_log = []
+        return self
 
     # --- lifecycle ----------------------------------------------------------------------------------------
     def start(self) -> SimDevice:
@@ -246,6 +255,8 @@ class SimDevice(ABC):
                 return
             try:
                 self._send(packet)
+                if self.send_log is not None:
+                    self.send_log.append((counter, time.monotonic()))
                 self.stats["sent"] += 1
             except BlockingIOError:
                 self.stats["overruns"] += 1

@@ -1,0 +1,113 @@
+"""The live denoiser call through ONNX Runtime instead of torch, where it is faster.
+
+The live loop calls the model a few times per 50 ms frame on one fixed input shape, from
+one CPU thread. At that size torch spends a good part of each call in dispatch between
+small kernels; ONNX Runtime runs the same graph (exported once per model and shape, in
+memory, mirror averaging included) with fused kernels. ``imucap bench`` times both in one
+run (``onnx_p50_ms`` next to ``p50_ms``); docs/latency.md has the figures.
+
+Where it is used: only where a caller asks for it (``Poser(runtime="auto")``: the live
+sessions), so offline evaluation keeps torch's results bit for bit (ONNX Runtime agrees
+with torch to ~1e-6, not exactly). ``auto`` takes ONNX Runtime when it is installed and
+torch otherwise; ``IMUCAP_RUNTIME=torch|onnx`` overrides ``auto`` (e.g. to compare).
+onnxruntime is optional (``pip install imucap[onnx]``): without it everything runs on torch.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import warnings
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+RUNTIMES = ("torch", "onnx", "auto")
+OPSET = 17
+
+
+def onnxruntime_available() -> bool:
+    try:
+        import onnxruntime  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def resolve_runtime(requested: str = "auto") -> str:
+    """"torch" or "onnx" for a request ("auto" follows IMUCAP_RUNTIME, else takes ONNX
+    Runtime when it is installed). An explicit "onnx" without onnxruntime is an error."""
+    if requested not in RUNTIMES:
+        raise ValueError(f"unknown runtime {requested!r}; choose from {', '.join(RUNTIMES)}")
+    if requested == "auto":
+        env = os.environ.get("IMUCAP_RUNTIME", "auto")
+        if env not in RUNTIMES:
+            raise ValueError(f"IMUCAP_RUNTIME={env!r}: choose from {', '.join(RUNTIMES)}")
+        requested = env if env != "auto" else ("onnx" if onnxruntime_available() else "torch")
+    if requested == "onnx" and not onnxruntime_available():
+        raise ImportError("the ONNX runtime was asked for but onnxruntime is not installed (pip install onnxruntime)")
+    return requested
+
+
+class OnnxNet:
+    """``module`` (a denoiser, or a wrapper called like one: ``(z, t, height[, mask])``)
+    exported for one input shape and run by ONNX Runtime; called like the module, returns
+    a torch tensor. ``threads``: ONNX Runtime's intra-op threads (default torch's own
+    setting, which the live loop keeps at 1)."""
+
+    def __init__(self, module: nn.Module, batch: int, window: int, features: int, mask_input: bool,
+                 threads: int | None = None) -> None:
+        import onnxruntime as ort
+
+        self.config = getattr(module, "config", None)
+        self.shape = (batch, window, features)
+        self.mask_input = mask_input
+        example: tuple[Tensor, ...] = (torch.zeros(self.shape), torch.zeros(batch, dtype=torch.long),
+                                       torch.full((batch,), 1.7))
+        names = ["z", "t", "height"]
+        if mask_input:
+            example = (*example, torch.ones(self.shape, dtype=torch.bool))
+            names.append("mask")
+        self.names = names
+        buf = io.BytesIO()
+        was_training = module.training
+        module.eval()
+        # eval mode without autograd: the denoiser's lean decoder is what gets exported
+        with torch.inference_mode(False), torch.no_grad(), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            torch.onnx.export(module, example, buf, dynamo=False, opset_version=OPSET, input_names=names,
+                              output_names=["x0"])
+        module.train(was_training)
+        opts = ort.SessionOptions()
+        opts.intra_op_num_threads = max(1, threads if threads is not None else torch.get_num_threads())
+        opts.inter_op_num_threads = 1
+        opts.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+        opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+        self.session = ort.InferenceSession(buf.getvalue(), opts, providers=["CPUExecutionProvider"])
+
+    def __call__(self, z: Tensor, t: Tensor, height: Tensor, mask: Tensor | None = None) -> Tensor:
+        feeds: dict[str, Any] = {
+            "z": np.ascontiguousarray(z.detach().numpy(), dtype=np.float32),
+            "t": np.ascontiguousarray(t.detach().numpy(), dtype=np.int64),
+            "height": np.ascontiguousarray(height.detach().numpy(), dtype=np.float32),
+        }
+        if self.mask_input:
+            m = torch.zeros(self.shape, dtype=torch.bool) if mask is None else mask
+            feeds["mask"] = np.ascontiguousarray(m.detach().numpy(), dtype=bool)
+        return torch.from_numpy(self.session.run(None, feeds)[0])
+
+
+def onnx_net(module: nn.Module, batch: int, window: int, features: int, mask_input: bool) -> OnnxNet | None:
+    """``OnnxNet`` of ``module``, or None (with a warning) when the export or the session
+    fails: the caller then runs torch, so a model ONNX cannot take still runs."""
+    try:
+        return OnnxNet(module, batch, window, features, mask_input)
+    except Exception as exc:  # noqa: BLE001 - any failure falls back to torch, said once
+        warnings.warn(f"ONNX Runtime unavailable for this model ({type(exc).__name__}: {exc}); running torch",
+                      stacklevel=2)
+        return None
+
+
+__all__ = ["RUNTIMES", "onnxruntime_available", "resolve_runtime", "OnnxNet", "onnx_net"]

@@ -1,0 +1,79 @@
+"""The live model call through ONNX Runtime answers as torch does (to float rounding), the
+poser uses it only when asked, and falls back to torch without onnxruntime."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from inference.features.layout import N_FEATURES
+from inference.features.mirror import MirrorAveraged
+from inference.model import onnx_runtime
+from inference.model.config import ModelConfig
+from inference.model.files import LoadedModel, build_model
+from inference.poser.poser import Poser
+
+
+def _tiny(mask_input: bool = True) -> LoadedModel:
+    torch.manual_seed(0)
+    cfg = ModelConfig.tiny()
+    cfg.mask_input = mask_input
+    rng = np.random.default_rng(0)
+    return LoadedModel(model=build_model("diffusion", cfg).eval(), kind="diffusion", config=cfg,
+                       norm_mean=rng.normal(size=N_FEATURES).astype(np.float32),
+                       norm_std=rng.uniform(0.5, 2.0, N_FEATURES).astype(np.float32))
+
+
+needs_ort = pytest.mark.skipif(not onnx_runtime.onnxruntime_available(), reason="onnxruntime is not installed")
+
+
+@needs_ort
+@pytest.mark.parametrize("mirror", [False, True])
+def test_onnx_net_matches_the_torch_model(mirror):
+    m = _tiny()
+    module = MirrorAveraged(m.model, m.norm_mean, m.norm_std) if mirror else m.model
+    net = onnx_runtime.OnnxNet(module, 1, m.config.window, N_FEATURES, mask_input=True)
+    g = torch.Generator().manual_seed(1)
+    z = torch.randn(1, m.config.window, N_FEATURES, generator=g)
+    mask = torch.rand(1, m.config.window, N_FEATURES, generator=g) > 0.5
+    for level in (1000, 400, 0):
+        t, h = torch.tensor([level]), torch.tensor([1.8])
+        with torch.no_grad():
+            want = module(z, t, h, mask)
+        got = net(z, t, h, mask)
+        assert got.shape == want.shape and got.dtype == torch.float32
+        np.testing.assert_allclose(got.numpy(), want.numpy(), atol=1e-4, rtol=1e-4)
+
+
+@needs_ort
+def test_poser_steps_alike_on_both_runtimes():
+    m = _tiny()
+    rng = np.random.default_rng(2)
+    p_t = Poser(m, body=1.75, steps="3", runtime="torch", contact_detector=None, pelvis_odometry=None)
+    p_o = Poser(m, body=1.75, steps="3", runtime="onnx", contact_detector=None, pelvis_odometry=None)
+    assert (p_t.runtime, p_o.runtime) == ("torch", "onnx")
+    assert isinstance(p_o._net, onnx_runtime.OnnxNet) and not isinstance(p_t._net, onnx_runtime.OnnxNet)
+    mask = np.zeros(N_FEATURES, bool)
+    mask[:60] = True
+    for _ in range(4):
+        x = rng.normal(size=N_FEATURES) * 0.1
+        a, b = p_t.step(x, mask), p_o.step(x, mask)
+        np.testing.assert_allclose(a.rot, b.rot, atol=2e-3)
+
+
+def test_runtime_choice(monkeypatch):
+    assert onnx_runtime.resolve_runtime("torch") == "torch"
+    with pytest.raises(ValueError):
+        onnx_runtime.resolve_runtime("tpu")
+    monkeypatch.setattr(onnx_runtime, "onnxruntime_available", lambda: False)
+    monkeypatch.delenv("IMUCAP_RUNTIME", raising=False)
+    assert onnx_runtime.resolve_runtime("auto") == "torch"  # the fallback without onnxruntime
+    with pytest.raises(ImportError):
+        onnx_runtime.resolve_runtime("onnx")
+    monkeypatch.setattr(onnx_runtime, "onnxruntime_available", lambda: True)
+    assert onnx_runtime.resolve_runtime("auto") == "onnx"
+    monkeypatch.setenv("IMUCAP_RUNTIME", "torch")
+    assert onnx_runtime.resolve_runtime("auto") == "torch"
+    # offline runs never ask: a poser keeps torch unless told
+    assert Poser(_tiny(), body=1.75, steps="2", contact_detector=None, pelvis_odometry=None).runtime == "torch"
