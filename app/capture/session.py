@@ -163,7 +163,7 @@ class CaptureSession:
     def start_recording(self, path: str | Path):
         from app.recording import Recorder
 
-        rec = Recorder(path, sites=self.sites, metadata=self.metadata())
+        rec = Recorder(path, sites=self.sites, metadata=self.metadata(), on_error=self._recording_failed)
         self.recorder = rec
 
         def attach(p: Pipeline) -> None:
@@ -216,6 +216,15 @@ class CaptureSession:
             self._state[name] = "ok"
             self._emit(SessionEvent(ev.t, "device_back", f"{name}: {ev.detail}"))
 
+    def _recording_failed(self, t: float, error: str) -> None:
+        """The recorder could not write (disk full, folder gone): say so at once; the live
+        view goes on, and what was written opens and replays."""
+        self.recording_error = error
+        ev = SessionEvent(t, "recording_error", error)
+        self.events.append(ev)
+        if self.options.on_event is not None:
+            self.options.on_event(ev)
+
     def _calibrated(self, calibration: Calibration, t: float) -> None:
         self.calibration = calibration
         q = calibration.meta.get("quality") or {}
@@ -264,7 +273,9 @@ class CaptureSession:
         else:
             lat = np.percentile(self.watch.latency, 50) if self.watch.latency else float("nan")
             head = f"{self.fps():4.1f} fps  {lat:4.0f} ms"
-            if self.recorder is not None:
+            if self.recording_error is not None:
+                head += "  REC FAILED"
+            elif self.recorder is not None:
                 head += "  REC"
         marks = {"ok": "", "reconnecting": "!", "silent": "?"}
         devs = " ".join(f"{n}{marks.get(s, '?')}" for n, s in self._state.items())
@@ -286,4 +297,5 @@ class CaptureSession:
             "events": [{"t": e.t, "kind": e.kind, "detail": e.detail} for e in self.events],
             "pipeline": st, "model": self.model_label,
             "record": str(self.options.record) if self.options.record else None,
+            "recording_error": self.recording_error,
         }

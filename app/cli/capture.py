@@ -144,6 +144,9 @@ def run(args: argparse.Namespace) -> int:
         stop.set()
 
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    # past a file-size limit a write fails (the recorder says so and the capture goes on)
+    # instead of the signal killing the process with the session
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
     try:
         try:
             session.start()
