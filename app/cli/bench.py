@@ -15,7 +15,9 @@ one run (``centred_p50_ms``, ``low_p50_ms``, ...; app/bench_end_to_end.py, docs/
 The input is a generated walking clip observed at the paper's 6 sites, fed one 20 Hz frame
 at a time, after a warm-up. benchmarks/bench_poser.py calls the same function. When the
 poser mirror-averages (the model file says so, or ``--mirror``), the same loop without it
-is timed too, under ``without_mirror``, so its cost is a ratio from one run.
+is timed too, under ``without_mirror``, so its cost is a ratio from one run. The loop with
+the per-segment spread on (``inference/poser/confidence.py``, its default settings) is
+timed under ``confidence`` (a diffusion model only; ``--no-confidence`` skips it).
 """
 
 from __future__ import annotations
@@ -29,12 +31,13 @@ import numpy as np
 
 
 def bench_poser(model, steps=None, frames: int = 200, warmup: int = 10, label: str = "",
-                seed: int = 0, mirror: bool | None = None, runtime: str = "torch") -> dict:
+                seed: int = 0, mirror: bool | None = None, confidence=None, runtime: str = "torch") -> dict:
     """Time ``frames`` calls of ``Poser.step`` (after ``warmup`` untimed ones) for a
     LoadedModel (or None: the floor baseline). Returns p50_ms, p99_ms, mean_ms, max_ms,
     steps (model calls per frame), model, frames, threads, mirror (mirror averaging: each
-    call a batch of two windows; None = the model file's own setting); ``runtime``: the model
-    call's (``inference/model/onnx_runtime.py``: "torch" or "onnx")."""
+    call a batch of two windows; None = the model file's own setting); ``confidence``
+    goes to the poser (its settings are then reported too); ``runtime``: the model call's
+    (``inference/model/onnx_runtime.py``: "torch" or "onnx")."""
     import torch
 
     from inference.evaluation.runner import SIX, clip_input, synthetic_motion
@@ -42,7 +45,8 @@ def bench_poser(model, steps=None, frames: int = 200, warmup: int = 10, label: s
 
     motion = synthetic_motion(seconds=max(2.0, (frames + warmup) / 20.0 + 0.5), seed=seed)
     inp = clip_input(motion, SIX)
-    poser = Poser(model, body=motion.body, steps=steps, seed=seed, mirror=mirror, runtime=runtime)
+    poser = Poser(model, body=motion.body, steps=steps, seed=seed, mirror=mirror, confidence=confidence,
+                  runtime=runtime)
     n = inp.features.shape[0]
     for i in range(warmup):
         poser.step(inp.features[i % n], inp.mask[i % n])
@@ -60,6 +64,8 @@ def bench_poser(model, steps=None, frames: int = 200, warmup: int = 10, label: s
         "steps": len(poser.steps) if kind == "diffusion" else (1 if kind == "regressor" else 0),
         "model": label or kind, "frames": int(frames), "threads": torch.get_num_threads(),
         "mirror": poser.mirror, "runtime": poser.runtime,
+        **({"draws": c.draws, "every": c.every, "pool": c.pool, "level": c.level}
+           if (c := poser.confidence) is not None else {}),
     }
 
 
@@ -88,7 +94,7 @@ def _config_label(model) -> str:
 
 def run_bench(model_spec: str = "diffusion", steps=None, frames: int = 200, paper_frames: int = 10,
               threads: int = 0, random_weights: bool = False, paper: bool = True, warmup: int = 10,
-              mirror: bool | None = None, onnx: bool = True) -> dict:
+              mirror: bool | None = None, confidence: bool = True, onnx: bool = True) -> dict:
     """The `imucap bench` measurement (see the module docstring); returns its JSON object."""
     import torch
 
@@ -123,6 +129,9 @@ def run_bench(model_spec: str = "diffusion", steps=None, frames: int = 200, pape
     if out["mirror"]:
         # what the mirror averaging costs, measured in the same run
         out["without_mirror"] = bench_poser(model, st, frames, warmup, label=_config_label(model), mirror=False)
+    if confidence and model is not None and model.kind == "diffusion":
+        out["confidence"] = bench_poser(model, st, frames, warmup, label=_config_label(model), mirror=mirror,
+                                        confidence=True)
     if paper:
         out["paper"] = bench_poser(paper_model(), even_steps(30), paper_frames, min(warmup, 2),
                                    label="diffusion 8/512/2048 (paper, random weights)")
@@ -147,6 +156,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="time a randomly initialised default-size model (no weights needed)")
     p.add_argument("--warmup", type=int, default=10, help="untimed frames before timing (default 10)")
     p.add_argument("--no-paper", action="store_true", help="skip the paper-size model")
+    p.add_argument("--no-confidence", action="store_true", help="skip the loop with the per-segment spread on")
     p.add_argument("--no-onnx", action="store_true", help="skip the loop through ONNX Runtime (onnx_p50_ms)")
     p.add_argument("--end-to-end", action="store_true",
                    help="sensor-to-pose latency of the live path per latency mode instead (app/bench_end_to_end.py)")
@@ -166,7 +176,7 @@ def run(args: argparse.Namespace) -> int:
     if args.frames < 1 or args.paper_frames < 1:
         raise ValueError("--frames and --paper-frames must be at least 1")
     res = run_bench(args.model, args.steps, args.frames, args.paper_frames, args.threads, args.random_weights,
-                    not args.no_paper, max(0, args.warmup), args.mirror, onnx=not args.no_onnx)
+                    not args.no_paper, max(0, args.warmup), args.mirror, not args.no_confidence, not args.no_onnx)
     if args.json:
         print(json.dumps(res))
     else:
@@ -176,7 +186,7 @@ def run(args: argparse.Namespace) -> int:
                     f"{r['threads']} threads")
 
         print(line(res))
-        for key in ("without_mirror", "onnx", "paper"):
+        for key in ("without_mirror", "confidence", "onnx", "paper"):
             if key in res:
                 print(line(res[key]))
     sys.stdout.flush()

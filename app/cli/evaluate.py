@@ -24,6 +24,15 @@ Below it, the diffusion model's GA minus each baseline's on the same clips, with
 interval over clips, says which leads the clip sample settles (``comparisons`` in the JSON).
 --export-dir DIR writes <clip>.recon.bvh and <clip>.truth.bvh (20 Hz, metres, Y up; see
 app/export/bvh.py) for the main evaluation.
+
+--confidence turns on the poser's per-segment spread (inference/poser/confidence.py) and
+adds ``confidence``: Spearman between spread and error (per segment over frames, over all
+(frame, segment) pairs, over the segment means) and how often the error falls inside the
+50 / 90 % bands. --confidence-report FILE.md writes those tables for 6, 3 and 2 sites;
+--fit-bands fits the band factors on the given clips (docs/confidence.md).
+
+Clips share each model call (``--lanes``, inference/poser/batched.py); every clip's
+reconstruction is its frame-by-frame one to float tolerance.
 """
 
 from __future__ import annotations
@@ -90,6 +99,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="also write the markdown table over the standard sensor sets x models")
     p.add_argument("--export-dir", type=Path, default=None, metavar="DIR",
                    help="write <clip>.recon.bvh and <clip>.truth.bvh per clip")
+    p.add_argument("--confidence", action="store_true",
+                   help="the per-segment spread on; report how well it predicts the error (docs/confidence.md)")
+    p.add_argument("--confidence-report", type=Path, default=None, metavar="FILE.md",
+                   help="with --confidence: write the calibration tables at 6, 3 and 2 sites")
+    p.add_argument("--fit-bands", action="store_true",
+                   help="with --confidence: fit the band factors on these clips at 6, 3 and 2 sites (bands_fit)")
+    p.add_argument("--lanes", type=int, default=None,
+                   help="clips sharing each model call (default 8; 1 = one clip after the other)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
 
@@ -105,11 +122,40 @@ def _steps_label(poser_steps: list[int], kind: str) -> int:
     return 1 if kind == "regressor" else 0
 
 
+def _confidence(args: argparse.Namespace, result: dict, clips: list, sites: list[str], one) -> None:
+    """The ``confidence`` key, and with --confidence-report / --fit-bands the three standard sets."""
+    from inference.evaluation.confidence_report import CONFIDENCE_SETS, calibration, fit, markdown
+
+    if result["kind"] != "diffusion":
+        raise ValueError("--confidence needs a diffusion model (the spread comes from its inpaintings)")
+    result["confidence"] = calibration(clips)
+    if not (args.confidence_report or args.fit_bands):
+        return
+    runs = []
+    for label, set_sites in CONFIDENCE_SETS:
+        same = list(set_sites) == list(sites) and not args.insoles
+        runs.append((label, clips if same else one(args.model, list(set_sites), args.insoles,
+                                                     label=f"{args.model} {label}", confidence=True)[1]))
+    if args.fit_bands:
+        result["bands_fit"] = fit([c for _, c in runs])
+    if args.confidence_report:
+        rows = [(label, calibration(c)) for label, c in runs]
+        command = (f"imucap evaluate --data {' '.join(map(str, args.data))}"
+                   f"{' --limit ' + str(args.limit) if args.limit else ''} --confidence "
+                   f"--confidence-report {args.confidence_report} --json")
+        source = (f"{len(clips)} clip(s) from {', '.join(map(str, args.data))}, signals with the sensor noise model, "
+                  f"seed {args.seed}, the live poser frame by frame")
+        args.confidence_report.parent.mkdir(parents=True, exist_ok=True)
+        args.confidence_report.write_text(markdown(rows, source, command))
+        result["confidence_report"] = {"path": str(args.confidence_report), "rows": dict(rows)}
+
+
 def run(args: argparse.Namespace) -> int:
     import torch
 
     from inference.body.skeleton import parse_sites
     from inference.evaluation.runner import (
+        DEFAULT_LANES,
         REPORT_MODELS,
         REPORT_SETS,
         compare_rows,
@@ -155,7 +201,11 @@ def run(args: argparse.Namespace) -> int:
             models[spec] = resolve_model(spec)
         return models[spec]
 
-    def one(spec: str, set_sites, insoles: bool, keep: bool = False, label: str = ""):
+    if (args.confidence_report or args.fit_bands) and not args.confidence:
+        raise ValueError("--confidence-report and --fit-bands need --confidence")
+    lanes = DEFAULT_LANES if args.lanes is None else max(1, args.lanes)
+
+    def one(spec: str, set_sites, insoles: bool, keep: bool = False, label: str = "", confidence: bool = False):
         from app.latency import model_spec_for, resolve_filter
 
         model = get_model(model_spec_for(args.latency, spec))
@@ -165,13 +215,14 @@ def run(args: argparse.Namespace) -> int:
         kind = "floor" if model is None else model.kind
         st = (steps if steps is not None else default_steps(model)) if kind == "diffusion" else []
         summary, clips = evaluate_motions(motions, model, set_sites, insoles, st or None, noise, args.seed,
-                                          progress=progress, keep=keep, desc=f"{label or spec}",
+                                          progress=progress, keep=keep or confidence, desc=f"{label or spec}",
                                           smoothing=args.smoothing,
                                           contact_detector="default" if args.contact_detector else None,
                                           inpaint_noise=args.inpaint_noise, mirror=args.mirror,
                                           stride_scale=args.stride_scale,
                                           pelvis_odometry="default" if args.pelvis_odometry else None,
-                                          causal=causal)
+                                          causal=causal, confidence=confidence and kind == "diffusion",
+                                          lanes=lanes)
         summary.update({
             "model": str(spec), "kind": kind, "sensors": list(set_sites),
             "insoles": insoles, "steps": _steps_label(st, kind), "step_list": st if kind == "diffusion" else None,
@@ -186,7 +237,10 @@ def run(args: argparse.Namespace) -> int:
         return summary, clips
 
     keep = args.export_dir is not None
-    result, clips = one(args.model, sites, args.insoles, keep=keep, label=f"{args.model} {','.join(sites)}")
+    result, clips = one(args.model, sites, args.insoles, keep=keep, label=f"{args.model} {','.join(sites)}",
+                        confidence=args.confidence)
+    if args.confidence:
+        _confidence(args, result, clips, sites, one)
     result["per_clip"] = [{"name": c.name, **c.metrics.summary()} for c in clips]
     result["per_subject"] = per_subject([c.metrics for c in clips])
     result["truth_repaired"] = repaired

@@ -24,7 +24,9 @@ class ExportMotion:
     (m); joints: (T, 24, 3) joint positions (m), joint i = start of segment i; contacts:
     (T, 4) bool (l_heel, l_toe, r_heel, r_toe); contact_prob: (T, 4) or None; body: the
     bone geometry the poses were made with; fps: the nominal frame rate (20 Hz); meta:
-    provenance (source recording, model, steps, sensors, insoles, time_origin, ...).
+    provenance (source recording, model, steps, sensors, insoles, time_origin, ...);
+    spread_deg (T, 24) and root_spread_m (T,): the poser's confidence per segment (deg)
+    and for the root (m), NaN where it was off, or None when no frame has one.
     """
 
     time: np.ndarray
@@ -36,6 +38,8 @@ class ExportMotion:
     fps: float = float(FPS_MODEL)
     contact_prob: np.ndarray | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    spread_deg: np.ndarray | None = None
+    root_spread_m: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.time = np.asarray(self.time, dtype=np.float64)
@@ -52,6 +56,13 @@ class ExportMotion:
             raise ValueError(f"export: inconsistent motion arrays for {T} frames: {bad or self.time.shape}")
         if self.contact_prob is not None:
             self.contact_prob = np.asarray(self.contact_prob, dtype=np.float64).reshape(T, N_CONTACTS)
+        if self.spread_deg is not None or self.root_spread_m is not None:
+            seg = np.full((T, N_SEGMENTS), np.nan) if self.spread_deg is None else self.spread_deg
+            root = np.full(T, np.nan) if self.root_spread_m is None else self.root_spread_m
+            self.spread_deg = np.asarray(seg, dtype=np.float64).reshape(T, N_SEGMENTS)
+            self.root_spread_m = np.asarray(root, dtype=np.float64).reshape(T)
+            if not (np.isfinite(self.spread_deg).any() or np.isfinite(self.root_spread_m).any()):
+                self.spread_deg = self.root_spread_m = None  # confidence was off throughout
 
     @property
     def n_frames(self) -> int:

@@ -15,9 +15,12 @@ One row per 20 Hz frame, comma separated, one header row of column names, no com
 - per segment: ``<segment>_joint_x_m, _y_m, _z_m``: world position of the joint where the
   segment starts (the pelvis joint equals the root);
 - ``contact_l_heel, contact_l_toe, contact_r_heel, contact_r_toe``: 1 if that point is
-  on the ground, else 0.
+  on the ground, else 0;
+- only when the poser computed a confidence (``inference/poser/confidence.py``): per
+  segment ``<segment>_spread_deg``, how far other inpaintings put it (0 = measured; nan
+  in frames without one), and ``root_spread_m``.
 
-24 x 4 + 24 x 3 + 8 = 176 columns. Numbers use 9 significant digits (well below the
+24 x 4 + 24 x 3 + 8 = 176 columns, 201 with the confidence. Numbers use 9 significant digits (well below the
 reconstruction's own error, and a quaternion round trip stays within 1e-8).
 """
 
@@ -32,21 +35,25 @@ from app.export.common import ExportMotion, atomic_target, continuous_quaternion
 from inference.body.skeleton import CONTACTS, SEGMENTS
 
 
-def csv_columns() -> list[str]:
-    """The header row (see the module docstring)."""
+def csv_columns(spread: bool = False) -> list[str]:
+    """The header row (see the module docstring); ``spread``: with the confidence columns."""
     cols = ["time_s", "root_x_m", "root_y_m", "root_z_m"]
     cols += [f"{s}_q{c}" for s in SEGMENTS for c in "wxyz"]
     cols += [f"{s}_joint_{c}_m" for s in SEGMENTS for c in "xyz"]
     cols += [f"contact_{c}" for c in CONTACTS]
+    if spread:
+        cols += [f"{s}_spread_deg" for s in SEGMENTS] + ["root_spread_m"]
     return cols
 
 
 def csv_table(m: ExportMotion) -> np.ndarray:
-    """(T, 176) numbers in ``csv_columns()`` order."""
+    """(T, 176) numbers in ``csv_columns()`` order, (T, 201) with the confidence."""
     T = m.n_frames
     q = continuous_quaternions(m.rot).reshape(T, -1)
-    return np.concatenate([m.time[:, None], m.root, q, m.joints.reshape(T, -1),
-                           m.contacts.astype(np.float64)], axis=1)
+    parts = [m.time[:, None], m.root, q, m.joints.reshape(T, -1), m.contacts.astype(np.float64)]
+    if m.spread_deg is not None:
+        parts += [m.spread_deg, m.root_spread_m[:, None]]
+    return np.concatenate(parts, axis=1)
 
 
 def write_csv(path: str | os.PathLike, m: ExportMotion) -> Path:
@@ -55,9 +62,10 @@ def write_csv(path: str | os.PathLike, m: ExportMotion) -> Path:
     path = Path(path)
     tmp = atomic_target(path)
     table = csv_table(m)
-    n_float = table.shape[1] - 4
-    fmt = ["%.9g"] * n_float + ["%d"] * 4
-    np.savetxt(tmp, table, delimiter=",", fmt=fmt, header=",".join(csv_columns()), comments="")
+    spread = m.spread_deg is not None
+    n_float = len(csv_columns()) - 4
+    fmt = ["%.9g"] * n_float + ["%d"] * 4 + (["%.4g"] * (table.shape[1] - n_float - 4) if spread else [])
+    np.savetxt(tmp, table, delimiter=",", fmt=fmt, header=",".join(csv_columns(spread)), comments="")
     os.replace(tmp, path)
     return path
 

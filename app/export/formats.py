@@ -34,6 +34,7 @@ from app.export.csv_file import write_csv
 from app.export.hdf5_file import write_hdf5
 from app.export.opensim import write_mot
 from inference.body.body import Body
+from inference.body.skeleton import N_SEGMENTS
 
 if TYPE_CHECKING:
     from app.pipeline import LivePose
@@ -83,7 +84,8 @@ def motion_from_recording(rec: Recording, body: Body) -> ExportMotion:
             "sensors": list(md.get("sensors") or rec.sites), "insoles": bool(md.get("insoles", False)),
             "time_origin": t0, "what": "recorded live reconstruction"}
     return ExportMotion(time=r["t"] - t0, rot=r["R"], root=r["root"], joints=r["joints"], contacts=r["contacts"],
-                        contact_prob=r.get("contact_prob"), body=body, meta=meta)
+                        contact_prob=r.get("contact_prob"), body=body, meta=meta, spread_deg=r.get("spread_deg"),
+                        root_spread_m=r.get("root_spread_m"))
 
 
 def motion_from_poses(poses: Sequence[LivePose], body: Body, rec: Recording | None = None,
@@ -98,7 +100,10 @@ def motion_from_poses(poses: Sequence[LivePose], body: Body, rec: Recording | No
         time=np.array([lp.t for lp in poses]) - t0,
         rot=np.stack([lp.pose.rot for lp in poses]), root=np.stack([lp.pose.root for lp in poses]),
         joints=np.stack([lp.pose.joints for lp in poses]), contacts=np.stack([lp.pose.contacts for lp in poses]),
-        contact_prob=np.stack([lp.pose.contact_prob for lp in poses]), body=body, meta=m)
+        contact_prob=np.stack([lp.pose.contact_prob for lp in poses]), body=body, meta=m,
+        spread_deg=np.stack([np.full(N_SEGMENTS, np.nan) if lp.pose.spread_deg is None else lp.pose.spread_deg
+                             for lp in poses]),
+        root_spread_m=np.array([np.nan if lp.pose.root_spread_m is None else lp.pose.root_spread_m for lp in poses]))
 
 
 # ---------------------------------------------------------------------------- dispatch

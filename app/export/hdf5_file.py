@@ -17,6 +17,10 @@ Datasets (T = frames, float64 unless said):
     contact_prob (T, 4)   the model's contact values in [0, 1] (when known)
     body_offsets (24, 3)  bone offsets (joint i relative to its parent, parent's rest
                           frame, m): with rot and root they give joints by FK
+    spread_deg (T, 24)    per segment, how far other inpaintings put it, deg (0 where
+                          measured; NaN without one) -- only when the poser computed a
+                          confidence (inference/poser/confidence.py)
+    root_spread_m (T,)    the same for the root, m
 
 Root attributes: ``format`` ("imucap-motion"), ``version``, ``fps``, ``segments``,
 ``parents``, ``contacts`` (names), ``body_height_m``, ``units`` (JSON), ``frame`` (the
@@ -42,7 +46,8 @@ from inference.body.skeleton import CONTACTS, PARENTS, SEGMENTS
 FORMAT = "imucap-motion"
 VERSION = 1
 UNITS = {"time": "s", "root": "m", "joints": "m", "body_offsets": "m", "rot": "rotation matrix R_WB",
-         "quat": "unit quaternion (w, x, y, z) R_WB", "contacts": "bool", "contact_prob": "1"}
+         "quat": "unit quaternion (w, x, y, z) R_WB", "contacts": "bool", "contact_prob": "1", "spread_deg": "deg",
+         "root_spread_m": "m"}
 FRAME = "world: right-handed, Z up, gravity -Z, X = the subject's forward at calibration"
 
 
@@ -82,6 +87,9 @@ def write_hdf5(path: str | os.PathLike, m: ExportMotion) -> Path:
         if m.contact_prob is not None:
             f.create_dataset("contact_prob", data=m.contact_prob)
         f.create_dataset("body_offsets", data=m.body.offsets)
+        if m.spread_deg is not None:
+            f.create_dataset("spread_deg", data=m.spread_deg, compression="gzip", shuffle=True)
+            f.create_dataset("root_spread_m", data=m.root_spread_m)
     os.replace(tmp, path)
     return path
 

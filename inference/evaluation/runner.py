@@ -33,6 +33,8 @@ from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX, SITE_SEGMENT, par
 from inference.features.layout import N_FEATURES, SL_ACC, SL_CONTACT, SL_ROT, observation_mask
 from inference.metrics.errors import ClipMetrics, evaluate_clip, paired_difference, summarize
 from inference.model.files import LoadedModel
+from inference.poser.batched import reconstruct_many
+from inference.poser.confidence import ConfidenceSettings, confidence_settings
 from inference.poser.poser import Poser, Reconstruction, reconstruct_offline, resolve_model
 from inference.signals.resample import FPS_MODEL, STEP, downsample
 from inference.signals.synthesis import NoiseModel, kinematics, synthesize
@@ -46,6 +48,8 @@ REPORT_SETS: tuple[tuple[str, tuple[str, ...], bool], ...] = (
     ("2 sites (shanks)", ("l_shank", "r_shank"), False),
 )
 REPORT_MODELS: tuple[str, ...] = ("diffusion", "regressor", "floor")
+# clips sharing each model call: 16 windows with mirror averaging, the fastest per window on one thread
+DEFAULT_LANES = 8
 
 
 def evaluation_noise() -> NoiseModel:
@@ -127,19 +131,32 @@ class ClipResult:
     inp: ClipInput
 
 
+def clip_poser(model: LoadedModel | None, inp: ClipInput, steps=None, seed: int = 0, smoothing: bool = True,
+               contact_detector="default", inpaint_noise: str | None = None, mirror: bool | None = None,
+               stride_scale: bool = True, pelvis_odometry="default",
+               confidence: ConfidenceSettings | bool | None = None) -> Poser:
+    """The live poser for one clip, starting from a standing history at the clip's
+    first root position (only for nicer exports: every metric is translation-free).
+    ``inpaint_noise``: the poser's noise mode, ``mirror`` its mirror averaging (None: the
+    model file's own), ``stride_scale`` its shank stride scaling of the root,
+    ``pelvis_odometry`` its root walk without shanks (None: the model's own),
+    ``confidence`` its spread (drawn with the clip's seed)."""
+    conf = confidence_settings(confidence)
+    if conf is not None:
+        conf = replace(conf, seed=seed)
+    return Poser(model, body=inp.body, steps=steps, seed=seed, root_xy0=(inp.root[0, 0], inp.root[0, 1]),
+                 smoothing=smoothing, contact_detector=contact_detector, noise=inpaint_noise, mirror=mirror,
+                 stride_scale=stride_scale, pelvis_odometry=pelvis_odometry, confidence=conf)
+
+
 def reconstruct_clip(model: LoadedModel | None, inp: ClipInput, steps=None, seed: int = 0,
                      progress: Callable[[int], object] | None = None, smoothing: bool = True,
                      contact_detector="default", inpaint_noise: str | None = None,
                      mirror: bool | None = None, stride_scale: bool = True,
-                     pelvis_odometry="default") -> Reconstruction:
-    """The live poser over one clip, starting from a standing history at the clip's
-    first root position (only for nicer exports: every metric is translation-free).
-    ``inpaint_noise``: the poser's noise mode, ``mirror`` its mirror averaging (None: the
-    model file's own), ``stride_scale`` its shank stride scaling of the root,
-    ``pelvis_odometry`` its root walk without shanks (None: the model's own)."""
-    poser = Poser(model, body=inp.body, steps=steps, seed=seed, root_xy0=(inp.root[0, 0], inp.root[0, 1]),
-                  smoothing=smoothing, contact_detector=contact_detector, noise=inpaint_noise, mirror=mirror,
-                  stride_scale=stride_scale, pelvis_odometry=pelvis_odometry)
+                     pelvis_odometry="default", confidence: ConfidenceSettings | bool | None = None) -> Reconstruction:
+    """``clip_poser`` frame by frame over one clip, as live."""
+    poser = clip_poser(model, inp, steps, seed, smoothing, contact_detector, inpaint_noise, mirror, stride_scale,
+                       pelvis_odometry, confidence)
     return reconstruct_offline(poser, inp.features, inp.mask, progress=progress)
 
 
@@ -160,29 +177,32 @@ def evaluate_motions(
     mirror: bool | None = None,
     stride_scale: bool = True,
     pelvis_odometry="default",
+    confidence: ConfidenceSettings | bool | None = None,
+    lanes: int = DEFAULT_LANES,
     causal: bool = False,
 ) -> tuple[dict, list[ClipResult]]:
     """Evaluate one model and sensor set over motions; returns (pooled summary, per-clip
     results). ``keep`` retains reconstructions (for exports) instead of only metrics;
     ``smoothing=False`` scores the poser's outputs without its 1-Euro filters;
     ``contact_detector`` goes to the poser (None: the model's own contacts), and so do
-    ``inpaint_noise`` and ``mirror`` (None: the model file's own), ``stride_scale`` and
-    ``pelvis_odometry``. ``causal``: the signals through the low-latency mode's trailing
+    ``inpaint_noise`` and ``mirror`` (None: the model file's own), ``stride_scale``,
+    ``pelvis_odometry`` and ``confidence``. ``lanes`` clips share each model call
+    (``batched.reconstruct_many``: each clip's answer is its frame-by-frame one); 1 runs
+    them one after the other. ``causal``: the signals through the low-latency mode's trailing
     acceleration filter (docs/latency.md)."""
     from tqdm import tqdm
 
     inputs = [clip_input(m, sites, insoles, noise, clip_seed(seed, m.name), causal=causal) for m in motions]
     total = sum(i.features.shape[0] for i in inputs)
-    results: list[ClipResult] = []
+    posers = [clip_poser(model, inp, steps, clip_seed(seed, inp.name), smoothing, contact_detector, inpaint_noise,
+                         mirror, stride_scale, pelvis_odometry, confidence) for inp in inputs]
     with tqdm(total=total, desc=desc, unit="frame", file=sys.stderr, disable=not progress,
               dynamic_ncols=True) as bar:
-        for inp in inputs:
-            rec = reconstruct_clip(model, inp, steps, clip_seed(seed, inp.name), progress=bar.update,
-                                   smoothing=smoothing, contact_detector=contact_detector,
-                                   inpaint_noise=inpaint_noise, mirror=mirror, stride_scale=stride_scale,
-                                   pelvis_odometry=pelvis_odometry)
-            cm = evaluate_clip(inp.name, rec.rot, rec.root, rec.joints, inp.rot, inp.root, inp.joints, FPS_MODEL)
-            results.append(ClipResult(inp.name, cm, rec if keep else None, inp if keep else None))
+        recs = reconstruct_many(posers, [(i.features, i.mask) for i in inputs], lanes=lanes, progress=bar.update)
+    results: list[ClipResult] = []
+    for inp, rec in zip(inputs, recs):
+        cm = evaluate_clip(inp.name, rec.rot, rec.root, rec.joints, inp.rot, inp.root, inp.joints, FPS_MODEL)
+        results.append(ClipResult(inp.name, cm, rec if keep else None, inp if keep else None))
     return summarize([r.metrics for r in results]), results
 
 
@@ -333,6 +353,7 @@ def resolve_models(specs: Sequence[str]) -> dict[str, LoadedModel | None]:
 
 __all__ = [
     "SIX", "REPORT_SETS", "REPORT_MODELS", "evaluation_noise", "face_forward", "ClipInput", "clip_input", "clip_seed",
-    "ClipResult", "reconstruct_clip", "evaluate_motions", "load_motions", "model_label", "report_markdown",
+    "ClipResult", "clip_poser", "reconstruct_clip", "DEFAULT_LANES",
+    "evaluate_motions", "load_motions", "model_label", "report_markdown",
     "compare_rows", "comparison_markdown", "synthetic_motion", "resolve_models"
 ]

@@ -51,9 +51,11 @@ import functools
 import os
 import types
 import warnings
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -65,10 +67,17 @@ from inference.body.skeleton import N_CONTACTS, N_SEGMENTS, SEGMENT_INDEX, SITE_
 from inference.features.layout import N_FEATURES, SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
 from inference.features.mirror import MirrorAveraged
 from inference.model.denoiser import Denoiser, freeze_for_cpu
-from inference.model.diffusion import Schedule, inpaint, paper_steps, parse_steps
+from inference.model.diffusion import Schedule, inpaint, paper_steps, parse_steps, redraw
 from inference.model.files import LoadedModel, load_model
 from inference.model.onnx_runtime import onnx_net, resolve_runtime
 from inference.model.regressor import regress
+from inference.poser.confidence import (
+    ConfidenceSettings,
+    SpreadPool,
+    confidence_settings,
+    root_deviation_m,
+    segment_deviation_deg,
+)
 from inference.poser.contact_detector import DETECTOR_THRESHOLD, SHANK_INDEX, ContactDetector, load_detector
 from inference.poser.joint_constraints import constrain_knees
 from inference.poser.pelvis_odometry import PELVIS_INDEX, Odometry, load_odometry
@@ -194,7 +203,10 @@ class PoseFrame:
     contact_prob: (4,) the model's raw contact values clipped to [0, 1] (l_heel, l_toe,
     r_heel, r_toe); features: (190,) the full frame as written to the history (observed
     entries are exactly the input); observed: (190,) the mask actually used (input mask
-    and finite values); index: frame counter since the last reset.
+    and finite values); index: frame counter since the last reset. spread_deg: (24,) how
+    far other inpaintings of the window put each segment (degrees, 0 where measured) and
+    root_spread_m: the same for the root (``confidence``); None when the poser computes
+    no confidence.
     """
 
     index: int
@@ -205,6 +217,8 @@ class PoseFrame:
     contact_prob: np.ndarray
     features: np.ndarray
     observed: np.ndarray
+    spread_deg: np.ndarray | None = None
+    root_spread_m: float | None = None
 
 
 def standing_features(body: Body, pose: str = "npose") -> np.ndarray:
@@ -227,6 +241,17 @@ def standing_features(body: Body, pose: str = "npose") -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- the poser
+
+class Observation(NamedTuple):
+    """One frame's observation as the poser takes it: f_in the features as given, m the
+    mask used (given and finite), f32 float32 with the standing pose where unobserved, fn
+    the same normalised."""
+
+    f_in: Tensor
+    m: Tensor
+    f32: Tensor
+    fn: Tensor
+
 
 def noise_mode_for(model: LoadedModel | None, noise: str | None = None) -> str:
     """The inpainting noise mode a poser runs with: ``noise`` if given, else what the model
@@ -252,7 +277,9 @@ class Poser:
     subject's Body (bone lengths for FK and the root correction) or a height in metres.
     steps: diffusion step list (anything ``diffusion.parse_steps`` takes); default
     ``default_steps(model)``. seed: the inpainting noise generator's seed, so a replay is
-    reproducible. root_xy0: where the root path starts.
+    reproducible. root_xy0: where the root path starts. confidence: a per-segment spread
+    with each frame (``confidence.ConfidenceSettings``, True for its defaults; diffusion
+    models only); the pose itself is the same with it on or off.
     """
 
     def __init__(
@@ -275,6 +302,7 @@ class Poser:
         mirror: bool | None = None,
         stride_scale: bool = True,
         pelvis_odometry: Odometry | str | os.PathLike | None = "default",
+        confidence: ConfidenceSettings | bool | None = None,
         runtime: str = "torch",
     ) -> None:
         self.model = model
@@ -327,17 +355,13 @@ class Poser:
         # batch): a frozen TorchScript trace of that shape is ~25-30% faster per call on CPU
         # (bench_model.py)
         self.mirror = mirror_for(model, mirror)
-        self._net = None
-        if model is not None:
-            frozen = freeze and isinstance(model.model, Denoiser)
-            batch = 2 if self.mirror else 1
-            if frozen and self.runtime == "onnx":
-                eager = MirrorAveraged(model.model, model.norm_mean, model.norm_std) if self.mirror else model.model
-                self._net = onnx_net(eager, 1, self.window, N_FEATURES, model.config.mask_input)
-            if self._net is None:
-                self._net = freeze_for_cpu(model.model, batch=batch, window=self.window) if frozen else model.model
-                if self.mirror:
-                    self._net = MirrorAveraged(self._net, model.norm_mean, model.norm_std)
+        self._freeze = freeze
+        self._net = self.net_for(1) if model is not None else None
+        self.confidence = confidence_settings(confidence) if self.kind == "diffusion" else None
+        self._draw_net = None
+        if self.confidence is not None:
+            self._draw_net = self.net_for(self.confidence.draws, mirror=False)
+            self._spread = SpreadPool(self.confidence.pool)
         if model is not None:
             self._mean = torch.as_tensor(model.norm_mean, dtype=torch.float32)
             self._std = torch.as_tensor(model.norm_std, dtype=torch.float32)
@@ -351,6 +375,29 @@ class Poser:
         self._shank_idx = torch.as_tensor(SHANK_INDEX)
         self._pelvis_idx = torch.as_tensor(PELVIS_INDEX)
         self.reset()
+
+    def net_for(self, windows: int, mirror: bool | None = None):
+        """The model as called on ``windows`` windows at once: a frozen trace of that batch
+        shape (mirror averaging doubles it) when the poser freezes. Traces are kept per
+        model and shape (``_model_nets``), so the many posers of an offline run share them."""
+        mirror = self.mirror if mirror is None else mirror
+        frozen = self._freeze and isinstance(self.model.model, Denoiser)
+        nets = _model_nets(self.model)
+        onnx = frozen and windows == 1 and self.runtime == "onnx"
+        key = (windows, mirror, frozen, self.window) + (("onnx",) if onnx else ())
+        if key not in nets:
+            model = self.model
+            batch = windows * (2 if mirror else 1)
+            fast = None
+            if onnx:
+                eager = MirrorAveraged(model.model, model.norm_mean, model.norm_std) if mirror else model.model
+                fast = onnx_net(eager, windows, self.window, N_FEATURES, model.config.mask_input)
+            if fast is not None:
+                nets[key] = fast
+            else:
+                net = freeze_for_cpu(model.model, batch=batch, window=self.window) if frozen else model.model
+                nets[key] = MirrorAveraged(net, model.norm_mean, model.norm_std) if mirror else net
+        return nets[key]
 
     # ------------------------------------------------------------------ state
     def reset(self, root_xy0: tuple[float, float] | None = None) -> None:
@@ -375,6 +422,9 @@ class Poser:
             self._root_xy = torch.tensor(self.root_xy0, dtype=torch.float64)
             self._root_raw = np.zeros(2)  # the root path without stride scaling
             self._gen = torch.Generator().manual_seed(self.seed)
+            if self.confidence is not None:
+                self._draw_gen = torch.Generator().manual_seed(self.confidence.seed)
+                self._spread.reset()
         for f in self._filters or ():
             f.reset()
         if self.stride is not None:
@@ -395,6 +445,17 @@ class Poser:
             self._pos = N - 2
         self._pos += 1
         return self._buf[:, self._pos - N + 1: self._pos + 1]
+
+    def history_rows(self) -> Tensor:
+        """(N, F) the current window as the model takes it (normalised), oldest first: a
+        view, valid until the next ``enter``."""
+        return self._buf[0, self._pos - self.window + 1: self._pos + 1]
+
+    def history_mask_rows(self) -> Tensor:
+        """(N, F) what the history mode tells the model is known of the current window."""
+        if self._mbuf is None:
+            return torch.ones(self.window, N_FEATURES, dtype=torch.bool)
+        return self._mbuf[0, self._pos - self.window + 1: self._pos + 1]
 
     def history(self) -> np.ndarray:
         """(N, 190) the current window in physical units (a copy), for inspection/tests."""
@@ -424,69 +485,155 @@ class Poser:
         this frame (``features.observation_mask`` of the sensors that delivered).
         """
         with torch.inference_mode():
-            f_in = torch.as_tensor(_writable(features))
-            m = torch.as_tensor(_writable(observed_mask)).to(torch.bool).reshape(N_FEATURES)
-            f32 = f_in.to(torch.float32).reshape(N_FEATURES)
-            m = m & torch.isfinite(f32)
-            f32 = torch.where(m, f32, self._stand)  # no NaN may reach any arithmetic
-            fn = self._normalize(f32)
-
-            win = self._advance()
-            win[0, -1] = torch.where(m, fn, win[0, -2])
-            if self.history_mode == "measured":
-                self._mbuf[0, self._pos] = m
-                mask = self._mbuf[:, self._pos - self.window + 1: self._pos + 1]
-            else:
-                self._mask[0, -1] = m
-                mask = self._mask
+            obs = self.observe(features, observed_mask)
+            win, mask = self.enter(obs)
             out = self._predict(win, mask)
-            y = out[0, -1] * self._std + self._mean  # physical units, fresh tensor
+            draws = None
+            if self.confidence_due():
+                draws = self.draw(out, win, mask, self.draw_noise())[:, -1]
+            return self.finish(out[0, -1], win, obs, draws)
 
-            # clean the reconstruction: valid rotations, 0/1 contacts (what the data holds)
-            R = rot6d_to_matrix(y[SL_ROT].reshape(N_SEGMENTS, 6))
-            seg_measured = m[SL_ROT].view(N_SEGMENTS, 6).all(dim=-1)
-            if self.knee_hinge:
-                R = constrain_knees(R, seg_measured)
-            y[SL_ROT] = torch.where(m[SL_ROT], y[SL_ROT], matrix_to_rot6d(R).reshape(-1))
-            prob = y[SL_CONTACT].clamp(0.0, 1.0)
-            threshold = self.contact_threshold
-            det = self.contact_detector
-            if det is not None and not bool(m[SL_CONTACT].any()) and bool(m[self._shank_idx].all()):
-                prob, threshold = det.probabilities(self._recent(win, self._shank_idx, det.context)), DETECTOR_THRESHOLD
-            contact = prob > threshold
-            y[SL_CONTACT] = torch.where(m[SL_CONTACT], y[SL_CONTACT], contact.to(y.dtype))
+    # The step in stages, so that an offline run can batch the model calls of many frames
+    # (``batched.reconstruct_batched``) and still pass each frame through the same code.
+    def observe(self, features: np.ndarray | Tensor, observed_mask: np.ndarray | Tensor) -> Observation:
+        """This frame's observation, as the model and the history take it."""
+        f_in = torch.as_tensor(_writable(features))
+        m = torch.as_tensor(_writable(observed_mask)).to(torch.bool).reshape(N_FEATURES)
+        f32 = f_in.to(torch.float32).reshape(N_FEATURES)
+        m = m & torch.isfinite(f32)
+        f32 = torch.where(m, f32, self._stand)  # no NaN may reach any arithmetic
+        return Observation(f_in, m, f32, self._normalize(f32))
 
+    def enter(self, obs: Observation) -> tuple[Tensor, Tensor]:
+        """Shift the window and put the observation into its last frame; returns the
+        window view (1, N, F) and the mask the model is given."""
+        win = self._advance()
+        win[0, -1] = torch.where(obs.m, obs.fn, win[0, -2])
+        if self.history_mode == "measured":
+            self._mbuf[0, self._pos] = obs.m
+            return win, self._mbuf[:, self._pos - self.window + 1: self._pos + 1]
+        self._mask[0, -1] = obs.m
+        return win, self._mask
+
+    def confidence_due(self) -> bool:
+        """Whether the frame about to be finished gets new draws."""
+        return self.confidence is not None and self.index % self.confidence.every == 0
+
+    def draw_noise(self, frames: int = 1) -> Tensor:
+        """(frames * draws, N, F) the draws' noise of the next ``frames`` due frames, in the
+        order a frame-by-frame run draws it."""
+        return torch.randn((frames * self.confidence.draws, self.window, N_FEATURES), generator=self._draw_gen)
+
+    def draw(self, out: Tensor, win: Tensor, mask: Tensor, noise: Tensor, net=None,
+             heights: Tensor | None = None) -> Tensor:
+        """(B * draws, N, F) normalised draws near the answers ``out`` (B, N, F) of the
+        windows ``win`` with masks ``mask``; ``net``: the denoiser for that batch size,
+        ``heights`` (B,): the subjects' (default: this poser's)."""
+        k = self.confidence.draws
+
+        def rep(a: Tensor) -> Tensor:
+            return a.repeat_interleave(k, dim=0) if k > 1 else a
+
+        h = rep(heights) if heights is not None else self._height.expand(noise.shape[0])
+        return redraw(net or self._draw_net, rep(out), rep(win), rep(mask), h, self.confidence.level, noise,
+                      self.schedule, mask_input=self.model.config.mask_input)
+
+    def finish(self, y_n: Tensor, win: Tensor, obs: Observation, draws: Tensor | None = None) -> PoseFrame:
+        """Clean the model's answer ``y_n`` (F,) for the window's last frame (normalised),
+        correct and integrate the root, write the frame into the history and return it;
+        ``draws`` (k, F): other inpaintings of the frame for the spread, or None."""
+        f_in, m, f32, fn = obs
+        y = y_n * self._std + self._mean  # physical units, fresh tensor
+
+        # clean the reconstruction: valid rotations, 0/1 contacts (what the data holds)
+        R = rot6d_to_matrix(y[SL_ROT].reshape(N_SEGMENTS, 6))
+        seg_measured = m[SL_ROT].view(N_SEGMENTS, 6).all(dim=-1)
+        if self.knee_hinge:
+            R = constrain_knees(R, seg_measured)
+        y[SL_ROT] = torch.where(m[SL_ROT], y[SL_ROT], matrix_to_rot6d(R).reshape(-1))
+        prob = y[SL_CONTACT].clamp(0.0, 1.0)
+        threshold = self.contact_threshold
+        det = self.contact_detector
+        detected = False
+        if det is not None and not bool(m[SL_CONTACT].any()) and bool(m[self._shank_idx].all()):
+            prob, threshold = det.probabilities(self._recent(win, self._shank_idx, det.context)), DETECTOR_THRESHOLD
+            detected = True
+        contact = prob > threshold
+        y[SL_CONTACT] = torch.where(m[SL_CONTACT], y[SL_CONTACT], contact.to(y.dtype))
+
+        joints_rel = forward_kinematics(R, torch.zeros(3), self._offsets)
+        cps = contact_points(R, joints_rel, self._contact_offsets)
+        root_step = "measured" if bool(m[SL_DP].any()) else "model"
+        if self.root_correction and not bool(m[SL_DP].any()):
+            odo = self.pelvis_odometry
+            if odo is not None and not bool(m[self._shank_idx].all()) and bool(m[self._pelvis_idx].all()):
+                y[SL_DP] = odo.displacement(self._recent(win, self._pelvis_idx, odo.context))
+                root_step = "odometry"
+            else:
+                y[SL_DP] = correct_root_displacement(y[SL_DP], self._prev_cps, cps, contact)
+                root_step = "contacts"
+        apart = None
+        if draws is not None:
+            apart = self._draws_apart(draws, R, y, m, seg_measured, contact if detected else None, threshold,
+                                      root_step)
+        self._prev_cps = cps
+
+        # history keeps the exact normalised measurement where observed
+        win[0, -1] = torch.where(m, fn, self._normalize(y))
+
+        scale = 1.0
+        if self.stride is not None and not bool(m[SL_DP].any()):
+            scale = self._stride_scale(joints_rel, f32, m, contact, y[SL_DP])
+            y[SL_DP] = y[SL_DP] * scale
+        if apart is not None:
+            seg_dev, pz_d, dp_d = apart
+            self._spread.add(seg_dev, root_deviation_m(pz_d, y[SL_PZ], dp_d * scale, y[SL_DP], FPS_MODEL))
+        self._root_xy += y[SL_DP].to(torch.float64)
+        root = torch.cat([self._root_xy.to(torch.float32), y[SL_PZ]])
+        if self._filters is not None:
+            root_filter, rot_filter = self._filters
+            root = root_filter(root)
+            R = rot_filter(R, seg_measured)
             joints_rel = forward_kinematics(R, torch.zeros(3), self._offsets)
-            cps = contact_points(R, joints_rel, self._contact_offsets)
-            if self.root_correction and not bool(m[SL_DP].any()):
-                odo = self.pelvis_odometry
-                if odo is not None and not bool(m[self._shank_idx].all()) and bool(m[self._pelvis_idx].all()):
-                    y[SL_DP] = odo.displacement(self._recent(win, self._pelvis_idx, odo.context))
-                else:
-                    y[SL_DP] = correct_root_displacement(y[SL_DP], self._prev_cps, cps, contact)
-            self._prev_cps = cps
-
-            # history keeps the exact normalised measurement where observed
-            win[0, -1] = torch.where(m, fn, self._normalize(y))
-
-            if self.stride is not None and not bool(m[SL_DP].any()):
-                y[SL_DP] = y[SL_DP] * self._stride_scale(joints_rel, f32, m, contact, y[SL_DP])
-            self._root_xy += y[SL_DP].to(torch.float64)
-            root = torch.cat([self._root_xy.to(torch.float32), y[SL_PZ]])
-            if self._filters is not None:
-                root_filter, rot_filter = self._filters
-                root = root_filter(root)
-                R = rot_filter(R, seg_measured)
-                joints_rel = forward_kinematics(R, torch.zeros(3), self._offsets)
-            joints = joints_rel + root
-            feats = torch.where(m, f_in.to(torch.float64).reshape(N_FEATURES), y.to(torch.float64))
-            frame = PoseFrame(
-                index=self.index, rot=R.numpy(), root=root.numpy(), joints=joints.numpy(),
-                contacts=contact.numpy(), contact_prob=prob.numpy(), features=feats.numpy(),
-                observed=m.numpy(),
-            )
+        joints = joints_rel + root
+        feats = torch.where(m, f_in.to(torch.float64).reshape(N_FEATURES), y.to(torch.float64))
+        pool = self._spread if self.confidence is not None else None
+        frame = PoseFrame(
+            index=self.index, rot=R.numpy(), root=root.numpy(), joints=joints.numpy(),
+            contacts=contact.numpy(), contact_prob=prob.numpy(), features=feats.numpy(),
+            observed=m.numpy(),
+            spread_deg=None if pool is None or pool.spread_deg is None else pool.spread_deg.copy(),
+            root_spread_m=None if pool is None else pool.root_spread_m,
+        )
         self.index += 1
         return frame
+
+    def _draws_apart(self, draws: Tensor, R: Tensor, y: Tensor, m: Tensor, seg_measured: Tensor,
+                     detected: Tensor | None, threshold: float, root_step: str) -> tuple[np.ndarray, Tensor, Tensor]:
+        """How far each draw (k, F) is from the cleaned answer: (k, 24) degrees, and the
+        draws' root height (k,) and root step (k, 2) as the answer's root path would take
+        them (the same contact rule; the answer's own step where a sensor gives it)."""
+        yd = draws * self._std + self._mean
+        k = yd.shape[0]
+        Rd = rot6d_to_matrix(yd[:, SL_ROT].reshape(k, N_SEGMENTS, 6))
+        if self.knee_hinge:
+            Rd = constrain_knees(Rd, seg_measured)
+        seg_dev = segment_deviation_deg(Rd, R)
+        pz_d = torch.where(m[SL_PZ], y[SL_PZ], yd[:, SL_PZ])
+        if root_step in ("odometry", "measured"):
+            dp_d = y[SL_DP].expand(k, 2)
+        elif root_step == "contacts":
+            if detected is not None:
+                contact_d = detected.expand(k, -1)
+            else:
+                contact_d = yd[:, SL_CONTACT].clamp(0.0, 1.0) > threshold
+                contact_d = torch.where(m[SL_CONTACT], y[SL_CONTACT] > 0.5, contact_d)
+            cps_d = contact_points(Rd, forward_kinematics(Rd, torch.zeros(3), self._offsets), self._contact_offsets)
+            dp_d = torch.stack([correct_root_displacement(yd[i, SL_DP], self._prev_cps, cps_d[i], contact_d[i])
+                                for i in range(k)])
+        else:
+            dp_d = yd[:, SL_DP]
+        return seg_dev, pz_d, dp_d
 
     def _recent(self, win: Tensor, idx: Tensor, n: int) -> Tensor:
         """(n, len(idx)) the features ``idx`` of the window's last n frames in physical
@@ -511,6 +658,14 @@ _SHANK_SEGMENTS = tuple(SEGMENT_INDEX[s] for s in SHANK_SITES)
 _FOOT_JOINTS = tuple(SEGMENT_INDEX[s] for s in FOOT_SEGMENTS)
 _SHANK_ROT = torch.tensor([SL_ROT.start + 6 * k + i for k in _SHANK_SEGMENTS for i in range(6)])
 _SHANK_ACC = torch.tensor([SL_ACC.start + 3 * SITE_INDEX[s] + i for s in SHANK_SITES for i in range(3)])
+
+
+_NETS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _model_nets(model: LoadedModel) -> dict:
+    """The traced forms of one loaded model's network, dropped with it."""
+    return _NETS.setdefault(model.model, {})
 
 
 def _writable(a):
@@ -541,7 +696,8 @@ def correct_root_displacement(dp: Tensor, prev_points: Tensor, points: Tensor, c
 @dataclass
 class Reconstruction:
     """A whole clip reconstructed frame by frame (20 Hz): rot (T,24,3,3), root (T,3),
-    joints (T,24,3), contacts (T,4) bool, contact_prob (T,4), features (T,190)."""
+    joints (T,24,3), contacts (T,4) bool, contact_prob (T,4), features (T,190);
+    spread_deg (T,24) and root_spread_m (T,) the poser's confidence, NaN without it."""
 
     rot: np.ndarray
     root: np.ndarray
@@ -549,6 +705,24 @@ class Reconstruction:
     contacts: np.ndarray
     contact_prob: np.ndarray
     features: np.ndarray
+    spread_deg: np.ndarray | None = None
+    root_spread_m: np.ndarray | None = None
+
+    @classmethod
+    def empty(cls, T: int) -> Reconstruction:
+        """Arrays for T frames, to be filled frame by frame (``put``)."""
+        return cls(rot=np.empty((T, N_SEGMENTS, 3, 3)), root=np.empty((T, 3)), joints=np.empty((T, N_SEGMENTS, 3)),
+                   contacts=np.empty((T, N_CONTACTS), dtype=bool), contact_prob=np.empty((T, N_CONTACTS)),
+                   features=np.empty((T, N_FEATURES)), spread_deg=np.full((T, N_SEGMENTS), np.nan),
+                   root_spread_m=np.full(T, np.nan))
+
+    def put(self, t: int, fr: PoseFrame) -> None:
+        self.rot[t], self.root[t], self.joints[t] = fr.rot, fr.root, fr.joints
+        self.contacts[t], self.contact_prob[t], self.features[t] = fr.contacts, fr.contact_prob, fr.features
+        if fr.spread_deg is not None:
+            self.spread_deg[t] = fr.spread_deg
+        if fr.root_spread_m is not None:
+            self.root_spread_m[t] = fr.root_spread_m
 
     def __len__(self) -> int:
         return int(self.rot.shape[0])
@@ -563,19 +737,12 @@ def reconstruct_offline(poser: Poser, features: np.ndarray, mask: np.ndarray, pr
     features = np.asarray(features)
     T = features.shape[0]
     mask = np.ascontiguousarray(np.broadcast_to(np.asarray(mask, dtype=bool), (T, N_FEATURES)))
-    rot = np.empty((T, N_SEGMENTS, 3, 3))
-    root = np.empty((T, 3))
-    joints = np.empty((T, N_SEGMENTS, 3))
-    contacts = np.empty((T, N_CONTACTS), dtype=bool)
-    prob = np.empty((T, N_CONTACTS))
-    feats = np.empty((T, N_FEATURES))
+    rec = Reconstruction.empty(T)
     for t in range(T):
-        fr = poser.step(features[t], mask[t])
-        rot[t], root[t], joints[t] = fr.rot, fr.root, fr.joints
-        contacts[t], prob[t], feats[t] = fr.contacts, fr.contact_prob, fr.features
+        rec.put(t, poser.step(features[t], mask[t]))
         if progress is not None:
             progress(1)
-    return Reconstruction(rot=rot, root=root, joints=joints, contacts=contacts, contact_prob=prob, features=feats)
+    return rec
 
 
 def make_poser(spec: str | os.PathLike | LoadedModel | None, body: Body | float = 1.75,

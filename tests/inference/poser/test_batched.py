@@ -1,0 +1,93 @@
+"""Offline reconstruction with the model calls of many frames batched: clips in lock step
+give each clip's frame-by-frame answer to float tolerance (confidence included); a clip
+cut in chunks stays within the history's weight of it; posers whose answer depends on
+their history run frame by frame."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from inference.evaluation.runner import SIX, clip_input, synthetic_motion
+from inference.features.layout import N_FEATURES
+from inference.model.config import ModelConfig
+from inference.model.files import LoadedModel, build_model
+from inference.poser.batched import batchable, reconstruct_batched, reconstruct_many
+from inference.poser.confidence import ConfidenceSettings
+from inference.poser.poser import DEFAULT_WEIGHTS, Poser, reconstruct_offline, resolve_model
+
+SHIPPED = dict(history="measured", noise="mean", inpaint_mode="replace-ddim")
+FIELDS = ("rot", "root", "joints", "contact_prob", "features", "spread_deg", "root_spread_m")
+# the spread is an angle between float32 rotations, in degrees: float tolerance there is ~1e-3 deg
+SLACK = {"spread_deg": 200.0}
+
+
+def _tiny(mask_input: bool = True) -> LoadedModel:
+    torch.manual_seed(0)
+    cfg = ModelConfig.tiny()
+    cfg.mask_input = mask_input
+    return LoadedModel(model=build_model("diffusion", cfg).eval(), kind="diffusion", config=cfg,
+                       norm_mean=np.zeros(N_FEATURES, np.float32), norm_std=np.ones(N_FEATURES, np.float32))
+
+
+@pytest.fixture(scope="module")
+def clips():
+    out = []
+    sets = [(2.0, SIX), (1.2, ("pelvis", "l_wrist", "r_wrist")), (2.6, ("l_shank", "r_shank"))]
+    for k, (sec, sites) in enumerate(sets):
+        m = synthetic_motion(seconds=sec, seed=k, height=1.6 + 0.1 * k)
+        out.append((m, clip_input(m, sites)))
+    return out
+
+
+def _close(a, b, atol):
+    for name in FIELDS:
+        x, y = getattr(a, name), getattr(b, name)
+        assert np.array_equal(np.isnan(x), np.isnan(y)), name
+        tol = atol * SLACK.get(name, 1.0)
+        assert np.allclose(np.nan_to_num(x), np.nan_to_num(y), atol=tol, rtol=0), (name, np.nanmax(abs(x - y)))
+    assert np.array_equal(a.contacts, b.contacts)
+
+
+@pytest.mark.parametrize("confidence", [None, ConfidenceSettings(draws=2)])
+def test_clips_in_lock_step_are_each_their_frame_by_frame_reconstruction(clips, confidence):
+    model = _tiny()
+
+    def posers():
+        return [Poser(model, body=m.body, steps=3, confidence=confidence, **SHIPPED) for m, _ in clips]
+
+    seq = [reconstruct_offline(p, i.features, i.mask) for p, (_, i) in zip(posers(), clips)]
+    many = reconstruct_many(posers(), [(i.features, i.mask) for _, i in clips], lanes=2)
+    for a, b in zip(seq, many):
+        _close(a, b, atol=1e-5)
+
+
+@pytest.mark.skipif(not DEFAULT_WEIGHTS["diffusion"].exists(), reason="shipped weights not installed")
+def test_shipped_poser_in_lock_step_matches_the_live_loop(clips):
+    model = resolve_model("diffusion")
+    seq = [reconstruct_offline(Poser(model, body=m.body), i.features, i.mask) for m, i in clips[:2]]
+    many = reconstruct_many([Poser(model, body=m.body) for m, _ in clips[:2]],
+                            [(i.features, i.mask) for _, i in clips[:2]])
+    for a, b in zip(seq, many):
+        _close(a, b, atol=1e-4)
+
+
+def test_a_clip_cut_in_chunks_stays_within_the_history_weight_of_frame_by_frame(clips):
+    model = _tiny()
+    m, inp = clips[0]
+    seq = reconstruct_offline(Poser(model, body=m.body, steps=3, **SHIPPED), inp.features, inp.mask)
+    chunked = reconstruct_batched(Poser(model, body=m.body, steps=3, **SHIPPED), inp.features, inp.mask, chunk=5)
+    assert np.abs(seq.rot - chunked.rot).max() < 1e-3
+    assert np.abs(seq.root - chunked.root).max() < 1e-3
+
+
+def test_posers_whose_answer_follows_their_history_run_frame_by_frame(clips):
+    m, inp = clips[1]
+    for poser in (Poser(_tiny(), body=m.body, steps=2), Poser(None, body=m.body),
+                  Poser(_tiny(), body=m.body, steps=2, history="reconstructed", noise="mean",
+                        inpaint_mode="replace-ddim")):
+        assert not batchable(poser)
+    a = reconstruct_offline(Poser(_tiny(), body=m.body, steps=2, seed=4), inp.features, inp.mask)
+    b = reconstruct_many([Poser(_tiny(), body=m.body, steps=2, seed=4)], [(inp.features, inp.mask)])[0]
+    assert np.array_equal(a.rot, b.rot) and np.array_equal(a.root, b.root)
