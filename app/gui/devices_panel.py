@@ -130,13 +130,14 @@ class DevicesPanel(QtWidgets.QWidget):
 
     def refresh(self) -> None:
         d = self.model.draft
-        current = self.site_combo.currentText()
-        self.site_combo.blockSignals(True)
-        self.site_combo.clear()
-        self.site_combo.addItems(list(d.sites))
-        if current in d.sites:
-            self.site_combo.setCurrentText(current)
-        self.site_combo.blockSignals(False)
+        if [self.site_combo.itemText(i) for i in range(self.site_combo.count())] != list(d.sites):
+            current = self.site_combo.currentText()
+            self.site_combo.blockSignals(True)
+            self.site_combo.clear()
+            self.site_combo.addItems(list(d.sites))
+            if current in d.sites:
+                self.site_combo.setCurrentText(current)
+            self.site_combo.blockSignals(False)
         highlight = self.identification.site if self.identification else None
         self.figure.set_state(d.sites, self.model.assigned(), self.alarm_sites, highlight, d.insoles)
         urls = self.urls()
@@ -196,10 +197,15 @@ class DevicesPanel(QtWidgets.QWidget):
                 return r
         return -1
 
-    def show_live(self, rows: list[DeviceRow]) -> None:
+    def showEvent(self, event: QtGui.QShowEvent) -> None:  # noqa: N802 (Qt's name)
+        self.refresh()  # rows were not redrawn while the tab was hidden
+        super().showEvent(event)
+
+    def show_live(self, rows: list[DeviceRow], redraw: bool = True) -> None:
         self.live_rows = {r.url: r for r in rows}
         self.alarm_sites = {r.name for r in rows if r.state in ("reconnecting", "silent")}
-        self.refresh()
+        if redraw:
+            self.refresh()
 
     def set_session_running(self, on: bool) -> None:
         """Devices in use by a capture cannot be opened a second time for identification."""

@@ -20,6 +20,11 @@ from calibration.quality import QualityReport
 from inference.body.body import Body
 
 RATE_WINDOW_S = 1.0
+# While calibrating, the pipeline's thread only feeds the guided steps (no model), so it can
+# always catch up; dropping frames to stay current (what the live view wants) would
+# instead leave holes that the stillness measure reads as motion, and on a busy machine
+# a step then never holds. Frames are kept for this long until the calibration is done.
+CALIBRATION_MAX_LAG_S = 2.0
 
 
 @dataclass
@@ -47,6 +52,7 @@ class LiveSession:
         self.started = False
         self._rates: dict[str, tuple[float, int, float | None]] = {}  # name -> (t, packets, rate)
         self._seen_events = 0
+        self._live_max_lag: float | None = None
         self.record_path: Path | None = None
         self.record_started: float | None = None
 
@@ -58,7 +64,18 @@ class LiveSession:
             self.stop()
             raise
         self.started = True
+        live = self.session.live
+        self._live_max_lag = live.max_lag if live is not None else None
+        self._keep_frames_while_calibrating()
         return self
+
+    def _keep_frames_while_calibrating(self) -> None:
+        live = self.session.live
+        if live is None:
+            return
+        want = self._live_max_lag if self.calibrated else CALIBRATION_MAX_LAG_S
+        if live.max_lag != want:
+            live.max_lag = want
 
     def stop(self) -> Path | None:
         path = self.record_path if self.session.recorder is not None else None
@@ -105,6 +122,8 @@ class LiveSession:
     def poll(self) -> list[SessionEvent]:
         """Look for silent devices, and return the events since the last call."""
         self.session.poll()
+        if self.started:
+            self._keep_frames_while_calibrating()
         evs = self.session.events
         new = evs[self._seen_events:]
         self._seen_events += len(new)

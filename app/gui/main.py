@@ -400,8 +400,11 @@ class MainWindow(QtWidgets.QMainWindow):
         live = self.session
         if live is None:
             return
-        self.devices_panel.show_live(live.device_rows())
-        self.live_panel.update_plots()
+        # hidden tabs are not redrawn: on a busy machine every millisecond of the GUI thread
+        # is one the devices' and the model's threads do not get
+        self.devices_panel.show_live(live.device_rows(), redraw=self.tabs.currentWidget() is self.devices_panel)
+        if self.tabs.currentWidget() is self.live_panel:
+            self.live_panel.update_plots()
         self._show_perf(live.perf())
         if live.recording and live.record_started is not None:
             self.live_panel.set_recording(True, f"recording {live.record_path.name if live.record_path else ''} "
