@@ -13,7 +13,8 @@ with the sensor configuration, model, steps, app version, ...):
         meta (K,) JSON: the protocol and the quality report of each calibration
     /recon/t (M,), index (M,), rot (M,24,4) quaternions R_WB, root (M,3), joints (M,24,3),
         contacts (M,4) bool, contact_prob (M,4), observed_sites (M,13) bool, insoles (M,),
-        latency_ms (M,) (NaN when not live)
+        latency_ms (M,) (NaN when not live), spread_deg (M,24) and root_spread_m (M,): the
+        poser's per-segment confidence (inference/poser/confidence.py; NaN when off)
     /events/t (E,), kind (E,), detail (E,): what happened during the session, in order:
         markers (detail = label), notes, devices lost and back, recording errors
 
@@ -76,7 +77,9 @@ INSOLE_FIELDS = (("force", (2,), "f4"), ("contacts", (N_CONTACTS,), "?"), ("pres
 RECON_FIELDS = (("t", (), "f8"), ("index", (), "i8"), ("rot", (N_SEGMENTS, 4), "f4"), ("root", (3,), "f4"),
                 ("joints", (N_SEGMENTS, 3), "f4"), ("contacts", (N_CONTACTS,), "?"),
                 ("contact_prob", (N_CONTACTS,), "f4"), ("observed_sites", (N_SITES,), "?"), ("insoles", (), "?"),
-                ("latency_ms", (), "f4"))
+                ("latency_ms", (), "f4"), ("spread_deg", (N_SEGMENTS,), "f4"), ("root_spread_m", (), "f4"))
+# recon fields recordings from before they existed lack (read back as NaN)
+RECON_NEWER = ("spread_deg", "root_spread_m")
 EVENT_FIELDS = (("t", (), "f8"), ("kind", (), EVENT_KIND), ("detail", (), EVENT_DETAIL))
 
 
@@ -273,6 +276,8 @@ class Recorder(Sink):
         b["rec/observed_sites"].append(pose.observed_sites)
         b["rec/insoles"].append(pose.insoles)
         b["rec/latency_ms"].append(np.nan if pose.latency_ms is None else pose.latency_ms)
+        b["rec/spread_deg"].append(np.full(N_SEGMENTS, np.nan) if p.spread_deg is None else p.spread_deg)
+        b["rec/root_spread_m"].append(np.nan if p.root_spread_m is None else p.root_spread_m)
         self.poses += 1
         self._maybe_flush()
 
@@ -1012,7 +1017,7 @@ def read_recording(path: str | os.PathLike) -> Recording:
                        cols["detail"].data[i].decode("utf-8", "replace")) for i in np.flatnonzero(~drop_ev)]
 
         # recon: a damaged pose is dropped whole (export shows it as a gap)
-        cols, m = rd.group("recon", RECON_FIELDS)
+        cols, m = rd.group("recon", RECON_FIELDS, newer=RECON_NEWER)
         t_rec = cols["t"].data.astype(np.float64)
         _never_written(cols, ~np.isfinite(t_rec))
         drop_rec = np.zeros(m, bool)

@@ -12,7 +12,7 @@ import sys
 # checkout still runs what it has
 _COMMAND_MODULES = (
     "app.cli.data", "app.cli.devices", "app.cli.train", "app.cli.evaluate", "app.cli.bench", "app.cli.demo",
-    "app.cli.replay", "app.cli.importing", "app.cli.capture", "app.cli.setup", "app.cli.gui",
+    "app.cli.replay", "app.cli.importing", "app.cli.advise", "app.cli.capture", "app.cli.setup", "app.cli.gui",
 )
 
 

@@ -67,6 +67,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="with --sensors a subset: replay again with every recorded sensor and report, per site "
                         "left out, the mean angle between its reconstructed segment and what its sensor measured")
     p.add_argument("--seed", type=int, default=0, help="seed of the inpainting noise (replays are reproducible)")
+    p.add_argument("--confidence", action="store_true",
+                   help="the per-segment spread with every pose (inference/poser/confidence.py): in --out's CSV "
+                        "and HDF5, and spread_mean_deg in the JSON")
     p.add_argument("--threads", type=int, default=1, help="torch threads (0 = torch's default)")
     p.add_argument("--height", type=float, default=None, help="subject height in m (default: from the recording)")
     p.add_argument("--out", action="append", type=Path, default=[], metavar="FILE", help=OUT_HELP)
@@ -147,6 +150,17 @@ class _Progress:
 # ---------------------------------------------------------------------------- commands
 
 
+def _mean_spread(poses) -> dict[str, float] | None:
+    """Per segment, the mean spread over the replayed poses (deg; 0 = measured)."""
+    from inference.body.skeleton import SEGMENTS
+
+    got = [p.pose.spread_deg for p in poses if p.pose.spread_deg is not None]
+    if not got:
+        return None
+    mean = np.mean(got, axis=0)
+    return {name: round(float(v), 2) for name, v in zip(SEGMENTS, mean)}
+
+
 def run_replay(args: argparse.Namespace) -> int:
     from app.export.formats import body_for_recording, export_motion, motion_from_poses
     from app.replay import compare_to_recorded, held_out_errors, replay_recording, resolve_insoles, resolve_sensors
@@ -177,7 +191,7 @@ def run_replay(args: argparse.Namespace) -> int:
     odometry = (args.pelvis_odometry if args.pelvis_odometry is not None
                 else bool(rec.metadata.get("pelvis_odometry", False)))
     setting = dict(steps=args.steps, seed=args.seed, mirror=mirror, stride_scale=stride,
-                   pelvis_odometry="default" if odometry else None)
+                   pelvis_odometry="default" if odometry else None, confidence=args.confidence or None)
     poser = Poser(model, body=body, **setting)
     label = _model_label(args.model, model)
     steps = len(poser.steps) if poser.kind == "diffusion" else (1 if poser.kind == "regressor" else 0)
@@ -228,6 +242,7 @@ def run_replay(args: argparse.Namespace) -> int:
         **compare_to_recorded(rec, res.poses),
         **({"held_out": held_out} if held_out is not None else {}),
         "outputs": outputs, "seconds": round(seconds, 2),
+        **({"spread_mean_deg": _mean_spread(res.poses)} if args.confidence else {}),
         **({"streams": stream_summary(sinks)} if sinks else {}),
     }
     if truth is not None:
