@@ -23,7 +23,7 @@ from drivers.hub import ClockModel, Hub
 
 FRAME = 1 / 60
 RATE = 100.0  # samples per second per device
-DURATION = 40.0
+DURATION = 30.0
 FAULT_AT = 20.0
 TRANSITION = 1.0  # s after the fault (or after the start) that need not be aligned
 
