@@ -41,7 +41,8 @@ def _one_torch_thread():
 # other worker built a dataset.
 REALTIME_MODULES = {"sim_devices/test_suit.py", "drivers/test_batched.py", "drivers/test_end_to_end.py",
                     "app/gui/test_main_window.py", "app/cli/test_demo.py", "app/capture/test_identify.py",
-                    "app/cli/test_setup.py", "app/capture/test_capture_e2e.py"}
+                    "app/cli/test_setup.py", "app/capture/test_capture_e2e.py",
+                    "app/gui/test_window_unplug.py", "app/gui/test_window_workflow.py"}
 
 
 def pytest_collection_modifyitems(config, items):

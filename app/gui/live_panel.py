@@ -28,6 +28,7 @@ class LivePanel(QtWidgets.QWidget):
     recordToggled = QtCore.Signal(bool)
     markerRequested = QtCore.Signal(str)
     noteRequested = QtCore.Signal(str)
+    activeSitesChosen = QtCore.Signal(tuple, bool)  # the worn sensors the reconstruction uses, insoles
 
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
@@ -89,6 +90,22 @@ class LivePanel(QtWidgets.QWidget):
         bl.addWidget(self.plot, 1)
         right.addWidget(box, 2)
 
+        # which of the worn sensors feed the reconstruction, changed live: "what would three give?"
+        box = QtWidgets.QGroupBox("Reconstruct from")
+        bl = QtWidgets.QVBoxLayout(box)
+        self.active_grid = QtWidgets.QGridLayout()
+        self.active_checks: dict[str, QtWidgets.QCheckBox] = {}
+        self.active_insoles = QtWidgets.QCheckBox("insoles")
+        self.apply_active = QtWidgets.QPushButton("Apply")
+        self.apply_active.clicked.connect(self._apply_active)
+        row = QtWidgets.QHBoxLayout()
+        row.addWidget(self.active_insoles)
+        row.addStretch(1)
+        row.addWidget(self.apply_active)
+        bl.addLayout(self.active_grid)
+        bl.addLayout(row)
+        right.addWidget(box)
+
         box = QtWidgets.QGroupBox("Recording")
         grid = QtWidgets.QGridLayout(box)
         self.record_button = QtWidgets.QPushButton("● Record (R)")
@@ -120,7 +137,7 @@ class LivePanel(QtWidgets.QWidget):
         self.marker_count = 0
 
     # ------------------------------------------------------------------ session
-    def attach(self, tap: SignalTap | None, sites: tuple[str, ...]) -> None:
+    def attach(self, tap: SignalTap | None, sites: tuple[str, ...], insoles: bool = False) -> None:
         self.tap = tap
         self.site_list.clear()
         for k, s in enumerate(sites):
@@ -128,6 +145,16 @@ class LivePanel(QtWidgets.QWidget):
             item.setFlags(item.flags() | QtCore.Qt.ItemFlag.ItemIsUserCheckable)
             item.setCheckState(QtCore.Qt.CheckState.Checked if k < 2 else QtCore.Qt.CheckState.Unchecked)
             self.site_list.addItem(item)
+        for cb in self.active_checks.values():
+            cb.deleteLater()
+        self.active_checks = {}
+        for k, site in enumerate(sites):
+            cb = QtWidgets.QCheckBox(site)
+            cb.setChecked(True)
+            self.active_grid.addWidget(cb, k // 4, k % 4)
+            self.active_checks[site] = cb
+        self.active_insoles.setEnabled(insoles)
+        self.active_insoles.setChecked(insoles)
         self.clear_trail()
         self.frames_shown = 0
         self._last_key = None
@@ -191,6 +218,17 @@ class LivePanel(QtWidgets.QWidget):
 
     def _follow_toggled(self, on: bool) -> None:
         self.view.follow = on
+
+    def choose_active(self, sites: tuple[str, ...] | list[str], insoles: bool | None = None) -> None:
+        for s, cb in self.active_checks.items():
+            cb.setChecked(s in sites)
+        if insoles is not None and self.active_insoles.isEnabled():
+            self.active_insoles.setChecked(insoles)
+        self._apply_active()
+
+    def _apply_active(self) -> None:
+        sites = tuple(s for s, cb in self.active_checks.items() if cb.isChecked())
+        self.activeSitesChosen.emit(sites, self.active_insoles.isChecked())
 
     # ------------------------------------------------------------------ recording widgets
     def _record_toggled(self, on: bool) -> None:

@@ -25,6 +25,18 @@ RATE_WINDOW_S = 1.0
 # instead leave holes that the stillness measure reads as motion, and on a busy machine
 # a step then never holds. Frames are kept for this long until the calibration is done.
 CALIBRATION_MAX_LAG_S = 2.0
+STOP_CATCH_UP_S = 3.0  # the most "Stop recording" waits for the pipeline to reach the click
+
+
+class _LastFrame(Sink):
+    """The session time of the newest frame the pipeline has handled (its thread writes,
+    others read one float)."""
+
+    def __init__(self) -> None:
+        self.t = float("-inf")
+
+    def on_frame(self, frame) -> None:
+        self.t = frame.t
 
 
 @dataclass
@@ -55,6 +67,8 @@ class LiveSession:
         self._live_max_lag: float | None = None
         self.record_path: Path | None = None
         self.record_started: float | None = None
+        self._last_frame = _LastFrame()
+        session.pipeline.add_sink(self._last_frame)
 
     # ------------------------------------------------------------------ lifecycle (worker threads)
     def start(self) -> LiveSession:
@@ -166,6 +180,18 @@ class LiveSession:
                                   seen, packets, int(st.get("reconnects", 0))))
         return rows
 
+    def set_active_sites(self, sites: tuple[str, ...], insoles: bool) -> None:
+        """The worn sensors the reconstruction uses from now on (the others are inpainted);
+        on the pipeline's thread, between two frames."""
+        live = self.session.live
+        if live is not None and live.running:
+            live.call(lambda p: p.set_active_sites(sites, insoles))
+        else:
+            self.session.pipeline.set_active_sites(sites, insoles)
+
+    def active_sites(self) -> tuple[str, ...]:
+        return tuple(self.session.pipeline.active_sites)
+
     # ------------------------------------------------------------------ calibration
     def redo(self, step: str) -> None:
         """Start calibration again at ``step``: on the pipeline's thread, where the
@@ -203,7 +229,16 @@ class LiveSession:
         return path
 
     def stop_recording(self) -> Path | None:
-        """Waits for the pipeline thread to close the file: call it off the GUI thread."""
+        """Waits for the pipeline thread to close the file: call it off the GUI thread.
+
+        The pipeline runs behind the sensors (the hub's latency, a model step, a busy
+        machine); the file is closed once it has handled the frames up to the moment Stop
+        was pressed, so the recording ends where the user ended it, not a second early."""
+        until = time.monotonic()
+        give_up = until + STOP_CATCH_UP_S
+        live = self.session.live
+        while live is not None and live.running and self._last_frame.t < until and time.monotonic() < give_up:
+            time.sleep(0.02)
         path = self.session.stop_recording()
         self.record_started = None
         return path

@@ -33,6 +33,7 @@ from app.gui.workers import Jobs
 
 TABS = ("Setup", "Devices", "Calibration", "Live", "Recordings", "Replay")
 ALARM_KINDS = ("device_lost", "device_silent")
+MAX_DRAW_GAP_S = 0.25  # a congested window still redraws the skeleton at least 4 times a second
 
 
 def default_settings() -> QtCore.QSettings:
@@ -79,6 +80,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.live_panel.recordToggled.connect(self.set_recording)
         self.live_panel.markerRequested.connect(self.add_marker)
         self.live_panel.noteRequested.connect(self.add_note)
+        self.live_panel.activeSitesChosen.connect(self.set_active_sites)
         self.recordings_panel.openRequested.connect(self.open_replay)
         self.model.changed.connect(self._setup_changed)
 
@@ -104,6 +106,9 @@ class MainWindow(QtWidgets.QMainWindow):
         QtGui.QShortcut(QtGui.QKeySequence("Space"), self, activated=self._space_key)
 
         # --- timers
+        self.loop_lag = 0.0  # how late the view timer arrives, smoothed (s)
+        self._draw_tick = self._drawn_at = time.monotonic()
+        self._slow_ticks = 0
         self.view_timer = QtCore.QTimer(self)
         self.view_timer.timeout.connect(self._draw)
         self.view_timer.start(int(1000 / ui_hz))
@@ -252,7 +257,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.down = {}
         tap = SignalTap(live.sites)
         live.add_sink(tap)
-        self.live_panel.attach(tap, live.sites)
+        self.live_panel.attach(tap, live.sites, insoles=live.setup.insoles is not None)
         self.live_panel.record_button.setEnabled(True)
         self.calibration_panel.set_protocol(live.setup.calibration, live.session.guided.still_dps,
                                             live.session.guided.moved_dps)
@@ -354,6 +359,15 @@ class MainWindow(QtWidgets.QMainWindow):
             return
         self.session.add_note(text)
 
+    def set_active_sites(self, sites: tuple[str, ...], insoles: bool) -> None:
+        if self.session is None:
+            return
+        if not sites:
+            self.report("keep at least one sensor for the reconstruction", "warning")
+            return
+        self.session.set_active_sites(sites, insoles)
+        self.report(f"reconstructing from {', '.join(sites)}{' + insoles' if insoles else ''}", "info")
+
     def _record_key(self) -> None:
         if self.session is not None and self.live_panel.record_button.isEnabled():
             self.live_panel.record_button.toggle()
@@ -373,9 +387,19 @@ class MainWindow(QtWidgets.QMainWindow):
 
     # ------------------------------------------------------------------ timers
     def _draw(self) -> None:
+        """The newest pose into the view, as often as the event loop keeps up: every redraw
+        of a GL view recomposes the window (a round trip to the display server), so when
+        the timer itself arrives late (a busy machine, software GL) the view is redrawn
+        less often rather than leaving no time for the alarms and the buttons."""
+        now = time.monotonic()
+        late = max(now - self._draw_tick - self.view_timer.interval() / 1000.0, 0.0)
+        self._draw_tick = now
+        self.loop_lag = 0.8 * self.loop_lag + 0.2 * late
+        if now - self._drawn_at < min(MAX_DRAW_GAP_S, 4.0 * self.loop_lag):
+            return
         live = self.session
-        if live is not None and live.body is not None:
-            self.live_panel.show_pose(live.latest(), live.body)
+        if live is not None and live.body is not None and self.live_panel.show_pose(live.latest(), live.body):
+            self._drawn_at = now
 
     def _status(self) -> None:
         """10 Hz: events (devices lost and back first: they are the alarms) and the
@@ -403,9 +427,12 @@ class MainWindow(QtWidgets.QMainWindow):
         # hidden tabs are not redrawn: on a busy machine every millisecond of the GUI thread
         # is one the devices' and the model's threads do not get
         self.devices_panel.show_live(live.device_rows(), redraw=self.tabs.currentWidget() is self.devices_panel)
-        if self.tabs.currentWidget() is self.live_panel:
+        self._slow_ticks += 1
+        congested = self.loop_lag > 0.05
+        if self.tabs.currentWidget() is self.live_panel and (not congested or self._slow_ticks % 4 == 0):
             self.live_panel.update_plots()
-        self._show_perf(live.perf())
+        if self._slow_ticks % 4 == 0:  # once a second: each label change repaints the window too
+            self._show_perf(live.perf())
         if live.recording and live.record_started is not None:
             self.live_panel.set_recording(True, f"recording {live.record_path.name if live.record_path else ''} "
                                                 f"{time.monotonic() - live.record_started:5.1f} s")

@@ -27,7 +27,7 @@ from inference.body.body import Body
 from inference.body.rotations import matrix_angle_between
 from inference.body.skeleton import METRIC_EXCLUDED, SEGMENTS, SITES
 
-SIDE_BY_SIDE_M = 1.1  # the re-run stands this far to the subject's right of the recording
+SIDE_BY_SIDE_M = 1.1  # the re-run stands this far to the subject's left: right of it on screen
 SPEEDS = (0.25, 0.5, 1.0, 2.0, 4.0)
 FORMATS = {".bvh": "BVH (Blender, MotionBuilder, Maya)", ".mot": "OpenSim motion (.mot, joint angles)",
            ".csv": "CSV (one row per frame)", ".h5": "HDF5 (arrays with units)", ".hdf5": "HDF5 (arrays with units)"}
@@ -198,6 +198,7 @@ class ReplayPanel(QtWidgets.QWidget):
         self.view = views.make_skeleton_view(self)
         self.view.add_figure(RERUN)
         self.view.follow = False
+        self.view.set_view("pair")
         self.view.set_figure_visible(1, False)
         left.addWidget(self.view, 1)
 
@@ -254,7 +255,7 @@ class ReplayPanel(QtWidgets.QWidget):
         bl = QtWidgets.QVBoxLayout(box)
         self.ga_label = QtWidgets.QLabel("re-run to compare")
         self.ga_label.setWordWrap(True)
-        self.colour_by_diff = QtWidgets.QCheckBox("colour the re-run by its difference")
+        self.colour_by_diff = QtWidgets.QCheckBox("colour the re-run by its difference (green 0° … red 30°+)")
         self.colour_by_diff.setChecked(True)
         self.diff_table = QtWidgets.QTableWidget(0, 3)
         self.diff_table.setHorizontalHeaderLabels(("segment", "mean °", "now °"))
@@ -271,6 +272,9 @@ class ReplayPanel(QtWidgets.QWidget):
         right.addWidget(self.export_button)
         lay.addLayout(right, 2)
 
+        # Space plays and pauses (the window's shortcut): a focused button would take it as a click
+        for b in (self.play_button, self.rerun_button, self.cancel_button, self.export_button):
+            b.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
         self.timer = QtCore.QTimer(self)
         self.timer.timeout.connect(self._tick)
         self.timer.start(33)
@@ -442,7 +446,7 @@ class ReplayPanel(QtWidgets.QWidget):
         self.frame = k
         self.view.set_segment_colours(segment_colours(ref.observed[k]))
         self.view.show_pose(ref.joints[k], ref.R[k], ref.contacts[k], body, figure=0)
-        right = np.array([0.0, -SIDE_BY_SIDE_M, 0.0])
+        right = np.array([0.0, SIDE_BY_SIDE_M, 0.0])
         centre = ref.joints[k, 0].copy()
         j = self.index[k] if len(self.index) > k else -1
         if self.other is not None and j >= 0:

@@ -13,7 +13,9 @@ HEAD = SEGMENT_INDEX["head"]
 HEAD_LENGTH_M = 0.2  # the head has no child joint: a line this long, up the head's own axis
 TRAIL_POINTS = 1200
 # camera presets: (elevation, azimuth) in degrees; the subject faces +X after calibration
-VIEWS = {"front": (5.0, 0.0), "side": (5.0, 90.0), "top": (89.0, 0.0), "free": (10.0, -70.0)}
+VIEWS = {"front": (5.0, 0.0), "side": (5.0, 90.0), "top": (89.0, 0.0), "free": (10.0, -70.0),
+         # in front and to the subject's left: two skeletons side by side along +Y read left to right
+         "pair": (12.0, 35.0)}
 
 
 def bone_segments(joints: np.ndarray, rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

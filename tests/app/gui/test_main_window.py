@@ -1,8 +1,8 @@
 """`imucap demo`'s window: the main window on a simulated suit (Xbus devices on pseudo-terminals
 in this process) with the bundled model. It calibrates through the wizard by itself (the simulated
 subject follows the steps), the live view draws a moving skeleton (two grabs of the GL
-view differ and hold skeleton-coloured pixels: not a blank or black view), and R / M
-record with a marker. Set IMUCAP_SCREENSHOT=docs/demo.png to refresh the README's picture
+view differ and hold skeleton-coloured pixels: not a blank or black view), the sensors
+the reconstruction uses change live, and R / M record with a marker. Set IMUCAP_SCREENSHOT=docs/demo.png to refresh the README's picture
 (a test run must not rewrite tracked files).
 
 Run under Xvfb: ``xvfb-run -a .venv/bin/pytest -m gui tests/app/gui/test_main_window.py``."""
@@ -34,6 +34,7 @@ def test_demo_window(qtbot, tmp_path, monkeypatch):
     from app.gui.main import MainWindow
     from app.gui.main_window import start_demo
 
+    shot = Path(os.environ.get("IMUCAP_SCREENSHOT", tmp_path / "demo.png")).resolve()
     monkeypatch.chdir(tmp_path)  # the demo records into ./recordings
     win = MainWindow(settings(tmp_path))
     qtbot.addWidget(win)
@@ -61,6 +62,13 @@ def test_demo_window(qtbot, tmp_path, monkeypatch):
         assert first.reshape(-1, 3).std(axis=0).max() > 5, "a blank view"
         assert "frames/s" in win.fps_label.text() and not win.fps_label.text().startswith("–")
 
+        # the worn set the reconstruction uses, changed live (the others are inpainted)
+        panel.choose_active(("pelvis", "l_wrist", "r_wrist"))
+        wait(qtbot, lambda: win.session.active_sites() == ("pelvis", "l_wrist", "r_wrist"), 10, "the new sensor set")
+        wait(qtbot, lambda: win.session.latest().observed_sites.sum() <= 3, 30, "poses from three sensors", state)
+        panel.choose_active(tuple(win.session.sites))
+        wait(qtbot, lambda: len(win.session.active_sites()) == 6, 10, "all sensors again")
+
         # R records, M sets a marker, R stops (keys reach the window's shortcuts when it is active)
         win.activateWindow()
         wait(qtbot, win.isActiveWindow, 5, "the window to be active")
@@ -69,7 +77,6 @@ def test_demo_window(qtbot, tmp_path, monkeypatch):
         qtbot.wait(500)
         qtbot.keyClick(win, QtCore.Qt.Key.Key_M)
         qtbot.wait(2500)
-        shot = Path(os.environ.get("IMUCAP_SCREENSHOT", tmp_path / "demo.png"))
         assert win.grab().save(str(shot)) and shot.stat().st_size > 10_000
         qtbot.keyClick(win, QtCore.Qt.Key.Key_R)
         wait(qtbot, lambda: not win.session.recording and "saved" in panel.record_label.text(), 15,
