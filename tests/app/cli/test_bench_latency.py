@@ -63,7 +63,9 @@ def test_bench_times_onnx_runtime_next_to_torch(capsys):
                  "--steps", "2", "--no-paper"])
     res = json.loads(capsys.readouterr().out)
     assert code == 0 and res["runtime"] == "torch"
-    assert 0 < res["onnx_p50_ms"] <= res["onnx_p99_ms"] and res["onnx"]["runtime"] == "onnx"
+    assert 0 < res["onnx_p50_ms"] <= res["onnx_p99_ms"]
+    o = res["onnx"]  # torch timed frame for frame in turn with it
+    assert o["interleaved"] and o["onnx_p50_ms"] == res["onnx_p50_ms"] and 0 < o["torch_p50_ms"] <= o["torch_p99_ms"]
     code = main(["bench", "--json", "--random-weights", "--frames", "3", "--warmup", "1", "--threads", "1",
                  "--steps", "2", "--no-paper", "--no-onnx"])
     assert "onnx_p50_ms" not in json.loads(capsys.readouterr().out)
