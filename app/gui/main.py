@@ -472,8 +472,15 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _alarm(self) -> None:
         names = ", ".join(sorted(self.down))
-        self.messages.alarm(f"DEVICE DROPPED OUT: {names}. The reconstruction goes on without it; check its "
-                            f"cable, battery or range ({'; '.join(self.down.values())})")
+        why = "; ".join(self.down.values())
+        why = why if len(why) <= 240 else why[:239] + "…"
+        if len(self.down) == 1:
+            text = (f"DEVICE DROPPED OUT: {names}. The reconstruction goes on without it; check its cable, "
+                    f"battery or range ({why})")
+        else:
+            text = (f"DEVICES DROPPED OUT: {names}. The reconstruction goes on without them; check their cables, "
+                    f"batteries or range ({why})")
+        self.messages.alarm(text)
         self.alarm_log.append((time.monotonic(), names))
         self.devices_panel.show_live(self.session.device_rows() if self.session else [])
 

@@ -21,6 +21,7 @@ from PySide6 import QtCore, QtWidgets
 
 from app.gui import views
 from app.gui.colours import RERUN, difference_colours, qcolor_tuple, segment_colours
+from app.gui.widgets import Legend
 from app.gui.workers import Job, Jobs
 from app.recording import Recording
 from inference.body.body import Body
@@ -91,7 +92,7 @@ def segment_differences(ref: Track, other: Track, index: np.ndarray) -> tuple[np
 
 
 def rerun(job: Job, rec: Recording, sensors: tuple[str, ...], insoles: bool, model_spec: str,
-          steps: str | None) -> Track:
+          steps: str | None, confidence: bool = False) -> Track:
     """The worker: a poser for ``model_spec`` and the recording's body, then the replay."""
     import torch
 
@@ -104,7 +105,7 @@ def rerun(job: Job, rec: Recording, sensors: tuple[str, ...], insoles: bool, mod
     job.report((0, 1, "loading the model"))
     model, label, warning = resolve_demo_model(model_spec)
     body, _ = body_for_recording(rec.metadata)
-    poser = Poser(model, body=body, steps=steps)
+    poser = Poser(model, body=body, steps=steps, confidence=confidence or None)
     res = replay_recording(rec, poser, sensors=list(sensors), insoles=insoles,
                            progress=lambda done, total, poses: job.report((done, total, f"{poses} poses")))
     track = track_from_poses(res.poses, res.sensors, label)
@@ -201,6 +202,8 @@ class ReplayPanel(QtWidgets.QWidget):
         self.view.set_view("pair")
         self.view.set_figure_visible(1, False)
         left.addWidget(self.view, 1)
+        self.legend = Legend()
+        left.addWidget(self.legend)
 
         row = QtWidgets.QHBoxLayout()
         self.play_button = QtWidgets.QPushButton("▶ Play (Space)")
@@ -236,6 +239,10 @@ class ReplayPanel(QtWidgets.QWidget):
         form.addRow("Model", self.model)
         form.addRow("Steps", self.steps)
         bl.addLayout(form)
+        self.confidence = QtWidgets.QCheckBox("with each segment's spread (diffusion; slower)")
+        self.confidence.setToolTip("other inpaintings of each frame: how sure the model is of each segment it "
+                                   "did not measure; shown when the re-run is not coloured by its difference")
+        bl.addWidget(self.confidence)
         row = QtWidgets.QHBoxLayout()
         self.rerun_button = QtWidgets.QPushButton("Re-run")
         self.rerun_button.clicked.connect(self.start_rerun)
@@ -257,6 +264,7 @@ class ReplayPanel(QtWidgets.QWidget):
         self.ga_label.setWordWrap(True)
         self.colour_by_diff = QtWidgets.QCheckBox("colour the re-run by its difference (green 0° … red 30°+)")
         self.colour_by_diff.setChecked(True)
+        self.colour_by_diff.toggled.connect(lambda _on: self.show_frame(self.frame))
         self.diff_table = QtWidgets.QTableWidget(0, 3)
         self.diff_table.setHorizontalHeaderLabels(("segment", "mean °", "now °"))
         self.diff_table.verticalHeader().setVisible(False)
@@ -357,7 +365,8 @@ class ReplayPanel(QtWidgets.QWidget):
         self.progress.setValue(0)
         self.rerun_job = self.jobs.run("rerun", rerun, self.rec, sites, self.insoles.isChecked(),
                                        self.model.currentText().strip() or "diffusion",
-                                       self.steps.text().strip() or None, on_done=self._rerun_done,
+                                       self.steps.text().strip() or None, self.confidence.isChecked(),
+                                       on_done=self._rerun_done,
                                        on_error=self._rerun_failed, with_job=True)
 
     def cancel_rerun(self) -> None:
@@ -455,6 +464,7 @@ class ReplayPanel(QtWidgets.QWidget):
                 colours = difference_colours(self.diff[k])
             else:
                 colours = segment_colours(o.observed[j], None if o.spread is None else o.spread[j])
+            self.legend.set_spread(o.spread is not None and not self.colour_by_diff.isChecked())
             self.view.set_segment_colours(colours, figure=1)
             # side by side: the re-run's root follows its own path, shifted to the right
             self.view.show_pose(o.joints[j], o.R[j], o.contacts[j], body, figure=1, offset=right)

@@ -251,3 +251,34 @@ def test_imucap_gui_saves_a_screenshot(tmp_path):
     assert shot.stat().st_size > 10_000
     cfg = (tmp_path / "config" / "imucap" / "imucap.conf").read_text()
     assert str(setup.resolve()) in cfg and "tab=Devices" in cfg  # remembered for the next run
+
+
+def test_the_live_view_colours_by_spread_when_the_pose_has_one(qtbot):
+    """The poser's per-segment spread, when it reports one, colours the inferred segments
+    (green sure to red unsure) and the legend shows the ramp; without it, measured/inferred."""
+    from app.gui.colours import MEASURED, spread_colour
+    from app.gui.live_panel import LivePanel
+    from app.pipeline import LivePose
+    from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX
+    from inference.poser.poser import PoseFrame
+
+    body, R, joints = _standing()
+    panel = LivePanel()
+    qtbot.addWidget(panel)
+    obs = np.zeros(13, bool)
+    obs[SITE_INDEX["pelvis"]] = True
+
+    def pose(k: int, spread) -> LivePose:
+        frame = PoseFrame(index=k, rot=R, root=joints[0], joints=joints, contacts=np.ones(4, bool),
+                          contact_prob=np.ones(4), features=np.zeros(190), observed=np.zeros(190, bool),
+                          spread_deg=spread)
+        return LivePose(frame, t=k / 20, t_newest=k / 20, index=k, observed_sites=obs, insoles=False,
+                        latency_ms=None, compute_ms=1.0)
+
+    assert panel.show_pose(pose(1, None), body) and not panel.legend.with_spread
+    spread = np.full(24, 25.0)
+    assert panel.show_pose(pose(2, spread), body) and panel.legend.with_spread
+    colours = panel.view.figures[0].segment_colours
+    assert np.allclose(colours[SEGMENT_INDEX["pelvis"]], MEASURED)
+    assert np.allclose(colours[SEGMENT_INDEX["head"]], spread_colour(25.0))
+    assert not panel.show_pose(pose(2, spread), body)  # the same frame is not drawn twice
