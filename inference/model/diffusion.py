@@ -252,8 +252,8 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
     the model's estimate of the *mean* unknown features given the known ones, where a drawn
     start gives one sample whose error about the truth is larger wherever the measurements
     leave the pose open (arms with only the shanks worn: HDM05 dg, 2 sites, GA 35.5 -> 31.0
-    deg; 6 sites 16.6 -> 15.7; docs/model.md, "Inference: steps, start, noise, mirror, history"). With the DDIM modes the whole run is then
-    deterministic and draws nothing.
+    deg; 6 sites 16.6 -> 15.7; docs/model.md, "Inference: steps, start, noise, mirror,
+    history"). With the DDIM modes the whole run is then deterministic and draws nothing.
 
     ``mask_input``: hand the model the mask too (default: ``wants_mask(model)``; pass it
     for a traced model, which has no config).
