@@ -34,9 +34,9 @@ class OneEuroConfig:
 
 
 # chosen by sweeps on the HDM05 dg subset (docs/model.md, "Output filters and joint
-# constraints"). Root: 2 Hz at rest (time constant 80 ms), ~2.7 Hz at a walk (1.3 m/s): jitter 3.64 -> 2.38, RE2 unchanged.
-# Unmeasured orientations: 4 Hz at rest (40 ms), beta per rad/s: jitter 3.55 -> 2.97 for
-# +0.2 deg GA with the session-3 model.
+# constraints"). Root: 2 Hz at rest (time constant 80 ms), ~2.7 Hz at a walk (1.3 m/s):
+# jitter 3.64 -> 2.38, RE2 unchanged. Unmeasured orientations: 4 Hz at rest (40 ms), beta
+# per rad/s: jitter 3.55 -> 2.97 for +0.2 deg GA with an early model.
 ROOT_SMOOTHING = OneEuroConfig(min_cutoff_hz=2.0, beta=0.5)
 ROTATION_SMOOTHING = OneEuroConfig(min_cutoff_hz=4.0, beta=0.3)
 
