@@ -4,7 +4,7 @@ Every 20 Hz frame of the live poser is a fresh inference, so the root's height a
 per-frame displacement (and, without insoles, the contact-driven root correction) wobble
 by millimetres from frame to frame, and so do the orientations no sensor measures.
 Measured on HDM05 dg (6 sites, docs/model.md, "Output filters and joint constraints") the root wobble was most of the
-jitter ratio of the session-2 model (3.64; 2.05 with the true root path); the model
+jitter ratio of an early model (3.64; 2.05 with the true root path); the model
 trained to weight the last frame is more accurate but wobbles more in orientation too.
 A fixed low-pass would trade the wobble for lag in fast motion; the 1-Euro filter
 (Casiez, Roussel and Vogel, CHI 2012) lowers its cutoff when the signal is slow and
