@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from PySide6 import QtCore, QtGui, QtWidgets
 
@@ -41,6 +41,7 @@ class Identification:
     started: float
     leader: str | None = None
     leading_since: float | None = None
+    errors: list[str] = field(default_factory=list)  # devices that could not be opened, and why
 
 
 class DevicesPanel(QtWidgets.QWidget):
@@ -324,8 +325,7 @@ class DevicesPanel(QtWidgets.QWidget):
         errors: list[str] = []
         readers = DeviceReaders(urls, watcher, on_error=lambda u, why: errors.append(f"{u}: {why}"))
         readers.start()  # each device opens on its own thread
-        self.identification = Identification(site, urls, watcher, readers, time.monotonic())
-        self._identify_errors = errors
+        self.identification = Identification(site, urls, watcher, readers, time.monotonic(), errors=errors)
         self.identify_button.setText("Cancel")
         self.identify_label.setText(f"<b>Move the sensor for {site}</b> (turn it in your hand); "
                                     f"listening to {len(urls)} device(s)…")
@@ -358,7 +358,7 @@ class DevicesPanel(QtWidgets.QWidget):
             self.cancel_identification(f"{ident.site} is {winner}")
             return
         if ident.readers.all_failed() and now - ident.started > 1.0:
-            self.report("no device could be opened: " + "; ".join(self._identify_errors[:3]), "error")
+            self.report("no device could be opened: " + "; ".join(ident.errors[:3]), "error")
             self.cancel_identification()
             return
         if now - ident.started > 60.0:

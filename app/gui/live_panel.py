@@ -22,6 +22,7 @@ from inference.body.body import Body
 
 PLOT_COLOURS = ("#3b82f6", "#ef4444", "#10b981", "#f59e0b", "#8b5cf6", "#ec4899", "#14b8a6", "#64748b")
 TRAIL_STEP_M = 0.01
+MAX_EVENTS = 500  # the list keeps the latest; the recording keeps them all
 
 
 class LivePanel(QtWidgets.QWidget):
@@ -76,7 +77,7 @@ class LivePanel(QtWidgets.QWidget):
         self.quantity = QtWidgets.QComboBox()
         self.quantity.addItems(list(QUANTITIES))
         self.site_list = QtWidgets.QListWidget()
-        self.site_list.setMaximumHeight(90)
+        self.site_list.setFixedHeight(52)  # two rows of sites; the plot gets the rest
         self.site_list.setFlow(QtWidgets.QListView.Flow.LeftToRight)
         self.site_list.setWrapping(True)
         self.plot = pg.PlotWidget(background="w")
@@ -132,6 +133,7 @@ class LivePanel(QtWidgets.QWidget):
         right.addWidget(box)
         right.addWidget(QtWidgets.QLabel("<b>Events</b>"))
         self.events = QtWidgets.QListWidget()
+        self.events.setMinimumHeight(90)
         right.addWidget(self.events, 1)
         lay.addLayout(right, 2)
         self.marker_count = 0
@@ -261,4 +263,6 @@ class LivePanel(QtWidgets.QWidget):
         if alarm:
             item.setForeground(QtCore.Qt.GlobalColor.red)
         self.events.addItem(item)
+        while self.events.count() > MAX_EVENTS:
+            self.events.takeItem(0)
         self.events.scrollToBottom()

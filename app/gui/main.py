@@ -18,7 +18,7 @@ from typing import Any
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from app.capture.session import CaptureOptions, CaptureSession, SessionEvent
-from app.capture.setup_file import Setup, SetupError
+from app.capture.setup_file import Setup, SetupError, Subject
 from app.gui.calibration_panel import CalibrationPanel
 from app.gui.devices_panel import DevicesPanel
 from app.gui.live_panel import LivePanel
@@ -170,14 +170,8 @@ class MainWindow(QtWidgets.QMainWindow):
         if not d.sites:
             self.report("choose the sites first (Setup tab), then simulate their devices", "warning")
             return
-        try:
-            subject = self.model.to_setup().subject if not self.model.unassigned() else None
-        except SetupError:
-            subject = None
-        from app.capture.setup_file import Subject
-
         setup = simulated_setup(d.sites, protocol, d.insoles, model=d.model, steps=d.steps,
-                                subject=subject or Subject(d.subject_id or "sim-01", d.height_m, d.notes))
+                                subject=Subject(d.subject_id.strip() or "sim-01", d.height_m, d.notes))
         for site, e in setup.sensors.items():
             self.model.add_device(e.url, f"simulated {protocol}", "simulated")
             self.model.assign(site, e.url)
@@ -321,8 +315,7 @@ class MainWindow(QtWidgets.QMainWindow):
             return
         self.live_panel.record_button.setEnabled(False)
         if on:
-            folder = self._recordings_dir() if self.model.draft.path is not None else live.setup.recordings_dir()
-            self.jobs.run("record-start", live.start_recording, folder, on_done=self._recording_started,
+            self.jobs.run("record-start", live.start_recording, on_done=self._recording_started,
                           on_error=self._recording_failed)
         else:
             self.jobs.run("record-stop", live.stop_recording, on_done=self._recording_stopped,

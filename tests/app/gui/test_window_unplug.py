@@ -101,7 +101,8 @@ def test_an_unplugged_device_is_shown_within_a_second_and_the_window_never_freez
         qtbot.wait(800)
         second = grab_view(win.live_panel.view)
         assert skeleton_pixels(first) > 100 and skeleton_pixels(second) > 100
-        assert np.mean(np.any(first != second, axis=-1)) > 0.002
+        h, w = min(first.shape[0], second.shape[0]), min(first.shape[1], second.shape[1])  # the bar may come or go
+        assert np.mean(np.any(first[:h, :w] != second[:h, :w], axis=-1)) > 0.002
         assert "back" in win.messages.label.text()
         events = [win.live_panel.events.item(i).text() for i in range(win.live_panel.events.count())]
         assert any("device lost" in e or "device silent" in e for e in events)
