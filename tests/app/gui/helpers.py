@@ -30,14 +30,17 @@ def free_udp_port() -> int:
         return s.getsockname()[1]
 
 
-def suit_urls(tmp: Path) -> dict[str, str]:
-    """The classic six over three wire protocols, as a lab might have them."""
+def suit_urls(tmp: Path, can: bool = True) -> dict[str, str]:
+    """The classic six over three wire protocols, as a lab might have them (``can=False``:
+    serial ones only, Xbus and BNO08x on pseudo-terminals)."""
     group = f"239.{random.randint(1, 254)}.{random.randint(1, 254)}.{random.randint(1, 254)}"
+    wrists = ((f"xsens-can://udp_multicast/{group}?id_offset=0x100", f"xsens-can://udp_multicast/{group}?id_offset=0x200")
+              if can else (f"bno08x-rvc://{tmp}/l_wrist-tty", f"xbus://{tmp}/r_wrist-tty?baud=115200"))
     return {
         "pelvis": f"xbus://{tmp}/pelvis-tty?baud=115200",
         "head": f"bno08x-rvc://{tmp}/head-tty",
-        "l_wrist": f"xsens-can://udp_multicast/{group}?id_offset=0x100",
-        "r_wrist": f"xsens-can://udp_multicast/{group}?id_offset=0x200",
+        "l_wrist": wrists[0],
+        "r_wrist": wrists[1],
         "l_shank": f"bno08x-rvc://{tmp}/l_shank-tty",
         "r_shank": f"xbus://{tmp}/r_shank-tty?baud=115200",
     }

@@ -2,8 +2,9 @@
 in this process) with the bundled model. It calibrates through the wizard by itself (the simulated
 subject follows the steps), the live view draws a moving skeleton (two grabs of the GL
 view differ and hold skeleton-coloured pixels: not a blank or black view), the sensors
-the reconstruction uses change live, and R / M record with a marker. Set IMUCAP_SCREENSHOT=docs/demo.png to refresh the README's picture
-(a test run must not rewrite tracked files).
+the reconstruction uses change live, and R / M record with a marker. Set
+IMUCAP_SCREENSHOT=docs/demo.png to refresh the README's picture (a test run must not
+rewrite tracked files).
 
 Run under Xvfb: ``xvfb-run -a .venv/bin/pytest -m gui tests/app/gui/test_main_window.py``."""
 

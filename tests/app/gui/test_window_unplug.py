@@ -49,8 +49,9 @@ MAX_GAP_S = 0.5
 def test_an_unplugged_device_is_shown_within_a_second_and_the_window_never_freezes(qtbot, tmp_path, capsys):
     from app.gui.main import MainWindow
 
-    # the floor model: this test is about devices and the event loop, and leaves the CPU to them
-    setup = write_setup(tmp_path / "suit.toml", suit_urls(tmp_path), model="floor")
+    # the floor model and serial devices only: this test is about a device dropping out and the
+    # event loop; the CAN-over-multicast wrists are in the workflow test
+    setup = write_setup(tmp_path / "suit.toml", suit_urls(tmp_path, can=False), model="floor")
     truth_path = tmp_path / "truth.npz"
     sim = Simulator(setup, lead_in=LEAD_IN, truth=truth_path, unplug=f"{DEVICE}:{AT}:{FOR}")
     win = None
