@@ -12,7 +12,7 @@ and neck) or, for root, the horizontal root error over 2 s (RE2, m), on signals
 synthesized from the motions with the sensor noise model, as `imucap evaluate` does.
 
 Without --data: one clip of each of the 11 motion classes of the held-out HDM05 actor dg
-(the first take of each, ``DEFAULT_CLASSES``) if the data is installed, else six generated
+(the first take of each, ``DEFAULT_CLASSES``; 22.5 s) if the data is installed, else six generated
 motions (walk, jog, squat, lunge, jump, arm raises). --data takes any motion file or folder
 the loaders read (BVH, ASF/AMC, AMASS .npz).
 
@@ -40,12 +40,14 @@ DEFAULT_CLASSES = ("depositFloorR", "elbowToKnee1RepsLelbowStart", "grabHighR", 
 GENERATED = ("walk", "jog", "squat", "lunge", "jump", "arm_raises")
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    from inference.evaluation.advisor import TASKS
+# inference.evaluation.advisor.TASKS (not imported here: every imucap command registers this one)
+TASK_NAMES = ("whole", "legs", "arms", "back", "root")
 
+
+def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("advise", help="rank sensor sets for a task (whole, legs, arms, back, root)",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--task", required=True, choices=tuple(TASKS), help="the body parts that matter")
+    p.add_argument("--task", required=True, choices=TASK_NAMES, help="the body parts that matter")
     p.add_argument("--max-sensors", type=int, default=3, help="largest set to consider (default 3)")
     p.add_argument("--insoles", action="store_true", help="every set also has pressure insoles (foot contacts)")
     p.add_argument("--data", nargs="+", default=None, metavar="MOTIONS",
@@ -53,8 +55,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--limit", type=int, default=None, help="only the first N motion files (sorted)")
     p.add_argument("--top", type=int, default=15, help="lines of the table (default 15; 0 = every set)")
     p.add_argument("--beam", type=int, default=5, help="sets kept per size above 3 (default 5)")
-    p.add_argument("--frame-step", type=int, default=2,
-                   help="score every n-th frame for the angle tasks (default 2; the root needs every frame)")
+    p.add_argument("--frame-step", type=int, default=4,
+                   help="score every n-th frame for the angle tasks (default 4; the root needs every frame)")
     p.add_argument("--exact", action="store_true", help="score with the live poser as shipped (slow)")
     p.add_argument("--model", default="diffusion", help="diffusion (shipped) or a diffusion model file PATH.pt")
     p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")

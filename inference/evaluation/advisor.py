@@ -128,7 +128,7 @@ class Advisor:
     is reconstructed once and scored for every task, so rankings of several tasks share
     the work. ``frame_step``: every n-th frame scores the angle tasks."""
 
-    def __init__(self, model: LoadedModel, clips: Sequence[AdvisorClip], frame_step: int = 2, exact: bool = False,
+    def __init__(self, model: LoadedModel, clips: Sequence[AdvisorClip], frame_step: int = 4, exact: bool = False,
                  progress: Callable[[str], object] | None = None) -> None:
         if model is None or model.kind != "diffusion":
             raise ValueError("the advisor needs a diffusion model (one model for every sensor set)")
@@ -172,36 +172,39 @@ class Advisor:
             self.progress(text)
 
     def _score_angles(self, sets: list[tuple[str, ...]]) -> None:
-        """Every frame_step-th frame of every clip, each an independent window."""
+        """Every frame_step-th frame of every clip, each an independent window; the windows
+        of all sets of a clip fill the model calls one after the other (a short clip's few
+        windows per set would leave most of a call empty)."""
         p = self._template
         net = p.net_for(WINDOWS_PER_CALL, mirror=False)
         mean, std = p._mean, p._std
-        stand = standing_features(p.body)
+        stand_n = (torch.as_tensor(standing_features(p.body), dtype=torch.float32) - mean) / std
+        N = p.window
         for s in sets:
             self.scored[s] = Scored(s)
         for ci, clip in enumerate(self.clips):
-            T = len(clip.features)
-            frames = np.arange(0, T, self.frame_step)
-            stand_n = (torch.as_tensor(stand, dtype=torch.float32) - mean) / std
+            frames = np.arange(0, len(clip.features), self.frame_step)
             feats_n = (torch.as_tensor(clip.features, dtype=torch.float32) - mean) / std
-            N = p.window
             truth = torch.as_tensor(clip.rot[frames], dtype=torch.float64)
-            for s in sets:
-                m = torch.as_tensor(set_mask(s, clip))
-                rows = torch.cat([stand_n.expand(N - 1, N_FEATURES), torch.where(m, feats_n, stand_n)])
-                mrows = torch.cat([torch.ones(N - 1, N_FEATURES, dtype=torch.bool), m.expand(T, N_FEATURES)])
-                W = rows.unfold(0, N, 1).permute(0, 2, 1)[frames]
-                M = mrows.unfold(0, N, 1).permute(0, 2, 1)[frames]
-                y = _last_frames(net, W, M, clip.height, p, WINDOWS_PER_CALL) * std + mean
-                R = rot6d_to_matrix(y[:, SL_ROT].reshape(-1, N_SEGMENTS, 6))
-                seg_measured = m[SL_ROT].view(N_SEGMENTS, 6).all(dim=-1)
-                R = constrain_knees(R, seg_measured)
-                err = np.degrees(matrix_angle_between(R.to(torch.float64), truth).numpy())  # (F, 24)
-                for task, segs in TASKS.items():
-                    if segs is not None:
-                        idx = [SEGMENT_INDEX[g] for g in segs]
-                        self.scored[s].per_clip.setdefault(task, []).append(float(err[:, idx].mean()))
+            masks = {s: torch.as_tensor(set_mask(s, clip)) for s in sets}
+            group = max(1, (8 * WINDOWS_PER_CALL) // len(frames))  # sets per round of calls
+            for k in range(0, len(sets), group):
+                part = sets[k: k + group]
+                W, M = zip(*(_set_windows(feats_n, stand_n, masks[s], frames, N) for s in part))
+                y = _last_frames(net, torch.cat(W), torch.cat(M), clip.height, p, WINDOWS_PER_CALL) * std + mean
+                for j, s in enumerate(part):
+                    self._add_angles(s, y[j * len(frames): (j + 1) * len(frames)], masks[s], truth)
             self._say(f"clip {ci + 1}/{len(self.clips)} {clip.name}")
+
+    def _add_angles(self, s: tuple[str, ...], y: torch.Tensor, m: torch.Tensor, truth: torch.Tensor) -> None:
+        """Score one set's answers (F, 190) against the truth for every angle task."""
+        R = rot6d_to_matrix(y[:, SL_ROT].reshape(-1, N_SEGMENTS, 6))
+        R = constrain_knees(R, m[SL_ROT].view(N_SEGMENTS, 6).all(dim=-1))
+        err = np.degrees(matrix_angle_between(R.to(torch.float64), truth).numpy())  # (F, 24)
+        for task, segs in TASKS.items():
+            if segs is not None:
+                idx = [SEGMENT_INDEX[g] for g in segs]
+                self.scored[s].per_clip.setdefault(task, []).append(float(err[:, idx].mean()))
 
     def _posers(self, s: tuple[str, ...]) -> list[Poser]:
         return [Poser(self.model, body=c.body, seed=clip_seed(0, c.name), root_xy0=(c.root[0, 0], c.root[0, 1]),
@@ -294,6 +297,17 @@ def _canonical(sites: Sequence[str]) -> tuple[str, ...]:
     if bad:
         raise ValueError(f"unknown site(s) {bad}")
     return tuple(s for s in SITES if s in set(sites))
+
+
+def _set_windows(feats_n: torch.Tensor, stand_n: torch.Tensor, m: torch.Tensor, frames: np.ndarray,
+                 N: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The windows (F, N, 190) and masks of one set at ``frames`` as a live poser that
+    started standing would build them, the reconstructed history guessed as standing (it
+    weighs 5e-5: module docstring)."""
+    T = feats_n.shape[0]
+    rows = torch.cat([stand_n.expand(N - 1, N_FEATURES), torch.where(m, feats_n, stand_n)])
+    mrows = torch.cat([torch.ones(N - 1, N_FEATURES, dtype=torch.bool), m.expand(T, N_FEATURES)])
+    return rows.unfold(0, N, 1).permute(0, 2, 1)[frames], mrows.unfold(0, N, 1).permute(0, 2, 1)[frames]
 
 
 def _last_frames(net, W: torch.Tensor, M: torch.Tensor, height: float, poser: Poser, batch: int) -> torch.Tensor:

@@ -41,3 +41,10 @@ def test_json_and_plot(motion_file, capsys, tmp_path):
     assert errs == sorted(errs) and res["best_by_size"]["1"]["sites"] == res["ranking"][0]["sites"]
     assert set(res["curves"]) == {"whole", "legs", "arms", "back", "root"}
     assert set(res["other_tasks"]) == {"legs", "arms", "back"}
+
+
+def test_the_cli_knows_every_task():
+    from app.cli.advise import TASK_NAMES
+    from inference.evaluation.advisor import TASKS
+
+    assert TASK_NAMES == tuple(TASKS)
