@@ -286,6 +286,19 @@ class Pipeline:
         out += self._resample(frame.t, acc, rest, t_start, _newest_sample(frame))
         return out
 
+    def pass_over(self, frame: HubFrame) -> None:
+        """A frame the live loop has no time to reconstruct: the sinks still get it raw (a
+        recording keeps the whole stream, and a replay rebuilds the poses) and a calibration
+        in progress still sees it (a still pose with holes reads as motion)."""
+        self.stats.frames_in += 1
+        self._emit("on_frame", frame)
+        if self.calibration is None:
+            self.stats.frames_calibrating += 1
+            cal = self.calibrator.push(frame.t, frame.quat, frame.free_acc, frame.acc, frame.gyro, frame.present)
+            if cal is not None:
+                self.set_calibration(cal, frame.t)
+            self._last_index = frame.index
+
     @staticmethod
     def _empty_rest() -> np.ndarray:
         r = np.zeros(_NR + N_SITES + N_CONTACTS + 1)
@@ -564,13 +577,15 @@ class LivePipeline:
                     self._cv.wait(0.1)
                 batch = list(self._q)
                 self._q.clear()
-            if self.max_lag is not None and batch:
-                newest = batch[-1].t
-                keep = [f for f in batch if newest - f.t <= self.max_lag]
-                self.pipeline.stats.dropped += len(batch) - len(keep)
-                batch = keep
             while self._commands:
                 self._commands.popleft()(self.pipeline)
+            if self.max_lag is not None and batch:
+                newest = batch[-1].t
+                late = [f for f in batch if newest - f.t > self.max_lag]
+                self.pipeline.stats.dropped += len(late)
+                for f in late:  # not reconstructed, but recorded and calibrated from
+                    self.pipeline.pass_over(f)
+                batch = [f for f in batch if newest - f.t <= self.max_lag]
             for f in batch:
                 if self._stop.is_set():
                     break

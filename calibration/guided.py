@@ -109,7 +109,7 @@ class GuidedCalibration:
         self._frames: list[tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         self._data: dict[str, tuple[np.ndarray, ...]] = {}  # per completed step: quat, free_acc, acc, gyro, present
         self._t_last: float | None = origin
-        self._recent: list[np.ndarray] = []
+        self._recent: list[tuple[float, np.ndarray]] = []
         self._speed = np.zeros(len(self.sites))
         self._enter(0, origin)
 
@@ -194,25 +194,25 @@ class GuidedCalibration:
         self._frames.append((t, quat, nan3 if free_acc is None else np.asarray(free_acc, float),
                              nan3 if acc is None else np.asarray(acc, float),
                              nan3 if gyro is None else np.asarray(gyro, float), ok))
-        self._update_speed(quat, ok)
+        self._update_speed(t, quat, ok)
         self._t_last = t
         if self._phase_t is None:
             self._phase_t = self._step_t = t
         return self._advance(t)
 
-    def _update_speed(self, quat: np.ndarray, ok: np.ndarray) -> None:
-        """Angular speed over the last ~0.2 s, from the orientation then and now: frame to
-        frame, an orientation noise of 0.3 deg alone reads as ~25 deg/s at 60 Hz."""
-        self._recent.append(np.where(ok[:, None], quat, np.nan))
-        k = max(int(round(0.2 * self.fps)), 1)
-        if len(self._recent) > k + 1:
+    def _update_speed(self, t: float, quat: np.ndarray, ok: np.ndarray) -> None:
+        """Angular speed over the last ~0.2 s, from the orientation then and now, over the
+        time that really passed (a busy hub skips frames): frame to frame, an orientation
+        noise of 0.3 deg alone reads as ~25 deg/s at 60 Hz."""
+        self._recent.append((t, np.where(ok[:, None], quat, np.nan)))
+        while len(self._recent) > 2 and t - self._recent[1][0] >= 0.2:
             self._recent.pop(0)
-        old = self._recent[0]
-        both = np.all(np.isfinite(old), -1) & np.all(np.isfinite(self._recent[-1]), -1)
-        if len(self._recent) < 2 or not both.any():
+        t_old, old = self._recent[0]
+        both = np.all(np.isfinite(old), -1) & np.all(np.isfinite(self._recent[-1][1]), -1)
+        dt = t - t_old
+        if dt <= 0 or not both.any():
             return
-        dt = (len(self._recent) - 1) / self.fps
-        ang = np.rad2deg(matrix_angle_between(quat_to_matrix(self._recent[-1][both]), quat_to_matrix(old[both])))
+        ang = np.rad2deg(matrix_angle_between(quat_to_matrix(self._recent[-1][1][both]), quat_to_matrix(old[both])))
         self._speed[both] = ang / dt
 
     def _advance(self, t: float) -> Calibration | None:

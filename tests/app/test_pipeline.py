@@ -204,3 +204,20 @@ def test_stride_status_says_whether_the_distance_comes_from_the_shanks(session):
     assert stride_text(_pipeline(truth).stride_status()) == "off"  # the floor has no root to scale
     assert stride_text({"enabled": True, "shanks": True, "scale": 0.934, "strides": 12}) == "x0.93 from 12 strides"
 
+
+
+def test_frames_passed_over_still_reach_the_sinks_and_the_calibration(session):
+    """A live loop that falls behind passes frames over instead of reconstructing them: a
+    recorder still gets every raw frame, and a calibration in progress still sees them."""
+    sig, truth = session
+    frames = frames_from_signals(sig, t0=T0)
+    raw = []
+    pipe = _pipeline(truth, sinks=[CallbackSink(on_frame=raw.append)])
+    poses = []
+    for k, f in enumerate(frames):
+        if k % 3 == 1:  # a third of the frames passed over, during calibration too
+            pipe.pass_over(f)
+        else:
+            poses += pipe.push(f)
+    assert len(raw) == len(frames) and [f.index for f in raw] == [f.index for f in frames]
+    assert pipe.calibration is not None and poses
