@@ -146,7 +146,8 @@ class Advisor:
     def _poser_settings(self) -> dict:
         if self.exact:
             return {}
-        return {"steps": list(FAST_STEPS), "mirror": False}
+        # the output filters only smooth what is shown; the root path is integrated before them
+        return {"steps": list(FAST_STEPS), "mirror": False, "smoothing": False}
 
     # ------------------------------------------------------------------ scoring
     def score(self, sets: Iterable[Sequence[str]], tasks: Iterable[str]) -> list[Scored]:
