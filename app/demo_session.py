@@ -81,7 +81,7 @@ def resolve_demo_model(spec: str) -> tuple[Any, str, str | None]:
     """(LoadedModel or None, label, warning). The default model falls back to the floor
     baseline when its weights are not there (the model is trained separately), with a
     warning the caller must show; an explicit path that does not exist is an error."""
-    from inference.poser.poser import DEFAULT_WEIGHTS, resolve_model
+    from inference.poser.models import DEFAULT_WEIGHTS, resolve_model
 
     try:
         model = resolve_model(spec)

@@ -59,7 +59,7 @@ def hub_options(mode: str) -> dict[str, Any]:
 
 def causal_weights() -> os.PathLike:
     """Where the diffusion model trained on the trailing filter ships (when it does)."""
-    from inference.poser.poser import WEIGHTS_DIR
+    from inference.poser.models import WEIGHTS_DIR
 
     return WEIGHTS_DIR / "diffusionposer_causal.pt"
 

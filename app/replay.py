@@ -119,7 +119,7 @@ class ReplayResult:
 def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] | None = None,
                      insoles: bool | None = None, calibration: Calibration | None = None,
                      progress: Callable[[int, int, int], None] | None = None, sinks: Sequence[Sink] = (),
-                     pace: Callable[[float], None] | None = None) -> ReplayResult:
+                     pace: Callable[[float], None] | None = None, causal: bool | None = None) -> ReplayResult:
     """Run ``rec``'s raw stream through a Pipeline with ``poser``.
 
     sensors: the recorded sites whose measurements the poser gets (default all; the
@@ -129,7 +129,8 @@ def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] 
     sinks: get the replay as a live session's sinks would (frames, calibrations, poses,
     and the recorded events at their times), and are closed at the end; pace(t) is called
     before the frame of time ``t`` is pushed (``app.streams.pacing.Pacer`` holds it back
-    to real time).
+    to real time). causal: the trailing acceleration filter of the low-latency mode (None:
+    the one the poser's model was trained on).
     """
     use = resolve_sensors(rec, sensors)
     ins = resolve_insoles(rec, insoles)
@@ -139,7 +140,7 @@ def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] 
         raise ValueError(f"{rec.path} holds no calibration (the session never calibrated); nothing to replay")
     cals = [(-np.inf, calibration)] if calibration is not None else sorted(rec.calibrations, key=lambda c: c[0])
     stream = _Stream(rec)
-    pipe = Pipeline(poser, rec.sites, active_sites=use, insoles=ins, sinks=sinks)
+    pipe = Pipeline(poser, rec.sites, active_sites=use, insoles=ins, sinks=sinks, causal=causal)
     events = sorted(rec.events, key=lambda e: e[0]) if sinks else []
     e = 0  # next event to pass on
     poses: list[LivePose] = []

@@ -270,7 +270,7 @@ def run(clips: list[Path], steps=None, lanes: int = 8, log=print,  # type: ignor
         checkpoint: Callable[[dict], None] | None = None, session: float = SESSION) -> dict:
     from inference.evaluation.runner import ClipInput, clip_poser, clip_seed, evaluation_noise, face_forward
     from inference.poser.batched import reconstruct_many
-    from inference.poser.poser import resolve_model
+    from inference.poser.models import resolve_model
 
     model = resolve_model("diffusion")
     if dropouts and 0.0 not in losses:

@@ -171,7 +171,7 @@ def judge(d: DeviceCheck) -> list[str]:
 
 
 def _check_model(spec: str, report: SetupCheck) -> None:
-    from inference.poser.poser import DEFAULT_WEIGHTS, POSER_KINDS
+    from inference.poser.models import DEFAULT_WEIGHTS, POSER_KINDS
 
     if spec == "floor":
         return

@@ -108,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
         table,
     )
     from inference.evaluation.runner import load_motions
-    from inference.poser.poser import resolve_model
+    from inference.poser.models import resolve_model
 
     if args.threads > 0:
         torch.set_num_threads(args.threads)

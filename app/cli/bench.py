@@ -139,7 +139,7 @@ def run_bench(model_spec: str = "diffusion", steps=None, frames: int = 200, pape
     from inference.model.config import ModelConfig
     from inference.model.diffusion import even_steps, parse_steps
     from inference.model.files import LoadedModel, build_model
-    from inference.poser.poser import default_weights, resolve_model
+    from inference.poser.models import default_weights, resolve_model
 
     if threads > 0:
         torch.set_num_threads(threads)

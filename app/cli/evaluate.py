@@ -168,7 +168,7 @@ def run(args: argparse.Namespace) -> int:
     from inference.evaluation.subjects import per_subject, per_subject_markdown
     from inference.metrics.errors import paired_difference
     from inference.model.diffusion import parse_steps
-    from inference.poser.poser import default_steps, mirror_for, noise_mode_for, resolve_model
+    from inference.poser.models import default_steps, mirror_for, noise_mode_for, resolve_model
     from inference.signals.resample import FPS_MODEL
 
     if args.threads > 0:

@@ -70,6 +70,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--confidence", action="store_true",
                    help="the per-segment spread with every pose (inference/poser/confidence.py): in --out's CSV "
                         "and HDF5, and spread_mean_deg in the JSON")
+    p.add_argument("--latency", default=None, choices=("centred", "low"),
+                   help="acceleration filter of the replay: low = the trailing one of the low-latency mode "
+                        "(docs/latency.md); default: as recorded, else centred")
     p.add_argument("--threads", type=int, default=1, help="torch threads (0 = torch's default)")
     p.add_argument("--height", type=float, default=None, help="subject height in m (default: from the recording)")
     p.add_argument("--out", action="append", type=Path, default=[], metavar="FILE", help=OUT_HELP)
@@ -113,7 +116,7 @@ def _check_outs(outs: list[Path]) -> None:
 
 
 def _model_label(spec: str, model: Any) -> str:
-    from inference.poser.poser import DEFAULT_WEIGHTS
+    from inference.poser.models import DEFAULT_WEIGHTS
 
     if model is None:
         return "floor"
@@ -164,7 +167,8 @@ def _mean_spread(poses) -> dict[str, float] | None:
 def run_replay(args: argparse.Namespace) -> int:
     from app.export.formats import body_for_recording, export_motion, motion_from_poses
     from app.replay import compare_to_recorded, held_out_errors, replay_recording, resolve_insoles, resolve_sensors
-    from inference.poser.poser import Poser, resolve_model
+    from inference.poser.models import resolve_model
+    from inference.poser.poser import Poser
 
     _check_outs(args.out)
     streaming = bool(parse_stream_spec(args.stream))  # a bad --stream fails before any work
@@ -184,7 +188,13 @@ def run_replay(args: argparse.Namespace) -> int:
         import torch
 
         torch.set_num_threads(args.threads)
-    model = resolve_model(args.model)
+    from app.latency import model_spec_for, resolve_filter
+
+    latency = args.latency or rec.metadata.get("latency") or "centred"
+    model = resolve_model(model_spec_for(latency, args.model))
+    causal, latency_warning = resolve_filter(latency, model)
+    if latency_warning:
+        print(f"replay: warning: {latency_warning}", file=sys.stderr)
     # a session recorded before the model file's defaults changed replays as it ran
     mirror = args.mirror if args.mirror is not None else rec.metadata.get("mirror")
     stride = args.stride_scale if args.stride_scale is not None else bool(rec.metadata.get("stride_scale", False))
@@ -205,7 +215,7 @@ def run_replay(args: argparse.Namespace) -> int:
         print(f"replay: streaming {args.stream} to {args.stream_host}, {pace}", file=sys.stderr, flush=True)
     t0 = time.perf_counter()
     res = replay_recording(rec, poser, sensors=sensors, insoles=insoles, progress=_Progress(not args.no_progress),
-                           sinks=sinks, pace=pacer)
+                           sinks=sinks, pace=pacer, causal=causal)
     held_out = None
     left_out = [s for s in rec.sites if s not in res.sensors]
     if args.held_out:
@@ -213,8 +223,8 @@ def run_replay(args: argparse.Namespace) -> int:
             raise ValueError("--held-out needs --sensors to leave out some of the recorded sensors "
                              f"({', '.join(rec.sites)})")
         full = Poser(model, body=body, **setting)
-        held_out = held_out_errors(res.poses, replay_recording(rec, full, sensors=rec.sites, insoles=insoles).poses,
-                                   left_out)
+        held_out = held_out_errors(res.poses, replay_recording(rec, full, sensors=rec.sites, insoles=insoles,
+                                                               causal=causal).poses, left_out)
     seconds = time.perf_counter() - t0
     outputs = []
     motion = None
@@ -233,6 +243,7 @@ def run_replay(args: argparse.Namespace) -> int:
         "recording": str(args.recording), "frames": n, "duration_s": round(span, 3),
         "sensors": list(res.sensors), "insoles": res.insoles, "model": label, "kind": poser.kind,
         "steps": steps, "step_list": list(poser.steps) if poser.kind == "diffusion" else None, "seed": args.seed,
+        "latency_mode": latency, "acc_filter": "causal" if causal else "centred",
         "mirror": poser.mirror, "stride_scale": poser.stride is not None,
         "pelvis_odometry": poser.pelvis_odometry is not None,
         "recorded_sensors": list(rec.sites), "recorded_model": rec.metadata.get("model"),

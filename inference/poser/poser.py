@@ -47,14 +47,10 @@ raises a FileNotFoundError that says how to train one.
 
 from __future__ import annotations
 
-import functools
 import os
-import types
-import warnings
 import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
@@ -67,8 +63,8 @@ from inference.body.skeleton import N_CONTACTS, N_SEGMENTS, SEGMENT_INDEX, SITE_
 from inference.features.layout import N_FEATURES, SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
 from inference.features.mirror import MirrorAveraged
 from inference.model.denoiser import Denoiser, freeze_for_cpu
-from inference.model.diffusion import Schedule, inpaint, paper_steps, parse_steps, redraw
-from inference.model.files import LoadedModel, load_model
+from inference.model.diffusion import Schedule, inpaint, parse_steps, redraw
+from inference.model.files import LoadedModel
 from inference.model.onnx_runtime import onnx_net, resolve_runtime
 from inference.model.regressor import regress
 from inference.poser.confidence import (
@@ -78,118 +74,29 @@ from inference.poser.confidence import (
     root_deviation_m,
     segment_deviation_deg,
 )
-from inference.poser.contact_detector import DETECTOR_THRESHOLD, SHANK_INDEX, ContactDetector, load_detector
+from inference.poser.contact_detector import DETECTOR_THRESHOLD, SHANK_INDEX, ContactDetector
 from inference.poser.joint_constraints import constrain_knees
-from inference.poser.pelvis_odometry import PELVIS_INDEX, Odometry, load_odometry
+from inference.poser.models import (
+    CONTACT_THRESHOLD,
+    DEFAULT_WEIGHTS,
+    HISTORY_MODES,
+    NOISE_MODES,
+    POSER_KINDS,
+    WEIGHTS_DIR,
+    default_steps,
+    default_weights,
+    mirror_for,
+    noise_mode_for,
+    resolve_detector,
+    resolve_model,
+    resolve_odometry,
+)
+from inference.poser.pelvis_odometry import PELVIS_INDEX, Odometry
 from inference.poser.smoothing import ROOT_SMOOTHING, ROTATION_SMOOTHING, RotationOneEuro, VectorOneEuro
 from inference.poser.stride import FOOT_SEGMENTS, SHANK_SITES, StrideScale
 from inference.signals.resample import FPS_MODEL, acc_filter_of
 
-WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
-DEFAULT_WEIGHTS: dict[str, Path] = {
-    "diffusion": WEIGHTS_DIR / "diffusionposer.pt",
-    "regressor": WEIGHTS_DIR / "regressor.pt",
-}
-CONTACT_DETECTOR_WEIGHTS = WEIGHTS_DIR / "contact_detector.pt"
-PELVIS_ODOMETRY_WEIGHTS = WEIGHTS_DIR / "pelvis_odometry.pt"
-POSER_KINDS = ("diffusion", "regressor", "floor")
-# what of the history the model is told is known: all of it (the paper: measured and
-# reconstructed features), or only what was measured (reconstructions are then just the
-# starting guess, re-inferred every frame from 3 s of measurements)
-HISTORY_MODES = ("reconstructed", "measured")
-# inpainting noise: a fresh draw every frame (the paper), or the same draw every frame, which
-# makes the output a deterministic function of the window, so it only moves when the
-# measurements do (much less jitter at the same accuracy; docs/model.md, "Inference"), or no draw
-# at all: the first level starts from the prior's mean (``inpaint(start="mean")``), which
-# estimates the mean pose given the measurements instead of sampling one (docs/model.md,
-# "Inference": the largest gain where few sensors leave the pose open)
-NOISE_MODES = ("fresh", "fixed", "mean")
-# a predicted contact value above this puts the foot point on the ground for the root
-# correction. A model unsure of a contact predicts something in between, and a swinging foot
-# taken as planted cancels the step; how sure a model is depends on the model, so the model
-# file may carry its own (meta "contact_threshold", `imucap train --export --contact-threshold`).
-# The shipped diffusion model carries 0.3 (docs/model.md, "Root and contacts": swept where the shank contact
-# detector does not apply); this is the default otherwise.
-CONTACT_THRESHOLD = 0.5
-
-
 # --------------------------------------------------------------------------- models
-
-def default_weights(kind: str = "diffusion") -> Path:
-    """Path of the shipped weights of `kind`; a clear error (with the command that makes
-    them) when they are not there, because a half-installed checkout should say so
-    rather than fall back to something silently worse."""
-    if kind not in DEFAULT_WEIGHTS:
-        raise ValueError(f"no default weights for model kind {kind!r}; kinds: {', '.join(DEFAULT_WEIGHTS)}")
-    path = DEFAULT_WEIGHTS[kind]
-    if not path.exists():
-        raise FileNotFoundError(
-            f"the default {kind} model {path} is missing. Train one with "
-            f"`imucap train --config CONFIG.json --out runs/{kind}` (config field \"kind\": \"{kind}\", "
-            f"see inference/training/loop.py TrainConfig) and copy runs/{kind}/model.pt to {path}, "
-            f"or pass --model PATH.pt"
-        )
-    return path
-
-
-def _resolve_detector(spec: ContactDetector | str | os.PathLike | None) -> ContactDetector | None:
-    """"default" = the shipped detector if it is installed (else the model's own contacts,
-    with a warning), None = none, a path = that file."""
-    return _resolve_stage(spec, ContactDetector, CONTACT_DETECTOR_WEIGHTS, load_detector,
-                          "root correction uses the model's contacts (train one with "
-                          "`imucap train --contact-detector --out DIR`)")
-
-
-def _resolve_odometry(spec: Odometry | str | os.PathLike | None) -> Odometry | None:
-    """"default" = the shipped pelvis odometry if it is installed (else the model's own
-    root displacement, with a warning), None = none, a path = that file."""
-    return _resolve_stage(spec, Odometry, PELVIS_ODOMETRY_WEIGHTS, load_odometry,
-                          "without both shanks the root follows the model's own displacement (train one with "
-                          "`imucap train --pelvis-odometry --out DIR`)")
-
-
-def _resolve_stage(spec, cls: type | types.UnionType, path: Path, loader, missing: str):
-    """A helper stage of the poser (contact detector, pelvis odometry) from its spec."""
-    if spec is None or isinstance(spec, cls):
-        return spec
-    if os.fspath(spec) == "default":
-        if not path.exists():
-            warnings.warn(f"{path} is missing: {missing}", stacklevel=4)
-            return None
-        return _shipped_stage(path, path.stat().st_mtime_ns, loader)
-    return loader(spec)
-
-
-@functools.lru_cache(maxsize=4)
-def _shipped_stage(path: Path, mtime_ns: int, loader):
-    """One shared instance per shipped file (the stages hold no state between calls);
-    reloaded if the file changes."""
-    return loader(path)
-
-
-def resolve_model(spec: str | os.PathLike | LoadedModel | None = "diffusion") -> LoadedModel | None:
-    """A model from a CLI-style spec: "diffusion"/"regressor" (shipped weights), "floor"
-    (no model: returns None), a path to a model file or checkpoint, or a LoadedModel."""
-    if spec is None or isinstance(spec, LoadedModel):
-        return spec
-    s = os.fspath(spec)
-    if s == "floor":
-        return None
-    if s in DEFAULT_WEIGHTS:
-        return load_model(default_weights(s))
-    if not Path(s).exists():
-        raise FileNotFoundError(f"model {s!r}: not a file, and not one of {', '.join(POSER_KINDS)}")
-    return load_model(s)
-
-
-def default_steps(model: LoadedModel | None) -> list[int]:
-    """The step list a model runs with unless told otherwise: the one recorded in its
-    file (``meta["default_steps"]``, written by whoever tuned speed vs accuracy for the
-    shipped weights), else the paper's 10D list."""
-    meta = (model.meta or {}) if model is not None else {}
-    if meta.get("default_steps") is not None:
-        return parse_steps(meta["default_steps"])
-    return paper_steps()
 
 
 # --------------------------------------------------------------------------- output
@@ -251,21 +158,6 @@ class Observation(NamedTuple):
     m: Tensor
     f32: Tensor
     fn: Tensor
-
-
-def noise_mode_for(model: LoadedModel | None, noise: str | None = None) -> str:
-    """The inpainting noise mode a poser runs with: ``noise`` if given, else what the model
-    file recommends (meta, set at export), else the paper's fresh draws."""
-    meta = (model.meta or {}) if model is not None else {}
-    return noise or meta.get("noise") or "fresh"
-
-
-def mirror_for(model: LoadedModel | None, mirror: bool | None = None) -> bool:
-    """Whether a poser mirror-averages (``mirror.MirrorAveraged``): ``mirror`` if given, else
-    what the model file says; never for the floor, which has no model to ask."""
-    if model is None:
-        return False
-    return bool((model.meta or {}).get("mirror", False) if mirror is None else mirror)
 
 
 class Poser:
@@ -338,10 +230,10 @@ class Poser:
         self.seed = seed
         # contacts from both shank sensors when they are measured (contact_detector.py):
         # far more often right than a reconstruction model's own contact features
-        self.contact_detector = None if self.kind == "floor" else _resolve_detector(contact_detector)
+        self.contact_detector = None if self.kind == "floor" else resolve_detector(contact_detector)
         # without both shanks the root's walk from the pelvis sensor (pelvis_odometry.py):
         # the guessed legs cancel the walk there, insoles or not
-        self.pelvis_odometry = None if self.kind == "floor" else _resolve_odometry(pelvis_odometry)
+        self.pelvis_odometry = None if self.kind == "floor" else resolve_odometry(pelvis_odometry)
         # the floor is by definition the standing pose wherever nothing is measured
         self.knee_hinge = knee_hinge and self.kind != "floor"
         # output only: the integrated root path (and so every later frame) is unfiltered

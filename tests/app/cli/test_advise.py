@@ -8,7 +8,7 @@ import json
 import pytest
 
 from app.cli.main import main
-from inference.poser.poser import DEFAULT_WEIGHTS
+from inference.poser.models import DEFAULT_WEIGHTS
 from sim_devices.motions import generate, write_amass_npz
 
 pytestmark = pytest.mark.skipif(not DEFAULT_WEIGHTS["diffusion"].exists(), reason="shipped weights not installed")

@@ -11,7 +11,7 @@ import pytest
 from app.cli.main import main
 from app.export.bvh import write_motion_bvh
 from inference.evaluation.runner import synthetic_motion
-from inference.poser.poser import DEFAULT_WEIGHTS
+from inference.poser.models import DEFAULT_WEIGHTS
 
 needs_weights = pytest.mark.skipif(not DEFAULT_WEIGHTS["diffusion"].exists(), reason="shipped weights not installed")
 

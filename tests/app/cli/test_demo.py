@@ -60,7 +60,7 @@ def test_headless_json_contract(tiny_model, tmp_path, capsys):
 
 
 def test_missing_weights_fall_back_to_floor_loudly(monkeypatch, tmp_path):
-    from inference.poser import poser
+    from inference.poser import models as poser
 
     monkeypatch.setitem(poser.DEFAULT_WEIGHTS, "diffusion", tmp_path / "nope.pt")
     model, label, warning = resolve_demo_model("diffusion")

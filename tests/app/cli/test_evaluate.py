@@ -15,7 +15,7 @@ from inference.evaluation.runner import synthetic_motion
 from inference.loaders import load_motion
 from inference.model.config import ModelConfig
 from inference.model.files import build_model, save_model
-from inference.poser import poser as poser_mod
+from inference.poser import models as poser_mod
 from inference.training.data import feature_stats
 
 KEYS = {"clips", "frames", "ga_deg", "la_deg", "jpe_cm", "jitter_ratio", "re2_m", "re5_m", "re10_m",

@@ -20,7 +20,8 @@ from calibration.standing import forward_from_knees, forward_from_shanks, still_
 from inference.body.motion import Motion
 from inference.body.rotations import matrix_about_axis, matrix_angle_between
 from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX, SITE_SEGMENT_INDEX
-from inference.poser.poser import Poser, resolve_model
+from inference.poser.models import resolve_model
+from inference.poser.poser import Poser
 from inference.signals.synthesis import NoiseModel, synthesize
 from sim_devices.motions import generate
 from sim_devices.ximu3_log import write_ximu3_log

@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 
 from inference.evaluation.advisor import TASKS, Advisor, advisor_clips, ranked, sets_of_size, table
-from inference.poser.poser import DEFAULT_WEIGHTS, resolve_model
+from inference.poser.models import DEFAULT_WEIGHTS, resolve_model
 from sim_devices.motions import generate
 
 pytestmark = pytest.mark.skipif(not DEFAULT_WEIGHTS["diffusion"].exists(), reason="shipped weights not installed")

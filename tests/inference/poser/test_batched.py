@@ -15,7 +15,8 @@ from inference.model.config import ModelConfig
 from inference.model.files import LoadedModel, build_model
 from inference.poser.batched import batchable, reconstruct_batched, reconstruct_many
 from inference.poser.confidence import ConfidenceSettings
-from inference.poser.poser import DEFAULT_WEIGHTS, Poser, reconstruct_offline, resolve_model
+from inference.poser.models import DEFAULT_WEIGHTS, resolve_model
+from inference.poser.poser import Poser, reconstruct_offline
 
 SHIPPED = dict(history="measured", noise="mean", inpaint_mode="replace-ddim")
 FIELDS = ("rot", "root", "joints", "contact_prob", "features", "spread_deg", "root_spread_m")

@@ -14,7 +14,8 @@ from inference.features.layout import N_FEATURES
 from inference.model.config import ModelConfig
 from inference.model.files import LoadedModel, build_model
 from inference.poser.confidence import ConfidenceSettings, SpreadPool, band
-from inference.poser.poser import DEFAULT_WEIGHTS, Poser, reconstruct_offline, resolve_model
+from inference.poser.models import DEFAULT_WEIGHTS, resolve_model
+from inference.poser.poser import Poser, reconstruct_offline
 
 THREE = ("pelvis", "l_wrist", "r_wrist")
 SHIPPED = dict(history="measured", noise="mean", inpaint_mode="replace-ddim")

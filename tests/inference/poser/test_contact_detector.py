@@ -129,9 +129,9 @@ def test_heading_frame_keeps_the_shanks_relative_yaw():
 
 
 def test_missing_shipped_detector_warns_and_keeps_the_models_contacts(monkeypatch, tmp_path):
-    from inference.poser import poser
+    from inference.poser import models as poser
 
     monkeypatch.setattr(poser, "CONTACT_DETECTOR_WEIGHTS", tmp_path / "nope.pt")
     with pytest.warns(UserWarning, match="nope.pt is missing"):
-        assert poser._resolve_detector("default") is None
-    assert poser._resolve_detector(None) is None
+        assert poser.resolve_detector("default") is None
+    assert poser.resolve_detector(None) is None

@@ -205,10 +205,10 @@ def test_poser_walks_from_the_pelvis_only_without_both_shanks(sites, insoles, ex
 
 
 def test_missing_shipped_odometry_warns_and_keeps_the_models_root(monkeypatch, tmp_path):
-    from inference.poser import poser
+    from inference.poser import models as poser
 
     monkeypatch.setattr(poser, "PELVIS_ODOMETRY_WEIGHTS", tmp_path / "nope.pt")
     with pytest.warns(UserWarning, match="nope.pt is missing: without both shanks"):
-        assert poser._resolve_odometry("default") is None
-    assert poser._resolve_odometry(None) is None
-    assert isinstance(poser._resolve_odometry(poser.WEIGHTS_DIR / "pelvis_odometry.pt"), TwoWayOdometry)  # shipped
+        assert poser.resolve_odometry("default") is None
+    assert poser.resolve_odometry(None) is None
+    assert isinstance(poser.resolve_odometry(poser.WEIGHTS_DIR / "pelvis_odometry.pt"), TwoWayOdometry)  # shipped

@@ -14,7 +14,7 @@ from inference.evaluation.runner import SIX, clip_input, synthetic_motion
 from inference.features.layout import N_FEATURES, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, observation_mask
 from inference.model.config import ModelConfig
 from inference.model.files import LoadedModel, build_model
-from inference.poser import poser as poser_mod
+from inference.poser import models as poser_mod
 from inference.poser.poser import Poser, correct_root_displacement, reconstruct_offline, standing_features
 from inference.training.data import feature_stats
 

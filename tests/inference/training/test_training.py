@@ -279,7 +279,8 @@ def test_resume_reproduces_uninterrupted_run(tmp_path, kind):
     assert shipped.meta["default_steps"] == "10" and shipped.step == 4
     assert shipped.meta["history"] == "measured" and shipped.meta["noise"] == "fixed"
     assert shipped.meta["contact_threshold"] == 0.8 and shipped.meta["mirror"] is True
-    from inference.poser.poser import CONTACT_THRESHOLD, Poser
+    from inference.poser.models import CONTACT_THRESHOLD
+    from inference.poser.poser import Poser
 
     assert Poser(shipped, freeze=False).mirror and not Poser(lm, freeze=False).mirror
     assert not Poser(shipped, freeze=False, mirror=False).mirror
