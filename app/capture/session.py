@@ -247,7 +247,7 @@ class CaptureSession:
             if last is not None:
                 self._last_seen[name] = last
             seen = self._last_seen.get(name)
-            silent = seen is None and self.started_at is not None and now - self.started_at > 2.0 or (
+            silent = seen is None and self.started_at is not None and now - self.started_at > 5.0 or (
                 seen is not None and now - seen > SILENT_AFTER_S)
             if silent and self._state.get(name) == "ok":
                 self._state[name] = "silent"
