@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import drivers
-from drivers.base import Sample
+from drivers.base import CounterTracker, Sample
 from drivers.hub import ClockModel, Hub
 
 FRAME = 1 / 60
@@ -36,6 +36,7 @@ class Stream:
     name: str
     device_time: Callable[[np.ndarray], np.ndarray]
     rate: float = RATE
+    restart_at: float | None = None  # the packet counter starts from zero again here
 
 
 def _device() -> drivers.Device:
@@ -55,9 +56,16 @@ def _simulate(streams: list[Stream], *, seed: int = 0, duration: float = DURATIO
         # a transport delivers in order: a delayed sample holds up the ones behind it
         arrival = np.maximum.accumulate(true + delay + rng.exponential(jitter, true.size))
         dev_t = s.device_time(true)
-        for i, (tt, at, dt) in enumerate(zip(true, arrival, dev_t, strict=True)):
-            smp = Sample(float(at), float(dt), s.name, i & 0xFF, np.array([1.0, 0, 0, 0]),
+        count = np.arange(true.size)
+        if s.restart_at is not None:
+            count = np.where(true >= s.restart_at, count - int(np.searchsorted(true, s.restart_at)), count)
+        tracker = CounterTracker(256)  # what the device base turns the wire counter into
+        for tt, at, dt, c in zip(true, arrival, dev_t, count, strict=True):
+            smp = Sample(float(at), float(dt), s.name, int(c) & 0xFF, np.array([1.0, 0, 0, 0]),
                          np.array([tt, 0.0, 0.0]), np.array([0, 0, 9.81]), np.zeros(3))
+            lost = tracker.update(smp.counter)
+            if lost:
+                smp.extra["lost_before"] = lost
             pending.append((float(at), s.name, smp))
     pending.sort(key=lambda x: x[0])
     grid_t: list[float] = []
@@ -118,14 +126,14 @@ def test_clock_running_fast_or_slow_stays_aligned(rate_error):
 
 @pytest.mark.parametrize("rate_error", [0.0, 0.01, -0.01])
 def test_clock_restarting_from_zero_mid_stream_realigns(rate_error):
-    """A device that reboots (brown-out, reconnect) starts its clock and counter at zero
-    again while the others keep going."""
+    """A device that reboots (brown-out, reconnect) starts its clock and its packet counter
+    at zero again while the others keep going."""
 
     def dev_time(true: np.ndarray) -> np.ndarray:
         before = 7.5 + true * (1 + rate_error)
         return np.where(true >= FAULT_AT, (true - FAULT_AT) * (1 + rate_error), before)
 
-    _check([Stream("ref", _good), Stream("dev", dev_time)], [(FAULT_AT, FAULT_AT + TRANSITION)])
+    _check([Stream("ref", _good), Stream("dev", dev_time, restart_at=FAULT_AT)], [(FAULT_AT, FAULT_AT + TRANSITION)])
 
 
 def test_repeated_restarts_and_jumps_with_heavy_jitter():
@@ -140,7 +148,8 @@ def test_repeated_restarts_and_jumps_with_heavy_jitter():
         return np.where(true >= 27.0, out - 2.0, out)  # jump back
 
     skip = [(a, a + TRANSITION) for a in (10.0, 18.0, 27.0)]
-    _check([Stream("ref", _good), Stream("dev", dev_time)], skip, jitter=0.015, seed=3, hub_kw={"latency": 0.15})
+    _check([Stream("ref", _good), Stream("dev", dev_time, restart_at=10.0)], skip, jitter=0.015, seed=3,
+           hub_kw={"latency": 0.15})
 
 
 def test_clock_model_keeps_the_rate_across_a_restart():
