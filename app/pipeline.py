@@ -289,8 +289,8 @@ class Pipeline:
     def pass_over(self, frame: HubFrame) -> None:
         """A frame the live loop has no time to reconstruct: the sinks still get it raw (a
         recording keeps the whole stream, and a replay rebuilds the poses) and a calibration
-        in progress still sees it (a still pose with holes reads as motion)."""
-        self.stats.frames_in += 1
+        in progress still sees it (a still pose with holes reads as motion). Counted as
+        dropped by the caller, not as a frame in."""
         self._emit("on_frame", frame)
         if self.calibration is None:
             self.stats.frames_calibrating += 1
