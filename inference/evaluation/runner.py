@@ -35,7 +35,8 @@ from inference.metrics.errors import ClipMetrics, evaluate_clip, paired_differen
 from inference.model.files import LoadedModel
 from inference.poser.batched import reconstruct_many
 from inference.poser.confidence import ConfidenceSettings, confidence_settings
-from inference.poser.poser import Poser, Reconstruction, reconstruct_offline, resolve_model
+from inference.poser.models import resolve_model
+from inference.poser.poser import Poser, Reconstruction, reconstruct_offline
 from inference.signals.resample import FPS_MODEL, STEP, downsample
 from inference.signals.synthesis import NoiseModel, kinematics, synthesize
 

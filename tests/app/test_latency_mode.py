@@ -30,7 +30,8 @@ def session():
 
 
 def _pipeline(truth, causal):
-    return Pipeline(make_poser("floor", body=truth.body), SITES, calibrator=Calibrator(SITES, schedule=PROTO.schedule()),
+    return Pipeline(make_poser("floor", body=truth.body), SITES,
+                    calibrator=Calibrator(SITES, schedule=PROTO.schedule()),
                     causal=causal)
 
 
