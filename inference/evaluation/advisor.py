@@ -207,27 +207,28 @@ class Advisor:
                 idx = [SEGMENT_INDEX[g] for g in segs]
                 self.scored[s].per_clip.setdefault(task, []).append(float(err[:, idx].mean()))
 
-    def _posers(self, s: tuple[str, ...]) -> list[Poser]:
-        return [Poser(self.model, body=c.body, seed=clip_seed(0, c.name), root_xy0=(c.root[0, 0], c.root[0, 1]),
-                      **self._poser_settings()) for c in self.clips]
-
-    def _run(self, sets: list[tuple[str, ...]]):
+    def _run(self, sets: list[tuple[str, ...]], clips: Sequence[int] | None = None):
         """Each (set, clip) through the live poser, many per model call; yields (set, clip
-        index, reconstruction)."""
-        jobs = [(s, ci) for s in sets for ci in range(len(self.clips))]
+        index, reconstruction). ``clips``: the indices to run (default all)."""
+        clips = range(len(self.clips)) if clips is None else clips
+        jobs = [(s, ci) for s in sets for ci in clips]
         posers, inputs = [], []
-        for s in sets:
-            posers += self._posers(s)
-            inputs += [(c.features, set_mask(s, c)) for c in self.clips]
+        for s, ci in jobs:
+            c = self.clips[ci]
+            posers.append(Poser(self.model, body=c.body, seed=clip_seed(0, c.name),
+                                root_xy0=(c.root[0, 0], c.root[0, 1]), **self._poser_settings()))
+            inputs.append((c.features, set_mask(s, c)))
         recs = reconstruct_many(posers, inputs, lanes=WINDOWS_PER_CALL // (2 if posers[0].mirror else 1))
         for (s, ci), rec in zip(jobs, recs):
             yield s, ci, rec
 
     def _score_root(self, sets: list[tuple[str, ...]]) -> None:
-        """RE2 per clip (clips shorter than 2 s have none) with the fast live poser."""
+        """RE2 per clip with the fast live poser; clips shorter than 2 s have none and are
+        not run."""
         self._say(f"root: {len(sets)} set(s) frame by frame")
+        long = [ci for ci, c in enumerate(self.clips) if len(c.features) > round(ROOT_SECONDS * FPS_MODEL)]
         for k in range(0, len(sets), 8):
-            for s, ci, rec in self._run(sets[k: k + 8]):
+            for s, ci, rec in self._run(sets[k: k + 8], long):
                 self._add_root(s, ci, rec.root)
             self._say(f"root: {min(k + 8, len(sets))}/{len(sets)} sets")
         self._root_done.update(sets)
