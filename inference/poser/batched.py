@@ -1,23 +1,27 @@
-"""A whole clip through the live poser with the model calls of many frames in one batch.
+"""Offline reconstruction with the model calls of many frames in one batch.
 
-Why it gives the live loop's answer: with the shipped settings (history "measured",
-inpainting "replace-ddim" from the prior's mean) the model is told only the
-measurements of the window; the reconstructed history is just the starting guess of the
-unknown entries, and the mean start scales it by sqrt(alpha_bar(T)) = 5e-5 before the
-first call. So a frame's answer hardly depends on the answers before it, and the frames
-of a chunk can be inpainted together, their not yet known history guessed by carrying
-the last finished frame forward (what the live loop does for a new frame's unknowns).
-Everything that does depend on the frames before (cleaning, contacts, root correction,
-odometry, stride scaling, output filters, the history itself) then runs frame by frame
-through the poser's own ``enter`` / ``finish``, as live. The guess moves the answer by
-about 1e-6 (tests/inference/poser/test_batched.py pins batched against frame by frame).
+Two ways, both running every frame through the poser's own stages (``observe``,
+``enter``, ``finish``: cleaning, contacts, root correction, odometry, stride scaling,
+output filters and the history, in order), so only the model calls are shared:
 
-Where the answer does depend on the history (the regressor, the floor, history
-"reconstructed", noise drawn per step), the clip runs frame by frame instead.
+- ``reconstruct_many``: several clips in lock step, each with its own poser, one frame of
+  each per call. Every window is exactly the one its poser builds frame by frame, so each
+  clip's answer is its frame-by-frame one to float tolerance (the batch changes only the
+  order of float sums: ~1e-6). ``imucap evaluate`` and ``imucap advise`` use it.
+- ``reconstruct_batched``: one clip cut into chunks of frames inpainted together. With
+  the shipped settings (history "measured", "replace-ddim" from the prior's mean) the
+  model is told only the measurements of its window; the reconstructed history is the
+  starting guess of the unknown entries, scaled by sqrt(alpha_bar(T)) = 5e-5 before the
+  first call, so a chunk's own earlier frames can be guessed (the last finished frame
+  carried forward, what the live loop does for a new frame's unknowns). The guess still
+  moves the answer by up to ~2e-4 (rotation entries, metres), which is more than float
+  tolerance; on one thread it gains nothing either (the denoiser is compute-bound already
+  at the live loop's two windows), so nothing ships with it: it is here for machines with
+  free cores, where a batch lets them share one call.
 
-Speed: on a CPU the denoiser is compute-bound already at the live loop's batch of two
-(mirror averaging), so a batch mostly saves the per-call overhead and lets several
-threads share one call; ``torch.set_num_threads`` decides how many.
+Where the answer depends on the history (the regressor, the floor, history
+"reconstructed", noise drawn per step), or the posers do not share one model, the clips
+run frame by frame instead.
 """
 
 from __future__ import annotations
