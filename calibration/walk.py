@@ -92,6 +92,21 @@ def _velocity(a: np.ndarray, fps: float) -> np.ndarray:
     return v - ramp * v[-1]
 
 
+MIN_PRESENT = 0.5  # of the walk's frames, per sensor
+
+
+def _fill_gaps(a: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """(T,3) with the frames not ``ok`` interpolated linearly in time from their neighbours.
+    A busy hub marks bursts of frames missing: counting them as zero acceleration shortens
+    the velocity along the step phases they fall in and turns the heading (10 % of frames
+    missing in bursts put a wrist 4 deg off, 20 % over 9 deg); interpolated, a burst of a few
+    frames costs only the acceleration's detail within it."""
+    if ok.all():
+        return a
+    t = np.arange(len(a))
+    return np.stack([np.interp(t, t[ok], a[ok, j]) for j in range(a.shape[1])], axis=-1)
+
+
 def walk_displacements(quat: np.ndarray, free_acc: np.ndarray | None, acc: np.ndarray | None,
                        present: np.ndarray, fps: float, windows: WalkWindows) -> tuple[np.ndarray, np.ndarray]:
     """Per sensor, the horizontal displacement over the walk in its own reference frame
@@ -107,10 +122,10 @@ def walk_displacements(quat: np.ndarray, free_acc: np.ndarray | None, acc: np.nd
         ok_still = present[n0:n1, k] & np.all(np.isfinite(a_G[n0:n1, k]), -1)
         seg = a_G[w0:w1, k]
         ok = present[w0:w1, k] & np.all(np.isfinite(seg), -1)
-        if ok_still.sum() < 2 or ok.mean() < 0.8:
+        if ok_still.sum() < 2 or ok.mean() < MIN_PRESENT:
             continue
         bias = a_G[n0:n1, k][ok_still].mean(0)
-        a = np.where(ok[:, None], seg - bias, 0.0)  # a lost sample adds nothing
+        a = _fill_gaps(seg - bias, ok)
         v = _velocity(a, fps)[:, :2]
         disp[k] = v.sum(0) / fps
         moving = v[np.linalg.norm(v, axis=-1) > 0.3]  # the still ends say nothing of direction
@@ -136,7 +151,7 @@ def swing_forward(quat: np.ndarray, present: np.ndarray, fps: float, window: tup
     thirds = np.full((S, 3, 2), np.nan)
     for k in range(S):
         ok = present[a:b, k] & np.all(np.isfinite(quat[a:b, k]), -1)
-        if ok.mean() < 0.8:
+        if ok.mean() < MIN_PRESENT:
             continue
         R = quat_to_matrix(np.where(ok[:, None], quat[a:b, k], [1.0, 0, 0, 0]))
         w = so3_log(R[1:] @ np.swapaxes(R[:-1], -1, -2))[:, :2] * fps  # world-frame rate, horizontal

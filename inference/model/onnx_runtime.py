@@ -29,7 +29,10 @@ OPSET = 17
 
 
 def onnxruntime_available() -> bool:
+    """Whether the ONNX path can run here: torch exports the model with ``onnx`` and
+    ``onnxruntime`` runs it; one without the other is no use."""
     try:
+        import onnx  # noqa: F401
         import onnxruntime  # noqa: F401
     except ImportError:
         return False
@@ -47,7 +50,8 @@ def resolve_runtime(requested: str = "auto") -> str:
             raise ValueError(f"IMUCAP_RUNTIME={env!r}: choose from {', '.join(RUNTIMES)}")
         requested = env if env != "auto" else ("onnx" if onnxruntime_available() else "torch")
     if requested == "onnx" and not onnxruntime_available():
-        raise ImportError("the ONNX runtime was asked for but onnxruntime is not installed (pip install onnxruntime)")
+        raise ImportError("the ONNX runtime was asked for but onnx or onnxruntime is not installed "
+                          "(pip install '.[onnx]')")
     return requested
 
 

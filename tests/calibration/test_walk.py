@@ -155,3 +155,20 @@ def test_guided_calibration_with_frames_missing(session):
             break
     assert g.done, g.status()
     assert segment_errors(g.calibration, sig, truth).max() < 3.0
+
+
+def test_bursts_of_missing_frames_in_the_walk(session):
+    """A busy hub marks bursts of frames missing per sensor (late samples). Counted as zero
+    acceleration they bent the integrated path: 10 % missing put a wrist 4 deg off. They are
+    interpolated now."""
+    sig, truth = session
+    rng = np.random.default_rng(0)
+    T, S = sig.quat.shape[:2]
+    present = np.ones((T, S), bool)
+    for k in range(S):
+        while (~present[:, k]).mean() < 0.1:
+            a = rng.integers(0, T - 10)
+            present[a:a + rng.integers(2, 12), k] = False
+    cal, _ = calibrate_walk(SITES, sig.quat, windows_of(sig), free_acc=sig.free_acc, fps=sig.fps, present=present)
+    err = segment_errors(cal, sig, truth)
+    assert cal.valid.all() and err.max() < 3.0, dict(zip(SITES, err.round(2)))

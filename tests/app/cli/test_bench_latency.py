@@ -57,7 +57,7 @@ def test_send_times_are_found_through_wrapping_counters():
     assert e2e._send_time(log, 7, None, before=100.05) is None  # not sent yet
 
 
-@pytest.mark.skipif(not onnxruntime_available(), reason="onnxruntime is not installed")
+@pytest.mark.skipif(not onnxruntime_available(), reason="onnx or onnxruntime is not installed")
 def test_bench_times_onnx_runtime_next_to_torch(capsys):
     code = main(["bench", "--json", "--random-weights", "--frames", "3", "--warmup", "1", "--threads", "1",
                  "--steps", "2", "--no-paper"])

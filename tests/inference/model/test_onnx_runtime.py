@@ -25,7 +25,7 @@ def _tiny(mask_input: bool = True) -> LoadedModel:
                        norm_std=rng.uniform(0.5, 2.0, N_FEATURES).astype(np.float32))
 
 
-needs_ort = pytest.mark.skipif(not onnx_runtime.onnxruntime_available(), reason="onnxruntime is not installed")
+needs_ort = pytest.mark.skipif(not onnx_runtime.onnxruntime_available(), reason="onnx or onnxruntime is not installed")
 
 
 @needs_ort
