@@ -7,7 +7,10 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import numpy as np
+
 from inference.body.motion import MotionFormatError
+from inference.body.rotations import so3_exp, so3_log
 from inference.loaders.retarget import JointMap
 
 # what the Acclaim sources we know (HDM05, CMU) capture at: AMC files do not say
@@ -25,6 +28,35 @@ def _sides(template: dict[str, str]) -> dict[str, str]:
             out[f"{s}_{ours}"] = theirs.format(L=L, s=lower, Side=long_)
     return out
 
+
+def _turns(template: dict[str, tuple[float, float, float]]) -> dict[str, tuple[float, float, float]]:
+    """Expand frame turns given for the left side ('thigh') and the midline ('pelvis') to
+    both sides: the right side's turn is the left's mirrored in the sagittal plane, which
+    keeps a rotation vector's Y and flips its X and Z."""
+    out: dict[str, tuple[float, float, float]] = {}
+    for seg, (x, y, z) in template.items():
+        if seg in _MIDLINE:
+            out[seg] = (x, y, z)
+        else:
+            out[f"l_{seg}"] = (x, y, z)
+            out[f"r_{seg}"] = (-x, y, -z)
+    return out
+
+
+_MIDLINE = ("pelvis", "spine1", "spine2", "spine3", "neck", "head")
+
+# Cgspeed's Daz collars against the reference, CMU's own ASF/AMC read as HDM05 is (what
+# the shipped model learnt from). No take exists in both, so the figure is the mean
+# posture (heading taken out, walking frames: root at 0.8-1.8 m/s) of Daz subjects 05,
+# 06, 07, 08, 10, 12 against ASF subjects 02 and 03, as a right-multiplied turn: 33.8 deg,
+# the 12 estimates (6 subjects x 2 sides, mirrored) within 5.3 deg (median), 9.6 (max).
+# Subject to subject, the collars' mean posture differs by 8-12 deg among the ASF
+# subjects (01, 02, 03) and up to 10 among the Daz ones, against 25-41 deg between any
+# Daz and any ASF subject: a rig difference. Every other segment's Daz-to-ASF difference
+# lies within the spread between subjects (pelvis 3.7 deg, thighs 2-6, spine2/3 13 against
+# up to 11 between ASF subjects, neck 22 against 26, head 29 against 29-51, upper arms
+# 16-18 against 17-41), so nothing else is corrected on that evidence.
+_DAZ_COLLAR_TO_ASF = (28.4, 11.5, 14.3)
 
 BANDAI = JointMap(
     name="bandai22",
@@ -84,6 +116,7 @@ CMU_DAZ = JointMap(
     # to frame 1->2: 0.94, 1, 0.89, 0.61, 0.24, 0.06, 0.14, 0.09, then the take's own,
     # 0.01 in a still one): the capture starts at frame 8
     lead_in=8,
+    frame_turns=_turns({"collar": _DAZ_COLLAR_TO_ASF}),
 )
 
 # Mixamo-style and most game skeletons
@@ -128,6 +161,41 @@ ASF = JointMap(
 # twist bone nor the hand's parent frame (``{L}_Forearm``) has the full pronation: our
 # forearm is ``{L}_Forearm`` turned by the hand's twist about the forearm (``twist``),
 # as for CMU_DAZ, and our hand is the whole ``{L}_Hand``.
+# The CC rig's segment frames sit a constant turn off the Daz conversion's for the same
+# posture: its joints lie elsewhere (the waist bone, Hip to Waist to Spine01, points 12
+# and 40 deg off Daz's hip-abdomen-chest) and its zero pose is a line. Measured on the two
+# takes in both conversions, 05_01 = 005_01 and 06_01 = 006_01 (the same capture: knee and
+# elbow angle traces correlate at 0.996 with iClone frame k at Daz frame 2k - 6 once the
+# Daz lead-in is dropped, the same in each third of both takes): the rotation mean of
+# R_iclone^T R_daz over the aligned frames (296 and 243), after a world heading the
+# pelvis fixes (0.3 and 2.7 deg), each side's and each take's estimate mirrored onto the
+# left and averaged. Per segment: angle, median spread over frames (05 / 06), largest
+# difference of the 4 (limbs) or 2 (midline, symmetrised) estimates from their mean:
+#   pelvis 12.0 (0.1/0.2, 0.4)   spine1 40.0 (2.8/3.3, 2.8)  spine3 5.1 (1.2/1.6, 1.0)
+#   neck 10.1 (1.2/1.6, 2.0)     head 10.6 (1.2/1.5, 1.9)    collar 24.2 (1.2/1.6, 1.0)
+#   upperarm 5.4 (1.3/1.4, 1.1)  forearm 19.6 (2.4/1.8, 7.3) thigh 5.3 (1.3/1.7, 0.8)
+#   shank 1.4 (1.3/1.7, 0.7)     foot 7.9 (1.6/1.9, 2.8)
+# A world (left-multiplied) offset per segment fits worse everywhere (pelvis spread
+# 0.9/1.2 against 0.1/0.2). Not constant, so not in the table: spine2 (CC's Spine01 has
+# no Daz bone: Daz's chest spans our spine2 and spine3; 2.0 deg, estimates 4.5 apart),
+# the hands and fingers (26 deg, estimates 40 apart: the take's wrist, not the rig) and
+# the toes (Daz has no toe joint). The hands and fingers stay as the rig has them (turned
+# with the forearm they would fit one take better and the other worse); the toes, which
+# nothing here measures, turn with the foot, keeping the rig's toe angle. The collars take Daz's own
+# turn to the ASF reference (_DAZ_COLLAR_TO_ASF) after it, so both conversions land on it.
+# test_cmu pins the agreement.
+_ICLONE_COLLAR_TO_DAZ = (-13.7, 1.9, -19.9)
+_ICLONE_TO_DAZ = {
+    "pelvis": (0.0, -12.0, 0.0), "spine1": (0.0, -40.0, 0.0), "spine3": (0.0, 5.1, 0.0),
+    "neck": (0.0, 10.1, 0.0), "head": (0.0, -10.6, 0.0),
+    "collar": tuple(float(v) for v in np.round(np.degrees(so3_log(
+        so3_exp(np.radians(_ICLONE_COLLAR_TO_DAZ)) @ so3_exp(np.radians(_DAZ_COLLAR_TO_ASF))
+    )), 2)),
+    "upperarm": (5.0, -1.6, -1.3), "forearm": (7.3, 1.0, -18.1),
+    "thigh": (0.4, -5.3, 0.3), "shank": (-0.6, 1.3, -0.3),
+    "foot": (5.2, 5.3, -2.5), "toes": (5.2, 5.3, -2.5),
+}
+
 ICLONE_CC = JointMap(
     name="iclone-cc",
     segments=_sides({
@@ -138,6 +206,7 @@ ICLONE_CC = JointMap(
         "shank": "CC_Base_{L}_Calf", "foot": "CC_Base_{L}_Foot", "toes": "CC_Base_{L}_ToeBase",
     }),
     twist=_sides({"forearm": "CC_Base_{L}_Hand"}),
+    frame_turns=_turns(_ICLONE_TO_DAZ),
 )
 
 # CMU's Acclaim skeleton written to BVH bone for bone under its ASF names, the root

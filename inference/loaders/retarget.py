@@ -28,6 +28,7 @@ import numpy as np
 from inference.body.body import MAIN_CHILD, Body, anthropometric_offsets
 from inference.body.motion import Motion
 from inference.body.rotations import (
+    axis_angle_to_matrix,
     matrix_to_quat,
     quat_about_axis,
     quat_between_vectors,
@@ -100,6 +101,12 @@ class JointMap:
     # the rate every file of this layout was captured at, where the files' own frame time
     # is a converter's guess (joint_maps.ACCLAIM_BVH); None: trust the file
     capture_fps: float | None = None
+    # segment -> constant turn (rotation vector, degrees, in the segment's own frame) that
+    # the retargeted orientation is right-multiplied by: a rig whose bone geometry (where
+    # it puts joints, how its zero pose lies) leaves a segment's frame a fixed rotation off
+    # the reference's for the same posture (joint_maps.ICLONE_CC). Joint positions do not
+    # move: the children's offsets turn back by as much (``retarget``).
+    frame_turns: dict[str, tuple[float, float, float]] = field(default_factory=dict)
 
     def required(self) -> set[str]:
         return set(self.segments.values()) | set(self.orient.values()) | set(self.twist.values())
@@ -257,6 +264,8 @@ def retarget(
     rot = np.zeros((T, N_SEGMENTS, 3, 3))
     orient = {SEGMENT_INDEX[s]: src.index(n) for s, n in jmap.orient.items()}
     twist = {SEGMENT_INDEX[s]: src.index(n) for s, n in jmap.twist.items()}
+    turns = {SEGMENT_INDEX[s]: axis_angle_to_matrix(np.radians(np.asarray(v, dtype=np.float64)))
+             for s, v in jmap.frame_turns.items()}
     for i in range(N_SEGMENTS):
         if i in ours_to_src:
             j = orient.get(i, ours_to_src[i])
@@ -264,6 +273,8 @@ def retarget(
             rot[:, i] = W @ G @ Q[j].T @ Wt
         else:
             rot[:, i] = rot[:, PARENTS[i]]
+        if i in turns:
+            rot[:, i] = rot[:, i] @ turns[i]
 
     # step 3: offsets from the source T-pose
     offsets = np.zeros((N_SEGMENTS, 3))
@@ -288,6 +299,11 @@ def retarget(
                 anthro = anthropometric_offsets(1.75 * _height_scale(tpose_pos))
             offsets[i] = anthro[i]
             tpose_pos[i] = tpose_pos[par] + offsets[i]
+    # a turned segment's frame holds its children's offsets turned back by as much, so
+    # every joint stays where the source puts it (JointMap.frame_turns)
+    for i in range(1, N_SEGMENTS):
+        if PARENTS[i] in turns:
+            offsets[i] = turns[PARENTS[i]].T @ offsets[i]
     root = (src.pos[:, pelvis] @ W.T) * scale
     body = Body.from_offsets(offsets)
     return Motion(rot=rot, root=root, fps=src.fps, body=body, name=name, source=source,

@@ -38,6 +38,9 @@ CMU_VAL_SUBJECTS: tuple[str, ...] = ("02", "06", "08")
 CMU_EXCLUDED = ("09_10", "005_05", "005_06", "005_08", "005_16", "005_17", "005_18", "005_19")
 # draw shares per source when CMU is trained on
 SHARES_WITH_CMU = {"bandai": 0.3, "hdm05": 0.35, "cmu": 0.35}
+# the CMU caches' own key: bump when the CMU layouts' rest-pose turns change (joint_maps.py),
+# which CODE_VERSION would bump for every source
+CMU_CACHE_TAG = "rest-turns-1"
 
 
 def cmu_subject(path: Path | str) -> str:
@@ -79,7 +82,7 @@ def root_val_files(root: Path | None = None) -> list[Path]:
 
 
 def _build(files: list[Path], progress: bool = True, speed: float = 1.0, repair: bool = False,
-           causal: bool = False) -> FeatureDataset:
+           causal: bool = False, tag: str = "") -> FeatureDataset:
     """The cached feature dataset of ``files``, performed at ``speed`` (copies at another
     speed get their own cache and names ``<file>@x<speed>``, so a clip and its copies stay apart),
     with broken feet repaired (``plausibility.repair_feet``) when ``repair``, accelerations
@@ -94,7 +97,8 @@ def _build(files: list[Path], progress: bool = True, speed: float = 1.0, repair:
                 m = repair_feet(m)[0]
             return m.at_speed(speed) if speed != 1.0 else m
 
-    variant = ",".join(v for v in ("" if speed == 1.0 else f"speed={speed:g}", "repair_feet" if repair else "") if v)
+    variant = ",".join(v for v in ("" if speed == 1.0 else f"speed={speed:g}", "repair_feet" if repair else "", tag)
+                       if v)
     ds = build_dataset(files, cache_root(), loader=loader, finder=lambda paths: [Path(p) for p in paths],
                        progress=progress, variant=variant, causal=causal)
     if speed != 1.0:
@@ -200,7 +204,7 @@ def train_set(
                                               for s in hdm05_speeds)])
     if cmu:
         base = FeatureDataset.concat([base, _build(cmu_train_files(), progress, repair=repair_implausible,
-                                                   causal=causal)])
+                                                   causal=causal, tag=CMU_CACHE_TAG)])
     if energy_per == "window":
         base.weights = clip_weights(base.energy, [len(c) for c in base.clips])
     if drop_implausible:
@@ -217,5 +221,5 @@ def val_set(progress: bool = True, cmu: bool = False, causal: bool = False) -> F
     """HDM05 actor dg (and with ``cmu`` the held-out CMU subjects too)."""
     if cmu:
         return FeatureDataset.concat([_build(val_files(), progress, causal=causal),
-                                      _build(cmu_val_files(), progress, causal=causal)])
+                                      _build(cmu_val_files(), progress, causal=causal, tag=CMU_CACHE_TAG)])
     return _build(val_files(), progress, causal=causal)

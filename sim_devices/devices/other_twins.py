@@ -14,16 +14,26 @@ from drivers.dualsense import protocol as ds
 from drivers.moticon import protocol as mot
 from drivers.urls import build_url
 from drivers.xsens_can import protocol as xcan
+from drivers.xsens_can.shared_bus import BusRegistry, Tap
 
 from .base import DeviceFaults, InsoleSource, SignalSource, SimDevice
 
 G = 9.80665
 
+# The simulated MTis of a process send through one bus per channel: on python-can's
+# virtual interface every bus on a channel gets a deep copy of every frame sent, so one
+# sending bus per sensor meant N-1 copies per frame into queues nobody reads (growing
+# without bound). A registry apart from the drivers', because a bus never receives its
+# own frames and the drivers' bus must receive ours.
+SIM_CAN_BUSES = BusRegistry()
+
 
 class SimXsensCan(SimDevice):
     """An MTi-600 on a python-can bus (``virtual`` by default: in-process, real
     python-can message path). A corrupted packet becomes a frame with a wrong
-    length, which is what a CAN receiver can see (the CRC catches bit flips)."""
+    length, which is what a CAN receiver can see (the CRC catches bit flips).
+    The MTis on one channel share one sending bus (``SIM_CAN_BUSES``); an MTi
+    receives nothing, so its tap routes no identifiers to it."""
 
     protocol = "xsens-can"
 
@@ -39,14 +49,14 @@ class SimXsensCan(SimDevice):
     ) -> None:
         super().__init__(source, rate, faults, name)
         self.interface, self.channel, self.id_offset = interface, channel, id_offset
-        self._bus: can.BusABC | None = None
+        self._bus: Tap | None = None
 
     @property
     def url(self) -> str:
         return build_url("xsens-can", self.interface, f"/{self.channel}", id_offset=hex(self.id_offset), id=self.name)
 
     def _open_transport(self) -> None:
-        self._bus = can.Bus(interface=self.interface, channel=self.channel, receive_own_messages=False)
+        self._bus = SIM_CAN_BUSES.attach(self.interface, self.channel, {"receive_own_messages": False})
 
     def _close_transport(self) -> None:
         bus, self._bus = self._bus, None
