@@ -26,18 +26,24 @@ CENTRED_HUB_WAIT = 0.05  # s behind now: the next sample of every site is there,
 # s behind now: the selector drains the ports every LOW_HUB_WAIT / 2, so the latest sample at
 # or before the grid time has been read by then; a sample read later is simply not used
 LOW_HUB_WAIT = 0.01
+# s: how far the centred hub may fall behind for samples that reach it late (a busy laptop:
+# its readers or the live loop missed their core); without it those samples are lost to
+# their frames and to the recording (drivers/hub.py, ``max_latency``)
+CENTRED_HUB_MAX_WAIT = 0.25
 
 
 @dataclass(frozen=True)
 class LatencySettings:
     """What a mode sets. hub_wait: the hub's ``latency`` (s); interpolate: the hub
     interpolates to the grid (needs the next sample) instead of holding the latest;
-    causal: the resampler's trailing moving average."""
+    causal: the resampler's trailing moving average; hub_max_wait: how far the hub's wait
+    may grow for late samples (None: fixed; the low mode gives a late sample up instead)."""
 
     mode: str
     hub_wait: float
     interpolate: bool
     causal: bool
+    hub_max_wait: float | None = None
 
 
 def latency_settings(mode: str) -> LatencySettings:
@@ -45,16 +51,17 @@ def latency_settings(mode: str) -> LatencySettings:
         raise ValueError(f"unknown latency mode {mode!r}; choose from {', '.join(LATENCY_MODES)}")
     if mode == "low":
         return LatencySettings(mode, LOW_HUB_WAIT, interpolate=False, causal=True)
-    return LatencySettings(mode, CENTRED_HUB_WAIT, interpolate=True, causal=False)
+    return LatencySettings(mode, CENTRED_HUB_WAIT, interpolate=True, causal=False, hub_max_wait=CENTRED_HUB_MAX_WAIT)
 
 
 def hub_options(mode: str) -> dict[str, Any]:
-    """Keyword arguments for ``Hub``/``SuitHub`` in this mode (``latency``, ``resampler``)."""
+    """Keyword arguments for ``Hub``/``SuitHub`` in this mode (``latency``, ``max_latency``, ``resampler``)."""
     from drivers.hub import resampler_from_to_grid
     from inference.signals.resample import to_grid
 
     s = latency_settings(mode)
-    return {"latency": s.hub_wait, "resampler": resampler_from_to_grid(to_grid) if s.interpolate else None}
+    return {"latency": s.hub_wait, "max_latency": s.hub_max_wait,
+            "resampler": resampler_from_to_grid(to_grid) if s.interpolate else None}
 
 
 def causal_weights() -> os.PathLike:

@@ -31,6 +31,12 @@ Why each piece exists:
   (the low-latency mode, docs/latency.md).
 - Each frame says which sample of each site went into it last (``sample_t``,
   ``sample_counter``), so a latency measurement starts at a real sample.
+- ``max_latency``: on a busy machine the readers or the consumer miss their core for
+  tens of milliseconds, samples reach the hub after their frame has gone out, and that
+  site is missing from the frame, and from the recording, which stores the frames. With
+  ``max_latency`` set the grid falls further behind instead, just enough for the late
+  samples seen (up to ``max_latency``), and creeps back to ``latency`` once none has
+  been late for ``LATE_QUIET_S``.
 """
 
 from __future__ import annotations
@@ -171,6 +177,14 @@ class HubStats:
     frames: int = 0
     frames_skipped: int = 0
     gaps: dict[str, int] = field(default_factory=dict)
+    late: int = 0  # samples that reached the hub later than the grid's wait at the time
+    latency_raised: int = 0  # times the wait grew for them (``max_latency``)
+    latency_max: float = 0.0  # the longest wait used
+
+
+LATE_QUIET_S = 10.0  # s without a late sample before the grid's wait comes back down
+LATENCY_RELAX = 0.005  # s of wait given back per s after that
+LATE_MARGIN = 0.01  # s of wait beyond the latest sample seen late
 
 
 class _Ring:
@@ -285,6 +299,7 @@ class Hub:
         read_interval: float | None = None,
         selector: bool = True,
         fill_gap: float = 0.1,
+        max_latency: float | None = None,
     ) -> None:
         self.rate = rate
         # Radio loss comes in bursts of a few packets. Marking every grid point inside such a
@@ -300,6 +315,10 @@ class Hub:
         self.selector = selector
         self._selector_thread: threading.Thread | None = None
         self.latency = latency
+        self.base_latency = latency
+        self.max_latency = max_latency if max_latency is None else max(max_latency, latency)
+        self._last_late: float | None = None
+        self._last_poll: float | None = None
         self.staleness = staleness
         self.max_backlog = max_backlog
         self.resampler = resampler
@@ -445,6 +464,8 @@ class Hub:
                     continue
                 batch = list(tr.queue)
                 tr.queue.clear()
+            now = self.clock()
+            worst = 0.0
             imu_t: list[float] = []
             imu: list[Sample] = []
             last_imu = tr.ring.last_t()
@@ -475,8 +496,32 @@ class Hub:
                     imu_t.append(st)
                     imu.append(s)
                     last_imu = st
+                    worst = max(worst, now - st)
             if imu:
                 tr.ring.extend(imu_t, imu)
+            if worst > self.latency:
+                self._late(worst, now)
+
+    def _late(self, age: float, now: float) -> None:
+        """A sample ``age`` s old reached the hub after its frame's time had passed."""
+        self.stats.late += 1
+        if self.max_latency is None or age > self.max_latency + self.max_backlog:
+            return  # fixed wait, or a backlog (a device's buffer after a reconnect), not a late sample
+        self._last_late = now
+        wanted = min(self.max_latency, age + LATE_MARGIN)
+        if wanted > self.latency:
+            self.latency = wanted
+            self.stats.latency_raised += 1
+            self.stats.latency_max = max(self.stats.latency_max, wanted)
+
+    def _relax(self, now: float) -> None:
+        """Give the wait back slowly once nothing has been late for a while (a sudden drop
+        would release a burst of frames at once)."""
+        last, self._last_poll = self._last_poll, now
+        if self.latency <= self.base_latency or last is None or self._last_late is None:
+            return
+        if now - self._last_late > LATE_QUIET_S:
+            self.latency = max(self.base_latency, self.latency - LATENCY_RELAX * (now - last))
 
     @property
     def sites(self) -> tuple[str, ...]:
@@ -486,6 +531,7 @@ class Hub:
         """All grid frames that are due (``now - latency``), oldest first."""
         self._drain()
         now = self.clock() if now is None else now
+        self._relax(now)
         horizon = now - self.latency
         last = math.floor(horizon * self.rate)
         if self._next_index is None:
