@@ -45,6 +45,7 @@ class DemoConfig:
     threads: int = 1  # one window per step: 1 intra-op thread is fastest and leaves a core to the drivers/GUI
     latency: str = "centred"  # app.latency.LATENCY_MODES: "low" waits for no future sample
     runtime: str = "auto"  # the live model call: ONNX Runtime when installed (faster), else torch
+    confidence: bool = False  # each pose with its per-segment spread (inference/poser/confidence.py)
     calibration_protocol: Any = None  # a calibration.Protocol overriding the default timings
     # sinks streaming the body to other programs (--stream: app.streams.make_stream_sinks builds
     # them, above this module); the session adds them to its pipeline, which closes them
@@ -178,7 +179,8 @@ class DemoSession:
         self.signals, self.truth = synthesize_session(self.activity, self.protocol, noise=noise, rng=cfg.seed,
                                                       sites=sites)
         self.assignment = assignment_for(cfg.sensors, cfg.protocol, cfg.insoles)
-        self.poser = Poser(self.model, body=self.truth.body, steps=cfg.steps, seed=cfg.seed, runtime=cfg.runtime)
+        self.poser = Poser(self.model, body=self.truth.body, steps=cfg.steps, seed=cfg.seed, runtime=cfg.runtime,
+                           confidence=cfg.confidence and self.model is not None and self.model.kind == "diffusion")
         self.calibrator = Calibrator(cfg.sensors, schedule=self.protocol.schedule())
         self.pipeline = Pipeline(self.poser, cfg.sensors, calibrator=self.calibrator, insoles=cfg.insoles,
                                  clock=time.monotonic, causal=self.causal)
@@ -338,6 +340,11 @@ class DemoSession:
         }
         if self.cfg.streams:
             out["streams"] = [s.summary() for s in self.cfg.streams if hasattr(s, "summary")]
+        w = getattr(self, "_watch", None)
+        if self.poser.confidence is not None and w is not None and w.spread_n:
+            from inference.body.skeleton import SEGMENTS
+
+            out["spread_mean_deg"] = {s: round(float(v), 2) for s, v in zip(SEGMENTS, w.spread_sum / w.spread_n)}
         out["latency_mode"] = self.cfg.latency
         out["runtime"] = self.poser.runtime
         out["acc_filter"] = "causal" if self.pipeline.causal else "centred"
@@ -354,11 +361,14 @@ class DemoSession:
 
 
 class CalibrationWatch(Sink):
-    """Notes when calibration took effect and the wall time of every pose (for fps)."""
+    """Notes when calibration took effect, the wall time of every pose (for fps) and the
+    per-segment spread when the poses carry one."""
 
     def __init__(self, session: DemoSession) -> None:
         self.session = session
         self.times: list[float] = []
+        self.spread_sum = np.zeros(24)
+        self.spread_n = 0
         session._watch = self
 
     def on_calibration(self, calibration, t: float) -> None:
@@ -366,3 +376,7 @@ class CalibrationWatch(Sink):
 
     def on_pose(self, pose: LivePose) -> None:
         self.times.append(time.monotonic())
+        spread = pose.pose.spread_deg
+        if spread is not None and np.all(np.isfinite(spread)):
+            self.spread_sum += spread
+            self.spread_n += 1

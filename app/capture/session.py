@@ -70,6 +70,7 @@ class CaptureOptions:
     metadata: dict[str, Any] = field(default_factory=dict)
     sinks: list[Sink] = field(default_factory=list)  # more consumers of the live body: streams (app.streams)
     latency: str = "centred"  # app.latency.LATENCY_MODES: "low" waits for no future sample
+    confidence: bool = False  # each pose with its per-segment spread (inference/poser/confidence.py)
 
 
 class CaptureSession:
@@ -94,7 +95,9 @@ class CaptureSession:
         causal, latency_warning = resolve_filter(opt.latency, self.model)
         self.warning = "; ".join(w for w in (self.warning, latency_warning) if w) or None
         steps = setup.steps
-        self.poser = Poser(self.model, body=Body.from_height(setup.subject.height_m), steps=steps, runtime="auto")
+        self.poser = Poser(self.model, body=Body.from_height(setup.subject.height_m), steps=steps, runtime="auto",
+                           confidence=(opt.confidence or setup.confidence) and self.model is not None
+                           and self.model.kind == "diffusion")
         self.guided = GuidedCalibration(self.sites, setup.calibration, countdown=opt.countdown, timeout=opt.timeout)
         self.pipeline = Pipeline(self.poser, self.sites, calibrator=self.guided, insoles=setup.insoles is not None,
                                  clock=time.monotonic, causal=causal)

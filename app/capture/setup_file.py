@@ -35,7 +35,7 @@ TABLE_KEYS: dict[str, tuple[str, ...]] = {
     "subject": ("id", "height", "notes"),
     "sensors": SITES,
     "insoles": ("url",),
-    "model": ("name", "steps"),
+    "model": ("name", "steps", "confidence"),
     "calibration": ("protocol",),
     "recording": ("folder",),
 }
@@ -87,6 +87,7 @@ class Setup:
     insoles: str | None = None
     model: str = DEFAULT_MODEL
     steps: str | None = None
+    confidence: bool = False  # each pose with its per-segment spread (docs/confidence.md)
     calibration: str = "walk"
     # relative = relative to the setup file's folder; load_setup resolves it against that folder
     recordings: Path = DEFAULT_RECORDINGS
@@ -228,6 +229,7 @@ class _Parser:
         self._check_one_device_per_site(sensors, insoles)
         model, steps = self._model(data.get("model", {}))
         return Setup(subject=subject, sensors=sensors, insoles=insoles, model=model, steps=steps,
+                     confidence=self._confidence(data.get("model", {})),
                      calibration=self._calibration(data.get("calibration", {})),
                      recordings=self._recordings(data.get("recording", {})), path=self.path)
 
@@ -418,6 +420,13 @@ class _Parser:
             raise self.error(f"steps {steps!r} is not a step list{why}",
                              'write e.g. "10D:3", "paper", a number of steps, or a list "1000,500,0"', line) from None
         return name, steps
+
+    def _confidence(self, table: dict[str, Any]) -> bool:
+        value = table.get("confidence", False)
+        if not isinstance(value, bool):
+            raise self.error(f"confidence {value!r} is not true or false", "write confidence = true (or false)",
+                             self.line("model", "confidence"))
+        return value
 
     def _calibration(self, table: dict[str, Any]) -> str:
         protocol = self._text("calibration", "protocol", table.get("protocol", "walk")).strip()
@@ -674,6 +683,8 @@ def _dump(setup: Setup, base: Path | None) -> str:
         '# steps: diffusion steps, e.g. "10D:3" (fewer = faster); leave out for the model\'s own',
         f"name = {_quote(setup.model)}",
         f"steps = {_quote(setup.steps)}" if setup.steps is not None else '# steps = "10D:3"',
+        "# confidence: each pose with how sure the model is of each segment (~40 % more per frame)",
+        f"confidence = {'true' if setup.confidence else 'false'}",
         "",
         "[calibration]",
         "# " + "; ".join(f'"{k}": {v}' for k, v in CALIBRATION_PROTOCOLS.items()),

@@ -127,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
     headless = args.headless or not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
     term = _Terminal()
     options = CaptureOptions(record=record, calibration=cal, countdown=args.countdown, timeout=args.timeout,
-                             on_event=term.event, latency=args.latency)
+                             on_event=term.event, latency=args.latency, confidence=args.confidence)
     try:
         options.sinks = sinks_from_args(args)
         session = CaptureSession(setup, options)
@@ -189,6 +189,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--timeout", type=float, default=30.0, help="seconds a calibration step may wait")
     p.add_argument("--latency", default="centred", choices=("centred", "low"),
                    help="low: wait for no future sample (trailing acceleration filter; docs/latency.md)")
+    p.add_argument("--confidence", action="store_true",
+                   help="each pose with a spread per segment (deg) and for the root (m): 0 where a sensor measured "
+                        "it, larger where the model guessed; coloured in the window, in the recording, on LSL "
+                        "(docs/confidence.md); costs ~40 %% more per frame")
     add_stream_arguments(p)
     p.add_argument("--screenshot", help="with a window: save it to this PNG after --quit-after seconds")
     p.add_argument("--quit-after", type=float, default=0.0)

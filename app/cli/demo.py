@@ -59,6 +59,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--latency", default="centred", choices=("centred", "low"),
                    help="low: wait for no future sample (trailing acceleration filter, the hub holds the latest "
                         "sample; docs/latency.md); default centred, as the shipped model was trained")
+    p.add_argument("--confidence", action="store_true",
+                   help="each pose with a spread per segment (deg) and for the root (m): 0 where a sensor measured "
+                        "it, larger where the model guessed; coloured in the window, in the recording, on LSL "
+                        "(docs/confidence.md); costs ~40 %% more per frame")
     add_stream_arguments(p)
     p.add_argument("--headless", action="store_true", help="no window")
     p.add_argument("--json", action="store_true", help="headless: print one JSON object")
@@ -81,7 +85,7 @@ def config_from_args(args: argparse.Namespace) -> DemoConfig:
         motion=args.motion, file=args.file, sensors=tuple(parse_sites(args.sensors)), insoles=args.insoles,
         protocol=args.protocol, seconds=seconds, model=args.model, steps=args.steps, seed=args.seed,
         record=args.record, noise=not args.no_noise, headless=args.headless, threads=args.threads,
-        latency=args.latency,
+        latency=args.latency, confidence=args.confidence,
     )
 
 

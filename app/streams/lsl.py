@@ -11,7 +11,11 @@ Three outlets (names start with ``prefix``, default "imucap"):
   the world acceleration (gravity removed, m/s^2), from ``Calibration.apply``; nothing is
   sent before the first calibration;
 - "imucap markers", type Markers, irregular, string: every pipeline event
-  ("kind: detail") and every calibration taking effect.
+  ("kind: detail") and every calibration taking effect;
+- "imucap confidence", type MoCap, 20 Hz, float32, once poses carry a spread (``--confidence``):
+  per segment how far the model's other inpaintings fell from the pose (degrees; 0 where a
+  sensor measured it) and the root's (metres), stamped like the body sample it belongs to
+  (docs/confidence.md).
 
 The channel labels, units and types are in each stream's XML header
 (``desc/channels/channel``), with the frame and quaternion order in ``desc/reference``.
@@ -120,6 +124,21 @@ def sensor_channels() -> list[Channel]:
     return out
 
 
+def confidence_channels() -> list[Channel]:
+    """The confidence stream's layout (24 segments + the root)."""
+    return [(f"{s}_spread", "degrees", "Spread") for s in SEGMENTS] + [("root_spread", "meters", "Spread")]
+
+
+def confidence_sample(pose: LivePose) -> np.ndarray | None:
+    """One confidence-stream sample, or None when the pose carries no spread."""
+    p = pose.pose
+    spread = getattr(p, "spread_deg", None)
+    if spread is None:
+        return None
+    root = getattr(p, "root_spread_m", None)
+    return np.r_[np.asarray(spread, float).reshape(-1), np.nan if root is None else float(root)]
+
+
 def body_sample(pose: LivePose) -> np.ndarray:
     """One body-stream sample, in ``body_channels`` order."""
     p = pose.pose
@@ -176,6 +195,18 @@ class LslSink(Sink):
                 pylsl, self.names["markers"], "Markers", [("event", "", "Marker")], pylsl.IRREGULAR_RATE,
                 pylsl.cf_string, f"{prefix}-markers", "session events: markers, notes, devices lost/back"))
         self.calibration: Calibration | None = None
+        self._pylsl, self._prefix = pylsl, prefix
+        self.confidence: Any = None  # opened with the first pose that carries a spread
+
+    def _confidence_outlet(self) -> Any:
+        if self.confidence is None:
+            pylsl, prefix = self._pylsl, self._prefix
+            self.names["confidence"], self.counts["confidence"] = f"{prefix} confidence", 0
+            self.confidence = pylsl.StreamOutlet(_info(
+                pylsl, self.names["confidence"], "MoCap", confidence_channels(), POSE_RATE, pylsl.cf_float32,
+                f"{prefix}-confidence", "per segment the spread of the model's other inpaintings (0 = measured), "
+                "and the root's; the time stamps of the body stream's samples"))
+        return self.confidence
 
     def lsl_time(self, t: float) -> float:
         """A pipeline time on the LSL clock."""
@@ -184,8 +215,13 @@ class LslSink(Sink):
     def on_pose(self, pose: LivePose) -> None:
         if self.body is None:
             return
-        self.body.push_sample(body_sample(pose).tolist(), self.lsl_time(pose.t))
+        t = self.lsl_time(pose.t)
+        self.body.push_sample(body_sample(pose).tolist(), t)
         self.counts["body"] += 1
+        spread = confidence_sample(pose)
+        if spread is not None:
+            self._confidence_outlet().push_sample(spread.tolist(), t)
+            self.counts["confidence"] += 1
 
     def on_calibration(self, calibration: Calibration, t: float) -> None:
         self.calibration = calibration
@@ -211,7 +247,8 @@ class LslSink(Sink):
         self.counts["markers"] += 1
 
     def close(self) -> None:
-        self.body = self.sensors = self.markers = None  # liblsl closes an outlet when it is released
+        # liblsl closes an outlet when it is released
+        self.body = self.sensors = self.markers = self.confidence = None
 
     def summary(self) -> dict[str, Any]:
         return {"kind": self.kind, "streams": dict(self.names), "samples": dict(self.counts),

@@ -273,3 +273,20 @@ def test_missing_file_is_one_line(tmp_path):
     with pytest.raises(SetupError) as info:
         load_setup(tmp_path / "nope.toml")
     assert "no such file" in str(info.value) and "imucap setup new" in str(info.value)
+
+
+def test_confidence_reads_back_and_must_be_true_or_false(tmp_path):
+    f = tmp_path / "lab.toml"
+    f.write_text(GOOD.replace('steps = "10D:3"', 'steps = "10D:3"\nconfidence = true'))
+    s = load_setup(f)
+    assert s.confidence is True and parse_setup(dump_setup(s), f).confidence is True
+    assert load_setup_text(GOOD, tmp_path).confidence is False  # left out: off
+    text = GOOD.replace('steps = "10D:3"', 'steps = "10D:3"\nconfidence = "yes"')
+    err = error_of(text, tmp_path)
+    assert err.line == line_of(text, "confidence =") and "true" in err.fix
+
+
+def load_setup_text(text: str, tmp_path: Path) -> Setup:
+    f = tmp_path / "other.toml"
+    f.write_text(text)
+    return load_setup(f)

@@ -76,3 +76,20 @@ def test_assignment_and_bad_arguments(capsys):
     assert main(["demo", "--headless", "--json", "--sensors", "pelvis,elbow"]) == 2
     assert "unknown sensor site" in capsys.readouterr().err
     assert main(["demo", "--headless", "--motion", "moonwalk"]) == 2
+
+
+def test_headless_demo_with_confidence(tiny_model, tmp_path, capsys):
+    """--confidence: the live poses carry a spread, 0 on the measured segments, in the
+    JSON and the recording."""
+    rec = tmp_path / "conf.h5"
+    rc = main(["demo", "--headless", "--json", "--seconds", "6", "--model", str(tiny_model), "--threads", "1",
+               "--sensors", "pelvis,l_wrist,r_shank", "--protocol", "xbus", "--confidence", "--record", str(rec)])
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    spread = out["spread_mean_deg"]
+    measured = [spread[s] for s in ("pelvis", "l_forearm", "r_shank")]
+    open_ = [v for s, v in spread.items() if s not in ("pelvis", "l_forearm", "r_shank")]
+    assert max(measured) < 0.5 * np.mean(open_), spread
+    r = read_recording(rec)
+    s = np.asarray(r.recon["spread_deg"])
+    assert s.shape[1] == 24 and np.isfinite(s).all(axis=1).mean() > 0.9

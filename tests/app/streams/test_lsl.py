@@ -119,3 +119,33 @@ def test_clock_offset_trusts_the_least_disturbed_reading():
     lsl = iter([1000.7, 1002.05, 1005.2])  # offsets 1000.2, 1000.0, 999.7
     offset = lsl_clock_offset(lambda: next(lsl), lambda: next(ticks), tries=3)
     assert offset == pytest.approx(1000.0)
+
+
+def test_confidence_stream_opens_with_the_first_spread_and_carries_it(walk_poses):
+    import dataclasses
+
+    prefix = f"imucap-test-{uuid.uuid4().hex[:8]}"
+    sink = LslSink(prefix, sensors=False, markers=False)
+    sink.on_pose(walk_poses[0])  # no spread: no confidence stream
+    assert sink.confidence is None and "confidence" not in sink.names
+    rng = np.random.default_rng(5)
+    with_spread = [dataclasses.replace(p, pose=dataclasses.replace(p.pose, spread_deg=rng.uniform(0, 30, 24),
+                                                                   root_spread_m=float(rng.uniform(0, 0.2))))
+                   for p in walk_poses[1:]]
+    sink.on_pose(with_spread[0])
+    inlet = open_inlet(f"{prefix} confidence")
+    info = inlet.info(timeout=10.0)
+    assert info.channel_count() == 25 and info.nominal_srate() == 20.0
+    chans = channels(inlet)
+    assert chans[0] == ("pelvis_spread", "degrees", "Spread") and chans[-1] == ("root_spread", "meters", "Spread")
+    time.sleep(0.5)
+    for p in with_spread[1:]:
+        sink.on_pose(p)
+    samples, stamps = pull(inlet, len(with_spread) - 1)
+    assert len(samples) == len(with_spread) - 1
+    x = np.array(samples)
+    np.testing.assert_allclose(x[:, :24], np.stack([p.pose.spread_deg for p in with_spread[1:]]), atol=1e-4)
+    np.testing.assert_allclose(x[:, 24], [p.pose.root_spread_m for p in with_spread[1:]], atol=1e-6)
+    np.testing.assert_allclose(stamps, np.array([p.t for p in with_spread[1:]]) + sink.offset, atol=1e-6)
+    assert sink.counts["confidence"] == len(with_spread)
+    sink.close()
