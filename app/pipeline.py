@@ -264,12 +264,7 @@ class Pipeline:
             raise ValueError(f"frame sites {frame.sites} differ from the pipeline's {self.sites}")
         self._emit("on_frame", frame)
         out: list[LivePose] = []
-        if self.calibration is None:
-            self.stats.frames_calibrating += 1
-            cal = self.calibrator.push(frame.t, frame.quat, frame.free_acc, frame.acc, frame.gyro, frame.present)
-            if cal is not None:
-                self.set_calibration(cal, frame.t)
-            self._last_index = frame.index
+        if self._calibrating(frame):
             return out
         if self._last_index is not None:
             gap = frame.index - self._last_index - 1
@@ -292,12 +287,19 @@ class Pipeline:
         in progress still sees it (a still pose with holes reads as motion). Counted as
         dropped by the caller, not as a frame in."""
         self._emit("on_frame", frame)
-        if self.calibration is None:
-            self.stats.frames_calibrating += 1
-            cal = self.calibrator.push(frame.t, frame.quat, frame.free_acc, frame.acc, frame.gyro, frame.present)
-            if cal is not None:
-                self.set_calibration(cal, frame.t)
-            self._last_index = frame.index
+        self._calibrating(frame)
+
+    def _calibrating(self, frame: HubFrame) -> bool:
+        """Before the first calibration a frame goes to the calibrator (which may finish
+        with it); True when it was taken for that."""
+        if self.calibration is not None:
+            return False
+        self.stats.frames_calibrating += 1
+        cal = self.calibrator.push(frame.t, frame.quat, frame.free_acc, frame.acc, frame.gyro, frame.present)
+        if cal is not None:
+            self.set_calibration(cal, frame.t)
+        self._last_index = frame.index
+        return True
 
     @staticmethod
     def _empty_rest() -> np.ndarray:

@@ -43,6 +43,9 @@ class DeviceFaults:
     seed: int | None = None
 
 
+LOOP_BLEND_S = 0.5  # s at a clip's end spent turning each sensor back to its first orientation
+
+
 class SignalSource:
     """One site's signals as functions of time, looping over the clip.
 
@@ -66,9 +69,35 @@ class SignalSource:
         d = np.sum(self.quat[1:] * self.quat[:-1], axis=-1)
         flips = np.cumprod(np.where(d < 0, -1.0, 1.0))
         self.quat[1:] *= flips[:, None]
-        self.free_acc = np.asarray(raw[:, k] if raw is not None else signals.free_acc[:, k], dtype=float)
-        self.specific_force = np.asarray(signals.specific_force[:, k], dtype=float)
-        self.gyro = np.asarray(signals.gyro[:, k], dtype=float)
+        self.free_acc = np.array(raw[:, k] if raw is not None else signals.free_acc[:, k], dtype=float)
+        self.specific_force = np.array(signals.specific_force[:, k], dtype=float)
+        self.gyro = np.array(signals.gyro[:, k], dtype=float)
+        self._close_the_loop()
+
+    def _close_the_loop(self) -> None:
+        """The clip loops (the window's demo, the soak): its last frames turn the sensor onto
+        its first orientation and the gyro measures that turn, as a subject taking the sensor
+        off and laying it down would. Without it the orientation jumps where the clip wraps
+        while the gyro sees nothing, and a device whose orientation is the driver's own AHRS
+        (the DualSense) keeps the old heading: the next loop's table step found it 19 deg off.
+        The sensor is held still otherwise (gravity only) over those frames."""
+        from inference.body.rotations import quat_conjugate, quat_log, quat_multiply, quat_slerp, quat_to_matrix
+
+        nb = int(round(LOOP_BLEND_S * self.fps))
+        if self.n < 4 * nb or nb < 2:
+            return
+        a = self.n - nb - 1  # the last frame kept as it is
+        q0, q1 = self.quat[a], self.quat[0]
+        if float(np.dot(q0, q1)) < 0:
+            q1 = -q1
+        w = np.arange(1, nb + 1) / (nb + 1)
+        self.quat[a + 1:] = quat_slerp(q0, q1, w)
+        seq = np.concatenate([self.quat[a:], q1[None]])  # through the wrap
+        step = quat_multiply(quat_conjugate(seq[:-1]), seq[1:])  # body-frame turn per frame
+        self.gyro[a:] = quat_log(step) * self.fps
+        R = quat_to_matrix(self.quat[a + 1:])
+        self.specific_force[a + 1:] = np.swapaxes(R, -1, -2) @ np.array([0.0, 0.0, 9.80665])
+        self.free_acc[a + 1:] = 0.0
 
     def _idx(self, t: float) -> tuple[int, int, float]:
         x = (t % self.duration) * self.fps
