@@ -42,11 +42,13 @@ disk or a vanished folder must stop the recording, loudly (``Recorder.error``,
 from __future__ import annotations
 
 import ctypes
+import functools
 import json
 import os
 import re
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -131,6 +133,20 @@ def _why(exc: BaseException) -> str:
     return f"{word} ({detail})" if word and word.lower() not in detail.lower() else detail
 
 
+def _locked(method: Callable[..., Any]) -> Callable[..., Any]:
+    """Run a Recorder method under its lock. Frames and poses arrive on the pipeline's thread,
+    device events on the hub's reader threads, and a session's stop closes from its own: a
+    flush clearing a buffer another thread is appending to wrote half a row (seen on stop:
+    "Can't broadcast (0,) -> (0, 24)")."""
+
+    @functools.wraps(method)
+    def run(self: Recorder, *args: Any, **kwargs: Any) -> Any:
+        with self._lock:
+            return method(self, *args, **kwargs)
+
+    return run
+
+
 class Recorder(Sink):
     """A pipeline sink writing the session to ``path`` (see the module docstring).
 
@@ -153,6 +169,7 @@ class Recorder(Sink):
     def __init__(self, path: str | os.PathLike, sites: Sequence[str], metadata: dict[str, Any] | None = None,
                  flush_interval: float = 1.0, chunk: int = 256, clock: Callable[[], float] = time.monotonic,
                  on_error: Callable[[float, str], None] | None = None) -> None:
+        self._lock = threading.RLock()
         self.path = Path(path)
         self.sites = tuple(sites)
         self.flush_interval = flush_interval
@@ -211,6 +228,7 @@ class Recorder(Sink):
         return self.error is not None
 
     # ------------------------------------------------------------------ sink
+    @_locked
     def on_frame(self, frame: HubFrame) -> None:
         if self.closed:
             return
@@ -234,6 +252,7 @@ class Recorder(Sink):
         self.frames += 1
         self._maybe_flush()
 
+    @_locked
     def on_calibration(self, calibration: Calibration, t: float) -> None:
         if self.closed:
             return
@@ -251,6 +270,7 @@ class Recorder(Sink):
         b["cal/meta"].append(_fit(json.dumps(calibration.meta, default=str), CAL_META))
         self.flush()  # rare and precious
 
+    @_locked
     def on_event(self, t: float, kind: str, detail: str = "") -> None:
         """A marker, a note, a device lost or back: written at the next flush (markers at once)."""
         if self.closed:
@@ -261,6 +281,7 @@ class Recorder(Sink):
         if kind == "marker":
             self.flush()
 
+    @_locked
     def on_pose(self, pose: LivePose) -> None:
         if self.closed:
             return
@@ -310,6 +331,7 @@ class Recorder(Sink):
         if last_t is not None:
             self._t_saved = float(last_t)
 
+    @_locked
     def flush(self) -> None:
         """Append everything buffered and make it durable; a disk fault stops the recording
         (see the class docstring) instead of raising."""
@@ -327,6 +349,7 @@ class Recorder(Sink):
         self.flushes += 1
         self._last_flush = self.clock()
 
+    @_locked
     def close(self) -> None:
         if self.closed:
             return

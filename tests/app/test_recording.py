@@ -119,3 +119,34 @@ def test_killed_recorder_leaves_a_readable_file(tmp_path):
     assert np.array_equal(r.raw["index"], np.arange(n))  # ...consistent, in order
     assert np.allclose(r.raw["head"]["free_acc"][:, 0], np.arange(n))
     assert r.metadata == {"who": "child"} and json.loads(r.attrs["sites"]) == ["pelvis", "head"]
+
+
+def test_writes_from_several_threads_while_flushing(tmp_path, session):
+    """Frames arrive on the pipeline's thread, device events on the readers', and a session
+    stops from its own: every row written whole, none lost, however they interleave."""
+    import threading
+
+    sig, truth = session
+    frames = frames_from_signals(sig, t0=10.0, insoles=True)
+    rec = Recorder(tmp_path / "t.h5", SITES, metadata={"model": "floor"}, flush_interval=0.0)
+    stop = threading.Event()
+    events = [0]
+
+    def device_events() -> None:
+        while not stop.is_set():
+            rec.on_event(10.0 + events[0] * 1e-3, "device_lost", "pelvis")
+            events[0] += 1
+            time.sleep(1e-4)
+
+    th = threading.Thread(target=device_events)
+    th.start()
+    try:
+        for f in frames:
+            rec.on_frame(f)  # flush_interval 0: every frame flushes, with events landing in between
+    finally:
+        stop.set()
+        th.join(10)
+    rec.close()
+    r = read_recording(tmp_path / "t.h5")
+    assert r.n_frames == len(frames) and not r.damage
+    assert len(r.events) == events[0] > 0
