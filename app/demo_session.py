@@ -179,8 +179,9 @@ class DemoSession:
         self.signals, self.truth = synthesize_session(self.activity, self.protocol, noise=noise, rng=cfg.seed,
                                                       sites=sites)
         self.assignment = assignment_for(cfg.sensors, cfg.protocol, cfg.insoles)
+        # the poser keeps confidence for a diffusion model only (the others draw nothing)
         self.poser = Poser(self.model, body=self.truth.body, steps=cfg.steps, seed=cfg.seed, runtime=cfg.runtime,
-                           confidence=cfg.confidence and self.model is not None and self.model.kind == "diffusion")
+                           confidence=cfg.confidence)
         self.calibrator = Calibrator(cfg.sensors, schedule=self.protocol.schedule())
         self.pipeline = Pipeline(self.poser, cfg.sensors, calibrator=self.calibrator, insoles=cfg.insoles,
                                  clock=time.monotonic, causal=self.causal)

@@ -96,8 +96,7 @@ class CaptureSession:
         self.warning = "; ".join(w for w in (self.warning, latency_warning) if w) or None
         steps = setup.steps
         self.poser = Poser(self.model, body=Body.from_height(setup.subject.height_m), steps=steps, runtime="auto",
-                           confidence=(opt.confidence or setup.confidence) and self.model is not None
-                           and self.model.kind == "diffusion")
+                           confidence=opt.confidence or setup.confidence)
         self.guided = GuidedCalibration(self.sites, setup.calibration, countdown=opt.countdown, timeout=opt.timeout)
         self.pipeline = Pipeline(self.poser, self.sites, calibrator=self.guided, insoles=setup.insoles is not None,
                                  clock=time.monotonic, causal=causal)

@@ -132,11 +132,10 @@ def confidence_channels() -> list[Channel]:
 def confidence_sample(pose: LivePose) -> np.ndarray | None:
     """One confidence-stream sample, or None when the pose carries no spread."""
     p = pose.pose
-    spread = getattr(p, "spread_deg", None)
-    if spread is None:
+    if p.spread_deg is None:
         return None
-    root = getattr(p, "root_spread_m", None)
-    return np.r_[np.asarray(spread, float).reshape(-1), np.nan if root is None else float(root)]
+    root = np.nan if p.root_spread_m is None else float(p.root_spread_m)
+    return np.r_[np.asarray(p.spread_deg, float).reshape(-1), root]
 
 
 def body_sample(pose: LivePose) -> np.ndarray:
