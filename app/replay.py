@@ -29,6 +29,7 @@ from drivers.hub import HubFrame
 from inference.body.rotations import matrix_angle_between
 from inference.body.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX, SITES, parse_sites
 from inference.metrics.errors import global_angle_error
+from inference.signals.resample import FPS_MODEL
 
 if TYPE_CHECKING:
     from inference.poser.poser import Poser
@@ -176,19 +177,38 @@ def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] 
                         stats=pipe.stats.summary())
 
 
+MATCH_TOLERANCE_S = 0.5 / FPS_MODEL - 1e-6
+"""Two runs' frames stand for the same moment when their times are under half a model
+frame apart. Not exact equality: a live run that dropped 60 Hz frames under load (counted
+in ``stats.dropped``) restarts its 20 Hz grid one or two 60 Hz samples off the replay's,
+so its frame times sit 17 or 33 ms from the re-run's; the nearest frame is the same
+moment to within the model's resolution."""
+
+
+def match_times(a: np.ndarray, b: np.ndarray, tol: float = MATCH_TOLERANCE_S) -> np.ndarray:
+    """For each time in ``a`` (sorted), the index of the nearest time in ``b`` (sorted) when
+    it is within ``tol``, else -1."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    if len(b) == 0:
+        return np.full(len(a), -1)
+    j = np.clip(np.searchsorted(b, a), 0, len(b) - 1)
+    j_prev = np.clip(j - 1, 0, len(b) - 1)
+    best = np.where(np.abs(b[j_prev] - a) < np.abs(b[j] - a), j_prev, j)
+    return np.where(np.abs(b[best] - a) <= tol, best, -1)
+
+
 def compare_to_recorded(rec: Recording, poses: Sequence[LivePose]) -> dict[str, Any]:
     """Mean global angle error (deg, the paper's GA over the body without hands/toes)
     between replayed poses and the recorded live ones at the same session times: how far
     a re-run (another model, fewer sensors) is from what was seen live. None when no
-    frame times match."""
+    frame times match (``match_times``)."""
 
     r = rec.recon
     if not poses or len(r["t"]) == 0:
         return {"vs_recorded_frames": 0, "vs_recorded_ga_deg": None}
     t_rep = np.array([lp.t for lp in poses])
-    j = np.searchsorted(r["t"], t_rep)
-    j = np.clip(j, 0, len(r["t"]) - 1)
-    ok = np.abs(r["t"][j] - t_rep) < 1e-6
+    j = match_times(t_rep, r["t"])
+    ok = j >= 0
     if not ok.any():
         return {"vs_recorded_frames": 0, "vs_recorded_ga_deg": None}
     R_rep = np.stack([lp.pose.rot for lp, o in zip(poses, ok) if o])

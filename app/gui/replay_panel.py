@@ -68,16 +68,6 @@ def track_from_poses(poses: list[Any], sensors: tuple[str, ...], model: str) -> 
                  poses=poses, sensors=sensors, model=model)
 
 
-def match_frames(a: np.ndarray, b: np.ndarray, tol: float = 1e-6) -> np.ndarray:
-    """For each time in ``a``, the index of the same time in ``b`` (-1 where none)."""
-    if len(b) == 0:
-        return np.full(len(a), -1)
-    j = np.clip(np.searchsorted(b, a), 0, len(b) - 1)
-    j_prev = np.clip(j - 1, 0, len(b) - 1)
-    best = np.where(np.abs(b[j_prev] - a) < np.abs(b[j] - a), j_prev, j)
-    return np.where(np.abs(b[best] - a) <= tol, best, -1)
-
-
 def segment_differences(ref: Track, other: Track, index: np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:
     """(M, 24) angle (deg) between the two per frame (NaN where the re-run has no frame),
     and a summary: GA over the paper's segments, per segment means, frames compared."""
@@ -392,7 +382,9 @@ class ReplayPanel(QtWidgets.QWidget):
         self.progress.setValue(1000)
         assert self.ref is not None
         self.other = track
-        self.index = match_frames(self.ref.t, track.t)
+        from app.replay import match_times
+
+        self.index = match_times(self.ref.t, track.t)
         self.diff, self.summary = segment_differences(self.ref, track, self.index)
         self.other_label.setText(track.label)
         self.view.set_figure_visible(1, True)

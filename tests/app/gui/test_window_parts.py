@@ -225,12 +225,17 @@ def test_recordings_are_listed_from_their_headers(tmp_path):
 
 
 def test_replay_frames_are_matched_by_time():
-    from app.gui.replay_panel import Track, match_frames, segment_differences
+    from app.gui.replay_panel import Track, segment_differences
+    from app.replay import match_times
 
     a = np.arange(10) / 20.0
     b = a[[1, 2, 3, 5, 8]]
-    idx = match_frames(a, b)
+    idx = match_times(a, b)
     assert list(idx) == [-1, 0, 1, 2, -1, 3, -1, -1, 4, -1]
+    # a live run that dropped 60 Hz frames sits one or two samples off the re-run's grid
+    assert list(match_times(a[:4] + 1 / 60, a)) == [0, 1, 2, 3]
+    assert list(match_times(a[:4] + 2 / 60, a)) == [1, 2, 3, 4]
+    assert list(match_times(a[:4] + 0.03, a[:2])) == [1, -1, -1, -1]
     R = np.tile(np.eye(3), (10, 24, 1, 1))
     ref = Track("ref", a, R, np.zeros((10, 24, 3)), np.zeros((10, 4), bool), np.zeros((10, 13), bool))
     other = Track("other", b, R[:5].copy(), np.zeros((5, 24, 3)), np.zeros((5, 4), bool), np.zeros((5, 13), bool))
