@@ -17,13 +17,26 @@ the transport's least delay) to the same emission: the centred moving average's 
 shows here, not in the newest-sample figure, because the newest sample of a centred pose is
 the one 5 samples *after* the time it stands for. And ``model``: the poser's time per frame.
 
-Rounds alternate the modes (centred, low, centred, low, ...), each a fresh demo session
+Rounds alternate the modes (centred, low, centred, low, ...), each a fresh session
 (calibration included, not timed), so a load change during the run hits both.
+
+Where the suit runs (``suit``): "process" (the default) is how a user has it: the devices
+live in another process (``imucap devices simulate --setup``, its send log written to a file
+on exit; the monotonic clock is the machine's, so the times compare), and this process runs
+the capture session (``app.capture.session``) that opens their URLs and calibrates with the
+walk protocol; the suit's packet writing does not compete with the model for this
+process's interpreter lock. "thread" runs the demo's simulated suit inside this process, as
+``imucap demo`` does: 6 device threads beside the model, which is what an all-in-one demo
+pays.
 """
 
 from __future__ import annotations
 
 import os
+import signal
+import subprocess
+import sys
+import tempfile
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -32,6 +45,9 @@ from typing import Any
 import numpy as np
 
 from app.pipeline import LivePose, Sink
+
+SUITS = ("process", "thread")
+CALIBRATION_TIMEOUT_S = 120.0
 
 WARMUP_POSES = 20  # the first poses after calibration also pay for the model's first calls
 
@@ -123,6 +139,13 @@ def measure_mode(mode: str, seconds: float, model: str = "diffusion", protocol: 
     hub = session.hub
     assert hub is not None and session.suit is not None
     logs = {site: d.sim.send_log or [] for site, d in session.suit.devices.items()}
+    return _summarise(mode, probe, logs, hub, session.pipeline.stats, session.pipeline.causal,
+                      session.model_label, session.poser.runtime, session.warning)
+
+
+def _summarise(mode: str, probe: LatencyProbe, logs: dict[str, list[tuple[int, float]]], hub: Any, stats: Any,
+               causal: bool, model_label: str, runtime: str, warning: str | None) -> dict[str, Any]:
+    """Per pose after the warm-up: newest sample's send (from the device's log) -> emission."""
     moduli = {site: hub.tracks[site].device.counter_modulus for site in probe.sites}
     e2e, age, missing = [], [], 0
     for rec in probe.records[WARMUP_POSES:]:
@@ -132,19 +155,86 @@ def measure_mode(mode: str, seconds: float, model: str = "diffusion", protocol: 
             continue
         e2e.append((rec.emitted - sent) * 1e3)
         age.append(rec.age_ms)
-    stats = session.pipeline.stats
     return {
         "mode": mode, "e2e_ms": e2e, "age_ms": age, "model_ms": list(stats.step_ms)[WARMUP_POSES:],
         "poses": len(probe.records), "timed": len(e2e), "unmatched": probe.unmatched + missing,
         "dropped": stats.dropped, "hub_frames_skipped": hub.stats.frames_skipped, "hub_wait_ms": hub.latency * 1e3,
-        "acc_filter": "causal" if session.pipeline.causal else "centred", "model": session.model_label,
-        "runtime": session.poser.runtime, "warning": session.warning,
+        "acc_filter": "causal" if causal else "centred", "model": model_label,
+        "runtime": runtime, "warning": warning,
     }
+
+
+def _bench_setup(folder: str, sensors: tuple[str, ...], model: str) -> str:
+    """A setup file for the suit in its own process: one Xbus device per site on a pty
+    (the demo's suit), the walk calibration (no table, own headings)."""
+    lines = ["[subject]", 'id = "bench"', "height = 1.75", "", "[sensors]"]
+    lines += [f'{s} = "xbus://{folder}/{s}-tty?baud=115200"' for s in sensors]
+    lines += ["", "[calibration]", 'protocol = "walk"', "", "[model]", f'name = "{model}"', ""]
+    path = os.path.join(folder, "bench-setup.toml")
+    with open(path, "w") as f:
+        f.write("\n".join(lines))
+    return path
+
+
+def _read_send_logs(path: str, names: tuple[str, ...]) -> dict[str, list[tuple[int, float]]]:
+    with np.load(path) as z:
+        return {n: list(zip(z[f"{n}/counter"].tolist(), z[f"{n}/t"].tolist())) for n in names}
+
+
+def measure_mode_process(mode: str, seconds: float, model: str = "diffusion", sensors: tuple[str, ...] | None = None,
+                         seed: int = 0, threads: int = 1) -> dict[str, Any]:
+    """One capture session in ``mode`` against a simulated suit in its own process:
+    calibrate (walk protocol, untimed), then ``seconds`` timed."""
+    from app.capture.session import CaptureOptions, CaptureSession
+    from app.capture.setup_file import load_setup
+    from app.demo_session import DEFAULT_SENSORS
+
+    sites = tuple(sensors or DEFAULT_SENSORS)
+    with tempfile.TemporaryDirectory(prefix="imucap-bench-") as folder:
+        setup_path = _bench_setup(folder, sites, model)
+        log_path = os.path.join(folder, "sends.npz")
+        cmd = [sys.executable, "-m", "app.cli.main", "devices", "simulate", "--setup", setup_path,
+               "--motion", "walk", "--activity-seconds", f"{seconds + CALIBRATION_TIMEOUT_S:.0f}", "--lead-in", "2",
+               "--seed", str(seed), "--log-sends", log_path]
+        sim = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        session = None
+        try:
+            assert sim.stdout is not None
+            for line in sim.stdout:
+                if line.startswith("simulating"):
+                    break
+            else:
+                raise RuntimeError(f"the simulated suit did not start: {sim.stderr.read() if sim.stderr else ''}")
+            session = CaptureSession(load_setup(setup_path), CaptureOptions(countdown=1.0, threads=threads,
+                                                                             latency=mode))
+            probe = LatencyProbe(sites)
+            session.pipeline.sinks.insert(0, probe)  # first: the emission time before any other sink's work
+            session.start()
+            end = time.monotonic() + CALIBRATION_TIMEOUT_S
+            while session.calibration is None:
+                session.poll()
+                if time.monotonic() > end or session.guided.phase == "failed":
+                    raise RuntimeError(f"the bench's capture did not calibrate: {session.guided.status()}")
+                time.sleep(0.1)
+            time.sleep(seconds)
+        finally:
+            if session is not None:
+                session.stop()
+            sim.send_signal(signal.SIGINT)
+            try:
+                sim.wait(30)
+            except subprocess.TimeoutExpired:
+                sim.kill()
+        logs = _read_send_logs(log_path, sites)
+    assert session.hub is not None
+    return _summarise(mode, probe, logs, session.hub, session.pipeline.stats, session.pipeline.causal,
+                      session.model_label, session.poser.runtime, session.warning)
 
 
 def run_end_to_end(seconds: float = 10.0, rounds: int = 2, model: str = "diffusion", protocol: str = "xbus",
                    seed: int = 0, threads: int = 1, runtime: str = "auto",
-                   modes: tuple[str, ...] = ("centred", "low")) -> dict[str, Any]:
+                   modes: tuple[str, ...] = ("centred", "low"), suit: str = "process") -> dict[str, Any]:
     """The `imucap bench --end-to-end` measurement; returns its JSON object: per mode
     ``<mode>_p50_ms``, ``<mode>_p99_ms`` (newest sample leaving its device -> pose to the
     sinks), ``<mode>_age_p50_ms``/``_p99_ms`` (from the time the pose stands for),
@@ -157,11 +247,18 @@ def run_end_to_end(seconds: float = 10.0, rounds: int = 2, model: str = "diffusi
         latency_settings(m)
     if rounds < 1 or seconds <= 0:
         raise ValueError("--rounds must be at least 1 and --seconds positive")
+    if suit not in SUITS:
+        raise ValueError(f"--suit must be one of {', '.join(SUITS)}, not {suit!r}")
+    if suit == "process" and protocol != "xbus":
+        raise ValueError("--suit process plays the demo's Xbus suit; other protocols run with --suit thread")
     runs: dict[str, list[dict[str, Any]]] = {m: [] for m in modes}
     t0 = time.monotonic()
     for _ in range(rounds):
         for m in modes:
-            runs[m].append(measure_mode(m, seconds, model, protocol, seed=seed, threads=threads, runtime=runtime))
+            if suit == "process":
+                runs[m].append(measure_mode_process(m, seconds, model, seed=seed, threads=threads))
+            else:
+                runs[m].append(measure_mode(m, seconds, model, protocol, seed=seed, threads=threads, runtime=runtime))
     out: dict[str, Any] = {}
     all_model: list[float] = []
     for m, rs in runs.items():
@@ -184,7 +281,7 @@ def run_end_to_end(seconds: float = 10.0, rounds: int = 2, model: str = "diffusi
     first = runs[modes[0]][0]
     warnings = sorted({r["warning"] for rs in runs.values() for r in rs if r["warning"]})
     out.update({
-        "runtime": first["runtime"], "threads": torch.get_num_threads(), "protocol": protocol,
+        "runtime": first["runtime"], "threads": torch.get_num_threads(), "protocol": protocol, "suit": suit,
         "rounds": rounds, "seconds_per_round": seconds, "wall_s": round(time.monotonic() - t0, 1),
         "load_avg_1min": round(os.getloadavg()[0], 2), "cpus": os.cpu_count(),
         **({"warnings": warnings} if warnings else {}),
@@ -192,4 +289,4 @@ def run_end_to_end(seconds: float = 10.0, rounds: int = 2, model: str = "diffusi
     return out
 
 
-__all__ = ["LatencyProbe", "measure_mode", "run_end_to_end"]
+__all__ = ["LatencyProbe", "SUITS", "measure_mode", "measure_mode_process", "run_end_to_end"]

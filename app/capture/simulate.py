@@ -149,6 +149,21 @@ class SimulatedSetup:
         tmp.replace(path)
         return path
 
+    def write_send_logs(self, path: str | Path) -> Path:
+        """Per device, the wire counter and the monotonic time of every packet sent since
+        ``log_sends`` (``<name>/counter``, ``<name>/t``): a latency measurement in another
+        process matches its poses back to them (the monotonic clock is the machine's)."""
+        path = Path(path)
+        arrays: dict[str, np.ndarray] = {}
+        for name, d in self.devices.items():
+            log = d.send_log or []
+            arrays[f"{name}/counter"] = np.array([c for c, _ in log], np.int64)
+            arrays[f"{name}/t"] = np.array([t for _, t in log], np.float64)
+        tmp = path.with_name(path.name + ".tmp.npz")
+        np.savez(tmp, **arrays)
+        tmp.replace(path)
+        return path
+
     def run(self, seconds: float | None = None) -> None:
         end = time.monotonic() + (self.duration if seconds is None else seconds)
         while time.monotonic() < end:

@@ -105,6 +105,9 @@ def cmd_simulate_setup(args: argparse.Namespace) -> int:
         noise = NoiseModel.typical() if args.noise == "typical" else NoiseModel()
         subject = SimulatedSubject(setup, activity, lead_in=args.lead_in, seed=args.seed, noise=noise)
         sim = SimulatedSetup(subject, unplug)
+        if args.log_sends:
+            for d in sim.devices.values():
+                d.log_sends()
         sim.start()
     except (SetupError, ValueError, OSError) as exc:
         print(f"imucap devices simulate: {exc}", file=sys.stderr)
@@ -120,6 +123,8 @@ def cmd_simulate_setup(args: argparse.Namespace) -> int:
         pass
     finally:
         sim.stop()
+        if args.log_sends:
+            sim.write_send_logs(args.log_sends)
     print(json.dumps(sim.stats()), file=sys.stderr)
     return 0
 
@@ -205,6 +210,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ps.add_argument("--setup", help="make every device of this setup file appear at its URL, worn by a simulated "
                                     "subject who follows the setup's calibration protocol, then --motion")
     ps.add_argument("--truth", help="with --setup: write the motion played here (.npz), for imucap replay --truth")
+    ps.add_argument("--log-sends", metavar="FILE.npz",
+                    help="with --setup: on exit, write when each device sent each packet (for imucap bench "
+                         "--end-to-end, which runs the suit in its own process)")
     ps.add_argument("--lead-in", type=float, default=8.0,
                     help="with --setup: seconds the subject waits in the first pose before the protocol")
     ps.add_argument("--activity-seconds", type=float, default=20.0,

@@ -167,7 +167,7 @@ def drop_implausible_clips(ds: FeatureDataset) -> list[str]:
 def train_set(
     progress: bool = True, hdm05_share: float = HDM05_SHARE, hdm05_speeds: Sequence[float] = (),
     energy_per: str = "trial", drop_implausible: bool = False, repair_implausible: bool = False,
-    cmu: bool = False, causal: bool = False,
+    cmu: bool = False, causal: bool = False, cmu_shares: dict[str, float] | None = None,
 ) -> FeatureDataset:
     """The training split. ``hdm05_speeds``: extra copies of the HDM05 clips performed at
     these speed factors (``Motion.at_speed``), sharing the HDM05 half of the draws. Two
@@ -190,7 +190,7 @@ def train_set(
 
     ``cmu``: also the CMU subjects not held out (``CMU_VAL_SUBJECTS``), as a source of
     their own (cached apart, so the Bandai and HDM05 caches stay valid); the draws are then
-    shared ``SHARES_WITH_CMU`` between the three sources.
+    shared ``SHARES_WITH_CMU`` between the three sources, or ``cmu_shares`` (source -> share).
 
     ``causal``: accelerations through the trailing filter of the low-latency mode (a model
     for ``--latency low``; TrainConfig.causal passes it)."""
@@ -213,7 +213,7 @@ def train_set(
             print(f"train_set: {len(dropped)} clip(s) with implausible frames never drawn: {', '.join(dropped)}",
                   file=sys.stderr)
     if cmu:
-        return balance_shares(base, SHARES_WITH_CMU)
+        return balance_shares(base, cmu_shares or SHARES_WITH_CMU)
     return balance_sources(base, hdm05_share)
 
 

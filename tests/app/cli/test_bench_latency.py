@@ -17,10 +17,13 @@ MODE_KEYS = ("p50_ms", "p99_ms", "age_p50_ms", "age_p99_ms", "model_p50_ms", "po
 
 
 @pytest.mark.slow
-def test_end_to_end_json_has_both_modes_from_one_run(capsys):
-    code = main(["bench", "--end-to-end", "--json", "--seconds", "1.5", "--rounds", "1", "--threads", "1"])
+@pytest.mark.parametrize("suit", ["thread", "process"])
+def test_end_to_end_json_has_both_modes_from_one_run(capsys, suit):
+    code = main(["bench", "--end-to-end", "--json", "--seconds", "1.5", "--rounds", "1", "--threads", "1",
+                 "--suit", suit])
     assert code == 0
     res = json.loads(capsys.readouterr().out)
+    assert res["suit"] == suit
     for mode in ("centred", "low"):
         for k in MODE_KEYS:
             assert f"{mode}_{k}" in res
@@ -32,6 +35,8 @@ def test_end_to_end_json_has_both_modes_from_one_run(capsys):
         p50, p99 = res[f"{mode}_p50_ms"], res[f"{mode}_p99_ms"]
         assert (p50 is None) == (res[f"{mode}_poses"] == 0)
         assert p50 is None or (0 < p50 <= p99)  # ordered and positive, whatever the load
+    if suit == "process":  # the send logs crossed the process boundary and matched
+        assert res["centred_poses"] > 0 and res["low_poses"] > 0
 
 
 def test_end_to_end_rounds_alternate_the_modes(monkeypatch):
@@ -44,7 +49,7 @@ def test_end_to_end_rounds_alternate_the_modes(monkeypatch):
                 "hub_wait_ms": 10.0, "acc_filter": "causal", "model": "m", "runtime": "torch", "warning": None}
 
     monkeypatch.setattr(e2e, "measure_mode", fake)
-    res = e2e.run_end_to_end(seconds=1.0, rounds=3)
+    res = e2e.run_end_to_end(seconds=1.0, rounds=3, suit="thread")
     assert order == ["centred", "low"] * 3
     assert res["low_p50_ms"] == 15.0 and res["centred_p50_ms"] == 80.0 and res["low_poses"] == 6
 
