@@ -575,6 +575,8 @@ class Hub:
                 tr.lost_pending = 0
         if self.resampler is None:
             quat, free, acc, gyro, present, newest = self._hold_all(sites, grid)
+        elif isinstance(self.resampler, GridResampler) and self.resampler.slerp is not None:
+            quat, free, acc, gyro, present, newest = self._interp_all(sites, grid, self.resampler)
         else:
             quat, free, acc, gyro, present, newest = self._per_site(sites, grid)
         force = np.full((G, 2), np.nan)
@@ -671,17 +673,9 @@ class Hub:
         dozen per site. ``W`` doubles until every site's window reaches back past the
         first grid point (a few rows in the steady state)."""
         S = len(sites)
-        rings = [self.tracks[n].ring for n in sites]
-        t0 = grid[0]
-        W = 16
-        while True:
-            block = np.stack([r.last(W) for r in rings]) if S else np.empty((0, W, _Ring.COLS))
-            ts = block[:, :, 0]  # NaN where a ring holds fewer than W rows (at the front)
-            first_t = ts[:, 0]
-            short = ~(first_t <= t0) & np.array([len(r) > W for r in rings], bool)
-            if not short.any() or W >= rings[0].cap:
-                break
-            W *= 2
+        block = _stack_windows([self.tracks[n].ring for n in sites], grid[0])
+        W = block.shape[1]
+        ts = block[:, :, 0]
         # rows after each grid time are at the end of each (time-sorted) window
         after = (ts[:, :, None] > grid[None, None, :]).sum(axis=1)  # (S, G); NaN compares False
         idx = W - 1 - after
@@ -699,6 +693,61 @@ class Hub:
         newest = rows[:, :, [0, _Ring.COUNTER]]
         return rows[:, :, 1:5], rows[:, :, 5:8], rows[:, :, 8:11], rows[:, :, 11:14], present, newest
 
+    def _interp_all(self, sites: tuple[str, ...], grid: np.ndarray, rs: GridResampler) -> tuple[np.ndarray, ...]:
+        """``_per_site`` with the injected resampler, for every site at once: the windows of
+        ``_hold_all``, each grid time's bracketing pair of samples found in one comparison,
+        and one batched slerp over the (site, grid time) pairs that need one. Per poll a
+        fixed handful of numpy calls instead of a full ``to_grid`` per site: with seven
+        devices at 60 polls a second those calls held the interpreter lock for a third of
+        a capture process's time, beside the drivers and the model (``docs/capture.md``).
+        Same values as ``_per_site`` (``tests/drivers/test_hub_interp.py``)."""
+        S, G = len(sites), grid.size
+        rings = [self.tracks[n].ring for n in sites]
+        block = _stack_windows(rings, grid[0])
+        W = block.shape[1]
+        ts = block[:, :, 0]
+        ks = np.arange(S)[:, None]
+        after = (ts[:, :, None] > grid[None, None, :]).sum(axis=1)  # (S, G); NaN compares False
+        idx = W - 1 - after
+        ii = np.maximum(idx, 0)
+        interp = np.array([r.has["quat"] for r in rings], bool)
+        has_free = np.array([r.has["free_acc"] for r in rings], bool)
+        reach = np.where(interp, max(self.staleness, self.fill_gap), self.staleness)[:, None]
+        ok = (idx >= 0) & (grid[None, :] - ts[ks, ii] <= reach)  # NaN (no row) -> False
+        for k, name in enumerate(sites):
+            for a, b in self.tracks[name].gap_spans:
+                if not interp[k] or b - a > self.fill_gap:
+                    ok[k] &= ~((grid > a) & (grid < b))
+        # the pair around each grid time, as to_grid picks it (the last pair at the newest sample)
+        i1 = np.clip(idx + 1, 1, W - 1)
+        i0 = i1 - 1
+        t0, t1 = ts[ks, i0], ts[ks, i1]
+        dt = t1 - t0
+        with np.errstate(invalid="ignore", divide="ignore"):
+            pair_ok = (dt <= rs.max_gap + 1e-12) & (grid[None, :] <= ts[:, -1:] + 1e-9) & (t0 <= grid[None, :] + 1e-9)
+        ok &= ~interp[:, None] | pair_ok
+        held = block[ks, ii]  # (S, G, COLS)
+        quat = held[:, :, 1:5].copy()
+        free = held[:, :, 5:8].copy()
+        sel = ok & interp[:, None]
+        if sel.any():
+            ka, ga = np.nonzero(sel)
+            a, b = i0[ka, ga], i1[ka, ga]
+            w = np.clip((grid[ga] - t0[ka, ga]) / dt[ka, ga], 0.0, 1.0)
+            quat[ka, ga] = rs.slerp(block[ka, a, 1:5], block[ka, b, 1:5], w)
+            lerp = (1.0 - w)[:, None] * block[ka, a, 5:8] + w[:, None] * block[ka, b, 5:8]
+            free[ka, ga] = np.where(has_free[ka][:, None], lerp, np.nan)
+        free[interp & ~has_free] = np.nan
+        # interpolation reads the sample after the grid time too (and so waits for it)
+        last = np.where(interp[:, None], np.minimum(idx + 1, W - 1), ii)
+        newest = np.stack([ts[ks, last], block[ks, last, _Ring.COUNTER]], axis=-1)
+        out = [x.transpose(1, 0, 2).copy() for x in (quat, free, held[:, :, 8:11], held[:, :, 11:14], newest)]
+        present = ok.T.copy()
+        for arr in out:
+            arr[~present] = np.nan
+        quat, free, acc, gyro, newest = out
+        return quat, free, acc, gyro, present, newest
+
     def _trim(self) -> None:
         """Forget gap spans that are older than anything a future frame can ask for."""
         if self._next_index is None:
@@ -709,12 +758,35 @@ class Hub:
                 tr.gap_spans.popleft()
 
 
-def resampler_from_to_grid(to_grid: Callable[..., tuple], fps: float = 60.0, max_gap: float = 0.1) -> Resampler:
-    """Adapt ``inference.resample.to_grid(t, quat, acc, fps, max_gap, t0)`` to the hub's
-    ``Resampler`` signature (the app does this; drivers cannot import inference)."""
+def _stack_windows(rings: list[_Ring], t0: float) -> np.ndarray:
+    """The last ``W`` rows of every ring as one (S, W, COLS) array (NaN-padded at the
+    front), ``W`` doubling from 16 until every window reaches back to ``t0`` (a few rows in
+    the steady state) or holds its whole ring."""
+    S, W = len(rings), 16
+    while True:
+        block = np.stack([r.last(W) for r in rings]) if S else np.empty((0, W, _Ring.COLS))
+        first_t = block[:, 0, 0]  # NaN where a ring holds fewer than W rows
+        short = ~(first_t <= t0) & np.array([len(r) > W for r in rings], bool)
+        if not short.any() or W >= rings[0].cap:
+            return block
+        W *= 2
 
-    def resample(t: np.ndarray, q: np.ndarray, a: np.ndarray, grid: np.ndarray):
-        tg, qg, ag, valid = to_grid(t, q, a, fps=fps, max_gap=max_gap, t0=float(grid[0]))
+
+@dataclass(frozen=True)
+class GridResampler:
+    """Inference's ``to_grid(t, quat, acc, fps, max_gap, t0)`` in the hub's ``Resampler``
+    signature (the app builds it; drivers cannot import inference). With ``slerp``
+    (``(q0 (N,4), q1 (N,4), w (N,)) -> unit quats (N,4)``, the same interpolation to_grid
+    does) the hub interpolates every site in one batch (``Hub._interp_all``); without it,
+    ``to_grid`` per site (``Hub._per_site``, the reference)."""
+
+    to_grid: Callable[..., tuple]
+    fps: float = 60.0
+    max_gap: float = 0.1
+    slerp: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None
+
+    def __call__(self, t: np.ndarray, q: np.ndarray, a: np.ndarray, grid: np.ndarray):
+        tg, qg, ag, valid = self.to_grid(t, q, a, fps=self.fps, max_gap=self.max_gap, t0=float(grid[0]))
         G = grid.size
         quat = np.full((G, 4), np.nan)
         acc = np.full((G, 3), np.nan)
@@ -723,4 +795,9 @@ def resampler_from_to_grid(to_grid: Callable[..., tuple], fps: float = 60.0, max
         quat[:n], acc[:n], ok[:n] = qg[:n], ag[:n], valid[:n]
         return quat, acc, ok
 
-    return resample
+
+def resampler_from_to_grid(to_grid: Callable[..., tuple], fps: float = 60.0, max_gap: float = 0.1,
+                           slerp: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None
+                           ) -> GridResampler:
+    """The hub's resampler from inference's ``to_grid`` (and, for the batched path, its slerp)."""
+    return GridResampler(to_grid, fps, max_gap, slerp)

@@ -157,6 +157,12 @@ class StreamingResampler:
         return out
 
 
+def slerp_unit(q0: np.ndarray, q1: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """The orientation between two samples at fraction ``w`` as ``to_grid`` takes it (slerp,
+    renormalised); the live hub interpolates in batches with the same function."""
+    return quat_normalize(quat_slerp(q0, q1, w))
+
+
 def to_grid(
     t: np.ndarray,
     quat: np.ndarray,
@@ -200,7 +206,7 @@ def to_grid(
         inside = (tg >= t[0] - 1e-9) & (tg <= t[-1] + 1e-9)
         valid = inside & (dt <= max_gap + 1e-12)
         wq = w.reshape((-1,) + (1,) * (quat.ndim - 2))
-        qg = quat_normalize(quat_slerp(quat[i0], quat[i1], wq))
+        qg = slerp_unit(quat[i0], quat[i1], wq)
         wa = w.reshape((-1,) + (1,) * (acc.ndim - 1))
         ag = (1.0 - wa) * acc[i0] + wa * acc[i1]
     qg = np.where(valid.reshape((-1,) + (1,) * (qg.ndim - 1)), qg, np.nan)
@@ -221,5 +227,5 @@ def acc_filter_of(meta: dict | None) -> str:
     return f
 
 
-__all__ = ["moving_average", "downsample", "StreamingResampler", "Frame20", "to_grid", "HALF", "STEP",
+__all__ = ["moving_average", "downsample", "StreamingResampler", "Frame20", "to_grid", "slerp_unit", "HALF", "STEP",
            "ACC_FILTERS", "acc_filter_of"]
