@@ -14,11 +14,13 @@ shows here as a latency that climbs from slice to slice; a leak as a memory that
 from __future__ import annotations
 
 import argparse
+import ctypes
 import json
 import resource
 import sys
 import tempfile
 import time
+import tracemalloc
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +36,27 @@ def rss_mb() -> float:
     with open("/proc/self/statm") as f:
         pages = int(f.read().split()[1])
     return pages * resource.getpagesize() / 2**20
+
+
+class _Mallinfo2(ctypes.Structure):
+    _fields_ = [(name, ctypes.c_size_t) for name in
+                ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks",
+                 "keepcost")]
+
+
+def malloc_stats() -> dict[str, float]:
+    """glibc's heap totals over all arenas (MB): ``in_use`` (allocated and not freed),
+    ``free`` (freed but kept by the allocator), ``mmapped`` (large blocks mapped on their
+    own). A leak grows ``in_use``; fragmentation grows ``free``."""
+    libc = ctypes.CDLL("libc.so.6")
+    libc.mallinfo2.restype = _Mallinfo2
+    m = libc.mallinfo2()
+    return {"in_use": round(m.uordblks / 2**20, 1), "free": round(m.fordblks / 2**20, 1),
+            "mmapped": round(m.hblkhd / 2**20, 1)}
+
+
+def malloc_trim() -> None:
+    ctypes.CDLL("libc.so.6").malloc_trim(0)
 
 
 class SliceLatency(Sink):
@@ -57,7 +80,16 @@ def main() -> int:
     ap.add_argument("--slice", type=float, default=5.0, help="minutes per row")
     ap.add_argument("--keep", action="store_true", help="keep the recording")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--malloc", action="store_true",
+                    help="per slice also glibc's heap totals (in use / free / mmapped, MB): a leak or fragmentation")
+    ap.add_argument("--trim", action="store_true", help="give freed heap memory back (malloc_trim) after each slice")
+    ap.add_argument("--tracemalloc", type=int, default=0, metavar="N",
+                    help="trace Python and numpy allocations; per slice the N source lines whose memory grew most "
+                         "since the first slice")
     args = ap.parse_args()
+    if args.tracemalloc:
+        tracemalloc.start(8)
+    base_snapshot = None
     rec = Path(tempfile.mkdtemp(prefix="imucap-soak-")) / "soak.h5"
     # a minute's walk that loops, calibration protocol included each time (headless=False is
     # the window's looping session, without a window)
@@ -86,6 +118,19 @@ def main() -> int:
                 "filled": st["frames_filled"] - last["frames_filled"], "pipeline_queue": live.get("queued"),
                 "hub_queue_max": hub_q, "recording_mb": round(rec.stat().st_size / 2**20, 1) if rec.exists() else 0,
             })
+            if args.malloc:
+                rows[-1]["malloc_mb"] = malloc_stats()
+            if args.tracemalloc:
+                snap = tracemalloc.take_snapshot().filter_traces([tracemalloc.Filter(False, tracemalloc.__file__)])
+                if base_snapshot is None:
+                    base_snapshot = snap
+                else:
+                    grew = snap.compare_to(base_snapshot, "lineno")[: args.tracemalloc]
+                    rows[-1]["grew_kb"] = {f"{st.traceback[0].filename.split('/')[-1]}:{st.traceback[0].lineno}":
+                                           round(st.size_diff / 1024) for st in grew}
+            if args.trim:
+                malloc_trim()
+                rows[-1]["rss_after_trim_mb"] = round(rss_mb(), 1)
             last = st
             print(json.dumps(rows[-1]) if args.json else "  ".join(f"{k}={v}" for k, v in rows[-1].items()),
                   flush=True)

@@ -344,8 +344,10 @@ def calibrate_world(
     a_G = _free_acc_G(quat, free_acc, acc)
     a_W = (R_WG[None] @ a_G[..., None])[..., 0]
     a_W[~ok] = np.nan
-    offset = np.nan_to_num(np.nanmean(np.where(np.isfinite(a_W), a_W, np.nan), axis=0)) if len(a_W) else np.zeros(
-        (S, 3))
+    # mean over the finite samples; a site with none (unplugged all along) gets 0, without nanmean's warning
+    fin = np.isfinite(a_W)
+    n = fin.sum(axis=0)
+    offset = np.where(n > 0, np.where(fin, a_W, 0.0).sum(axis=0) / np.maximum(n, 1), 0.0).reshape(S, 3)
     offset[~valid] = 0.0
     resid = _rms_about(R_GS, Rm)
     resid[~valid] = np.nan
