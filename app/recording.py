@@ -107,9 +107,19 @@ def _fill(dtype: Any) -> Any:
     return np.nan if kind == "f" else -1 if kind in "iu" else False if kind == "b" else b""
 
 
+CHUNKS_CACHED = 2
+"""Chunks each dataset of a recording keeps in memory while writing: the one being filled
+(so appending never reads it back from disk) and one more. HDF5 2.0 gives every dataset an
+8 MiB chunk cache by default, and a recording appends to ~40 datasets, so an hour-long
+session's memory grew with what it had written until each dataset's cache was full (+93 MB
+in 60 minutes, ``docs/robustness.md``). Fully written chunks go first (``rdcc_w0 = 1``)."""
+
+
 def _ds(g: h5py.Group, name: str, tail: tuple[int, ...], dtype: Any, chunk: int) -> h5py.Dataset:
+    chunk_bytes = chunk * int(np.prod(tail, dtype=np.int64)) * np.dtype(dtype).itemsize
     return g.create_dataset(name, shape=(0,) + tail, maxshape=(None,) + tail, chunks=(chunk,) + tail, dtype=dtype,
-                            fletcher32=True, fillvalue=_fill(dtype))
+                            fletcher32=True, fillvalue=_fill(dtype), rdcc_nbytes=CHUNKS_CACHED * chunk_bytes,
+                            rdcc_w0=1.0)
 
 
 _ERRNO_WORDS = {28: "the disk is full", 27: "the file size limit is reached",

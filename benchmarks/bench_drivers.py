@@ -213,6 +213,30 @@ def live_repeated(seconds: float, repeat: int, **hub_kw: Any) -> dict[str, Any]:
     return out
 
 
+def interpolation_cost(seconds: float, repeat: int, **hub_kw: Any) -> dict[str, Any]:
+    """The hub's share of a core with the 13 twins when it interpolates each site to the
+    grid (the centred mode): one batched slerp over all sites (``Hub._interp_all``) against
+    ``to_grid`` per site (``Hub._per_site``), and the hold, taken in turn in each repeat
+    so the machine's load falls on all three."""
+    from drivers.hub import resampler_from_to_grid
+    from inference.signals.resample import slerp_unit, to_grid
+
+    modes = {"hold": None, "batched": resampler_from_to_grid(to_grid, slerp=slerp_unit),
+             "per_site": resampler_from_to_grid(to_grid)}
+    ratios: dict[str, list[float]] = {m: [] for m in modes}
+    present: dict[str, list[float]] = {m: [] for m in modes}
+    for _ in range(repeat):
+        for m, rs in modes.items():
+            r = live_cost(seconds, resampler=rs, **hub_kw)
+            ratios[m].append(r["cpu_fraction_of_one_core"])
+            present[m].append(r["present_fraction"])
+    med = {m: float(np.median(v)) for m, v in ratios.items()}
+    return {f"{m}_fraction_of_one_core": round(v, 4) for m, v in med.items()} | {
+        "per_site_over_batched": round(med["per_site"] / med["batched"], 2),
+        "present_fraction": {m: round(float(np.median(v)), 4) for m, v in present.items()},
+        "runs": ratios, "sensors": 13, "seconds": seconds}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seconds", type=float, default=10.0)
@@ -221,11 +245,18 @@ def main() -> None:
     ap.add_argument("--no-selector", action="store_true", help="one reader thread per device (batched reads)")
     ap.add_argument("--read-interval", type=float, default=None, help="selector sleep between drains, s")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--interpolation", action="store_true",
+                    help="also the hub of the centred latency mode (slerp to the grid), batched over the sites and "
+                         "per site, alternating with the hold in each repeat")
     args = ap.parse_args()
     hub_kw: dict[str, Any] = {"selector": not args.no_selector}
     if args.read_interval is not None:
         hub_kw["read_interval"] = args.read_interval
     rates = {} if args.live_only else decode_rates()
+    if args.interpolation:
+        result = interpolation_cost(args.seconds, args.repeat, **hub_kw)
+        print(json.dumps(result) if args.json else "\n".join(f"{k}: {v}" for k, v in result.items()))
+        return
     live = live_repeated(args.seconds, args.repeat, **hub_kw)
     budget = {k: round(1300 / v, 4) for k, v in rates.items()}  # 13 sensors x 100 Hz, decode only
     result = {

@@ -79,7 +79,10 @@ def main() -> int:
     ap.add_argument("--minutes", type=float, default=60.0)
     ap.add_argument("--slice", type=float, default=5.0, help="minutes per row")
     ap.add_argument("--keep", action="store_true", help="keep the recording")
+    ap.add_argument("--no-record", action="store_true", help="no recording (what the rest costs)")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--model", default="diffusion", help="diffusion | regressor | floor (no network) | PATH.pt")
+    ap.add_argument("--protocol", default="mixed", help="the suit's wire protocol(s), as imucap demo --protocol")
     ap.add_argument("--malloc", action="store_true",
                     help="per slice also glibc's heap totals (in use / free / mmapped, MB): a leak or fragmentation")
     ap.add_argument("--trim", action="store_true", help="give freed heap memory back (malloc_trim) after each slice")
@@ -93,7 +96,9 @@ def main() -> int:
     rec = Path(tempfile.mkdtemp(prefix="imucap-soak-")) / "soak.h5"
     # a minute's walk that loops, calibration protocol included each time (headless=False is
     # the window's looping session, without a window)
-    cfg = DemoConfig(motion="walk", insoles=True, protocol="mixed", seconds=60.0, headless=False, record=str(rec))
+    cfg = DemoConfig(motion="walk", insoles=True, protocol=args.protocol, seconds=60.0, headless=False,
+                     record=None if args.no_record else str(rec),
+                     model=args.model)
     session = DemoSession(cfg)
     lat = SliceLatency()
     session.pipeline.add_sink(lat)

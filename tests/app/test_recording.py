@@ -150,3 +150,25 @@ def test_writes_from_several_threads_while_flushing(tmp_path, session):
     r = read_recording(tmp_path / "t.h5")
     assert r.n_frames == len(frames) and not r.damage
     assert len(r.events) == events[0] > 0
+
+
+def test_each_dataset_caches_only_the_chunks_being_written(tmp_path):
+    """HDF5 2.0 gives every dataset an 8 MiB chunk cache; a recording of ~40 growing
+    datasets then held what it wrote in memory (+93 MB over an hour's soak). Every dataset
+    the recorder writes keeps at most CHUNKS_CACHED of its own chunks, full ones evicted
+    first; what a long session costs is measured by benchmarks/soak.py --malloc."""
+    import h5py
+
+    from app.recording import CHUNKS_CACHED
+
+    rec = Recorder(tmp_path / "r.h5", sites=("pelvis", "l_wrist"), metadata={})
+    try:
+        datasets = [*rec._raw.values(), *rec._cal.values(), *rec._rec.values(), *rec._ev.values()]
+        assert len(datasets) > 20
+        for ds in datasets:
+            assert isinstance(ds, h5py.Dataset)
+            chunk_bytes = int(np.prod(ds.chunks)) * ds.dtype.itemsize
+            _, nbytes, w0 = ds.id.get_access_plist().get_chunk_cache()
+            assert nbytes == CHUNKS_CACHED * chunk_bytes and w0 == 1.0, ds.name
+    finally:
+        rec.close()
