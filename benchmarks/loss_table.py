@@ -180,8 +180,8 @@ def simulate_frames(sig, sites: tuple[str, ...], loss: float, dropout: tuple[str
         faults = DeviceFaults(clock_offset=100.0 * (k + 1), drift_ppm=20.0 * (k - 2), seed=seed * 31 + k)
         links.append(Link(site, k, SignalSource(sig, site), faults, clock))
     losses = [BurstLoss(loss, np.random.default_rng(seed * 31 + k)) for k in range(len(links))]
-    hub = SuitHub({ln.site: ln.dev for ln in links}, clock=clock, resampler=resampler_from_to_grid(to_grid, slerp=slerp_unit),
-                  fill_gap=fill_gap)
+    hub = SuitHub({ln.site: ln.dev for ln in links}, clock=clock,
+                  resampler=resampler_from_to_grid(to_grid, slerp=slerp_unit), fill_gap=fill_gap)
     duration = (len(sig) - 1) / sig.fps
     events: list[tuple[float, int, object]] = []
     sent = lost = 0

@@ -699,9 +699,9 @@ class Hub:
         and one batched slerp over the (site, grid time) pairs that need one. Per poll a
         fixed handful of numpy calls instead of a full ``to_grid`` per site: with seven
         devices at 60 polls a second those calls held the interpreter lock for a third of
-        a capture process's time, beside the drivers and the model (``docs/capture.md``).
+        a capture process's time, beside the drivers and the model (``docs/pipeline.md``).
         Same values as ``_per_site`` (``tests/drivers/test_hub_interp.py``)."""
-        S, G = len(sites), grid.size
+        S = len(sites)
         rings = [self.tracks[n].ring for n in sites]
         block = _stack_windows(rings, grid[0])
         W = block.shape[1]
