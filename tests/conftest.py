@@ -42,7 +42,8 @@ def _one_torch_thread():
 REALTIME_MODULES = {"sim_devices/test_suit.py", "drivers/test_batched.py", "drivers/test_end_to_end.py",
                     "app/gui/test_main_window.py", "app/cli/test_demo.py", "app/capture/test_identify.py",
                     "app/cli/test_setup.py", "app/capture/test_capture_e2e.py",
-                    "app/gui/test_window_unplug.py", "app/gui/test_window_workflow.py"}
+                    "app/gui/test_window_unplug.py", "app/gui/test_window_workflow.py",
+                    "app/cli/test_bench_latency.py"}
 
 
 # Separate processes in real time (a simulator, `imucap capture`) whose figures (a calibration
