@@ -10,7 +10,7 @@ values) measured in the same run, so the two figures share the machine's load.
 ``onnx_p50_ms``/``onnx_p99_ms``: the same loop with the model call through ONNX Runtime
 (when installed; what live sessions then use), right after the torch figures.
 ``--end-to-end``: sensor-to-pose latency of the whole live path in both latency modes in
-one run (``centred_p50_ms``, ``low_p50_ms``, ...; app/bench_end_to_end.py, docs/latency.md).
+one run (``centred_p50_ms``, ``low_p50_ms``, ...; app/capture/end_to_end_bench.py, docs/latency.md).
 
 The input is a generated walking clip observed at the paper's 6 sites, fed one 20 Hz frame
 at a time, after a warm-up. benchmarks/bench_poser.py calls the same function. When the
@@ -196,7 +196,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-confidence", action="store_true", help="skip the loop with the per-segment spread on")
     p.add_argument("--no-onnx", action="store_true", help="skip the loop through ONNX Runtime (onnx_p50_ms)")
     p.add_argument("--end-to-end", action="store_true",
-                   help="sensor-to-pose latency of the live path per latency mode instead (app/bench_end_to_end.py)")
+                   help="sensor-to-pose latency of the live path per latency mode instead "
+                        "(app/capture/end_to_end_bench.py)")
     p.add_argument("--seconds", type=float, default=10.0, help="--end-to-end: timed seconds per mode and round")
     p.add_argument("--rounds", type=int, default=2, help="--end-to-end: rounds of both modes, alternating")
     p.add_argument("--suit", default="process", choices=("process", "thread"),
@@ -207,7 +208,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     if args.end_to_end:
-        from app.bench_end_to_end import run_end_to_end
+        from app.capture.end_to_end_bench import run_end_to_end
 
         res = run_end_to_end(args.seconds, args.rounds, args.model, threads=args.threads, suit=args.suit)
         print(json.dumps(res) if args.json else "\n".join(f"{k}: {v}" for k, v in res.items()))

@@ -9,7 +9,7 @@ import json
 
 import pytest
 
-import app.bench_end_to_end as e2e
+import app.capture.end_to_end_bench as e2e
 from app.cli.main import main
 from inference.model.onnx_runtime import onnxruntime_available
 
