@@ -667,36 +667,17 @@ class Hub:
         return quat, free, acc, gyro, present, newest
 
     def _hold_all(self, sites: tuple[str, ...], grid: np.ndarray) -> tuple[np.ndarray, ...]:
-        """Latest-sample hold for every site at once: the last ``W`` rows of every
-        ring stacked into one (S, W, 14) array, then one comparison against the grid
-        picks each site's held row. A handful of numpy calls per poll instead of a
-        dozen per site. ``W`` doubles until every site's window reaches back past the
-        first grid point (a few rows in the steady state)."""
-        S = len(sites)
-        block = _stack_windows([self.tracks[n].ring for n in sites], grid[0])
-        W = block.shape[1]
-        ts = block[:, :, 0]
-        # rows after each grid time are at the end of each (time-sorted) window
-        after = (ts[:, :, None] > grid[None, None, :]).sum(axis=1)  # (S, G); NaN compares False
-        idx = W - 1 - after
-        ii = np.maximum(idx, 0)
-        ks = np.arange(S)[:, None]
-        held_t = ts[ks, ii]
-        ok = (idx >= 0) & (grid[None, :] - held_t <= self.staleness)  # NaN (no row) -> False
-        for k, name in enumerate(sites):
-            spans = self.tracks[name].gap_spans
-            for a, b in spans:
-                ok[k] &= ~((grid > a) & (grid < b))
-        rows = block[ks, ii].transpose(1, 0, 2).copy()  # (G, S, 15)
-        present = ok.T.copy()
-        rows[~present] = np.nan
-        newest = rows[:, :, [0, _Ring.COUNTER]]
-        return rows[:, :, 1:5], rows[:, :, 5:8], rows[:, :, 8:11], rows[:, :, 11:14], present, newest
+        """Latest-sample hold for every site at once: ``_interp_all`` with no site
+        interpolated (each grid time takes the last row at or before it, missing when older
+        than ``staleness`` or inside a gap)."""
+        return self._interp_all(sites, grid, None)
 
-    def _interp_all(self, sites: tuple[str, ...], grid: np.ndarray, rs: GridResampler) -> tuple[np.ndarray, ...]:
-        """``_per_site`` with the injected resampler, for every site at once: the windows of
-        ``_hold_all``, each grid time's bracketing pair of samples found in one comparison,
-        and one batched slerp over the (site, grid time) pairs that need one. Per poll a
+    def _interp_all(self, sites: tuple[str, ...], grid: np.ndarray,
+                    rs: GridResampler | None) -> tuple[np.ndarray, ...]:
+        """``_per_site`` for every site at once: the last rows of every ring stacked into one
+        (S, W, COLS) array (``_stack_windows``), each grid time's held row and bracketing pair
+        of samples found in one comparison, and with a resampler (``rs``) one batched slerp
+        over the (site, grid time) pairs of the sites that send orientation. Per poll a
         fixed handful of numpy calls instead of a full ``to_grid`` per site: with seven
         devices at 60 polls a second those calls held the interpreter lock for a third of
         a capture process's time, beside the drivers and the model (``docs/pipeline.md``).
@@ -710,7 +691,7 @@ class Hub:
         after = (ts[:, :, None] > grid[None, None, :]).sum(axis=1)  # (S, G); NaN compares False
         idx = W - 1 - after
         ii = np.maximum(idx, 0)
-        interp = np.array([r.has["quat"] for r in rings], bool)
+        interp = np.array([rs is not None and r.has["quat"] for r in rings], bool)
         has_free = np.array([r.has["free_acc"] for r in rings], bool)
         reach = np.where(interp, max(self.staleness, self.fill_gap), self.staleness)[:, None]
         ok = (idx >= 0) & (grid[None, :] - ts[ks, ii] <= reach)  # NaN (no row) -> False
@@ -723,14 +704,16 @@ class Hub:
         i0 = i1 - 1
         t0, t1 = ts[ks, i0], ts[ks, i1]
         dt = t1 - t0
-        with np.errstate(invalid="ignore", divide="ignore"):
-            pair_ok = (dt <= rs.max_gap + 1e-12) & (grid[None, :] <= ts[:, -1:] + 1e-9) & (t0 <= grid[None, :] + 1e-9)
-        ok &= ~interp[:, None] | pair_ok
+        if rs is not None:
+            with np.errstate(invalid="ignore"):
+                pair_ok = ((dt <= rs.max_gap + 1e-12) & (grid[None, :] <= ts[:, -1:] + 1e-9)
+                           & (t0 <= grid[None, :] + 1e-9))
+            ok &= ~interp[:, None] | pair_ok
         held = block[ks, ii]  # (S, G, COLS)
         quat = held[:, :, 1:5].copy()
         free = held[:, :, 5:8].copy()
         sel = ok & interp[:, None]
-        if sel.any():
+        if rs is not None and sel.any():
             ka, ga = np.nonzero(sel)
             a, b = i0[ka, ga], i1[ka, ga]
             w = np.clip((grid[ga] - t0[ka, ga]) / dt[ka, ga], 0.0, 1.0)
