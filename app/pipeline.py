@@ -40,6 +40,10 @@ if TYPE_CHECKING:  # the poser pulls in torch; recorders and replay readers need
     from inference.poser.poser import PoseFrame, Poser
 
 MAX_FILLED_GAP = 6  # 60 Hz frames; a longer hole restarts the resampler instead of inpainting it
+RECALIBRATION_EVENT = "recalibration"
+"""The event a pipeline sends its sinks with the first frame that goes back to the
+calibrator after a calibration was dropped: from then until the next calibration nothing
+is posed."""
 _NR = N_SITES * 9  # packed rest payload: R_WB (13*9) | observed (13) | contacts (4) | insole present (1)
 
 
@@ -188,6 +192,9 @@ class Pipeline:
         self.causal = bool(causal)
         self.resampler = StreamingResampler(causal=self.causal)
         self._last_index: int | None = None
+        # a calibration was in use and has been dropped, and the first frame that went back
+        # to the calibrator has not been announced yet (see _calibrating)
+        self._had_calibration = False
         self.insoles = insoles
         self.set_active_sites(active_sites if active_sites is not None else self.sites, insoles)
         if calibration is not None:
@@ -215,6 +222,7 @@ class Pipeline:
         if missing:
             raise ValueError(f"the calibration has no site(s) {missing}")
         self.calibration = calibration
+        self._had_calibration = True
         self.poser.reset()
         self.resampler.reset()
         self._emit("on_calibration", calibration, t)
@@ -294,6 +302,12 @@ class Pipeline:
         with it); True when it was taken for that."""
         if self.calibration is not None:
             return False
+        if self._had_calibration:
+            # however the calibration was dropped (recalibrate(), the window's redo), sinks
+            # hear when posing stopped: a recording keeps it, so that a replay poses nothing
+            # from here until the new calibration, as live
+            self._had_calibration = False
+            self._emit("on_event", frame.t, RECALIBRATION_EVENT, "")
         self.stats.frames_calibrating += 1
         cal = self.calibrator.push(frame.t, frame.quat, frame.free_acc, frame.acc, frame.gyro, frame.present)
         if cal is not None:

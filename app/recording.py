@@ -16,7 +16,9 @@ with the sensor configuration, model, steps, app version, ...):
         latency_ms (M,) (NaN when not live), spread_deg (M,24) and root_spread_m (M,): the
         poser's per-segment confidence (inference/poser/confidence.py; NaN when off)
     /events/t (E,), kind (E,), detail (E,): what happened during the session, in order:
-        markers (detail = label), notes, devices lost and back, recording errors
+        markers (detail = label), notes, devices lost and back, recording errors, and
+        ``recalibration`` where a dropped calibration stopped the posing (a replay pauses
+        there until the next calibration)
 
 Strings are fixed-length UTF-8 (JSON in ``meta``): SWMR appends to fixed-size types only.
 
@@ -562,9 +564,11 @@ def open_recording(path: str | os.PathLike) -> h5py.File:
 SWMR_READ_ATTEMPTS = 24
 
 
+@functools.cache
 def _hdf5_library() -> ctypes.CDLL | None:
     """The HDF5 library h5py already runs on (the very instance: property lists are ids
-    into it), for the one setting h5py does not expose; None when it cannot be found."""
+    into it), for the one setting h5py does not expose; None when it cannot be found.
+    Looked up once: scanning the process's memory map cost ~8 ms per damaged file opened."""
     candidates: list[str] = []
     try:
         with open("/proc/self/maps") as fh:
@@ -1071,23 +1075,5 @@ def read_recording(path: str | os.PathLike) -> Recording:
     return Recording(path, sites, meta, raw, cals, recon, attrs, events, damage, checksums)
 
 
-def replay(path: str | os.PathLike, poser, calibration: Calibration | None = None) -> list[LivePose]:
-    """Run a recording's raw stream through the pipeline again (with its first calibration
-    unless one is given): offline re-reconstruction with another model or steps."""
-    from app.pipeline import Pipeline
-
-    rec = read_recording(path)
-    cal = calibration or (rec.calibrations[0][1] if rec.calibrations else None)
-    if cal is None:
-        raise ValueError(f"{path} holds no calibration; pass one")
-    pipe = Pipeline(poser, rec.sites, calibration=cal, insoles=bool(rec.metadata.get("insoles", False)))
-    t_cal = rec.calibrations[0][0] if rec.calibrations and calibration is None else -np.inf
-    out: list[LivePose] = []
-    for fr in rec.hub_frames():
-        if fr.t > t_cal:
-            out += pipe.push(fr)
-    return out
-
-
-__all__ = ["Recorder", "Recording", "RecordingError", "read_recording", "open_recording", "replay", "FORMAT",
+__all__ = ["Recorder", "Recording", "RecordingError", "read_recording", "open_recording", "FORMAT",
            "VERSION", "SITES"]

@@ -2,16 +2,17 @@
 through the same ``Pipeline`` as live (recorded calibration -> resampler -> poser), with
 any model, step count and any subset of the recorded sensors.
 
-Why this and not ``recording.replay``: a researcher re-runs one session many ways ("what
-would 3 sensors have given?", "the regressor on the same data?"), so the sensor subset,
-the insoles and progress reporting are parameters here, the stream is read into arrays
+A researcher re-runs one session many ways ("what would 3 sensors have given?", "the
+regressor on the same data?"), so the sensor subset, the insoles and progress reporting
+are parameters here, the stream is read into arrays
 once (not a Python list of per-frame stacks), and every calibration the session made is
 applied at the time it took effect, as it was live (a session recalibrated twice is
 replayed in three pieces, the poser restarting from standing at each, as it did).
 
-Known difference from live: after a recalibration started, the live pipeline posed
-nothing until the new calibration took effect; the recording does not say when that
-window began, so a replay poses those frames with the previous calibration.
+After a recalibration started, the live pipeline posed nothing until the new calibration
+took effect; the recording keeps when that began (the pipeline's ``recalibration`` event),
+and a replay poses nothing over the same stretch. Recordings made before the event existed
+do not say, and there a replay poses those frames with the previous calibration.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from app.pipeline import LivePose, Pipeline, Sink
+from app.pipeline import RECALIBRATION_EVENT, LivePose, Pipeline, Sink
 from app.recording import Recording
 from calibration import Calibration
 from drivers.hub import HubFrame
@@ -140,12 +141,16 @@ def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] 
             raise ValueError(f"{rec.path}: its calibration is damaged (see the warnings); nothing to replay")
         raise ValueError(f"{rec.path} holds no calibration (the session never calibrated); nothing to replay")
     cals = [(-np.inf, calibration)] if calibration is not None else sorted(rec.calibrations, key=lambda c: c[0])
+    # when a live recalibration stopped the posing (a calibration given here holds throughout)
+    recals = [] if calibration is not None else sorted(ev[0] for ev in rec.events if ev[1] == RECALIBRATION_EVENT)
     stream = _Stream(rec)
     pipe = Pipeline(poser, rec.sites, active_sites=use, insoles=ins, sinks=sinks, causal=causal)
     events = sorted(rec.events, key=lambda e: e[0]) if sinks else []
     e = 0  # next event to pass on
     poses: list[LivePose] = []
     k = 0  # next calibration to apply
+    r = 0  # next recalibration start
+    paused = False
     used = 0
     n = len(stream)
     every = max(n // 100, 1)
@@ -157,12 +162,17 @@ def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] 
             pipe.event(*events[e])
             e += 1
         took_effect_now = False
-        while k < len(cals) and t >= cals[k][0]:
+        while (k < len(cals) and t >= cals[k][0]) or (r < len(recals) and t >= recals[r]):
+            if r < len(recals) and t >= recals[r] and (k >= len(cals) or recals[r] <= cals[k][0]):
+                paused = True  # live, this frame went back to the calibrator
+                r += 1
+                continue
             pipe.set_calibration(cals[k][1], float(max(cals[k][0], t)))
             took_effect_now = took_effect_now or t == cals[k][0]  # live, that frame was the last calibrating one
+            paused = False
             k += 1
             used += 1
-        if took_effect_now:
+        if paused or took_effect_now:
             # live, the pipeline consumed this frame while calibrating and noted its index, so
             # the next frame is not taken for a dropped one
             pipe._last_index = int(stream.index[i])

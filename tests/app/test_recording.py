@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from app.pipeline import Pipeline, frames_from_signals
-from app.recording import Recorder, read_recording, replay
+from app.recording import Recorder, read_recording
+from app.replay import replay_recording
 from calibration import Calibrator, Protocol, synthesize_session
 from inference.poser.poser import make_poser
 from inference.signals.synthesis import NoiseModel
@@ -64,7 +65,7 @@ def test_write_read_replay(tmp_path, session):
     assert np.allclose(r.recon["R"], np.stack([lp.pose.rot for lp in live]), atol=1e-5)
     assert np.allclose(r.recon["root"], np.stack([lp.pose.root for lp in live]), atol=1e-5)
     # replay of the raw stream with the recorded calibration reproduces the reconstruction
-    again = replay(path, make_poser("floor", body=truth.body))
+    again = replay_recording(r, make_poser("floor", body=truth.body)).poses
     assert len(again) == len(live)
     assert np.allclose(np.stack([lp.pose.rot for lp in again]), np.stack([lp.pose.rot for lp in live]), atol=1e-4)
 

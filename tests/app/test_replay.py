@@ -85,3 +85,53 @@ def test_every_recorded_calibration_takes_effect_and_none_is_an_error(recorded):
     # an explicit calibration replaces the recorded ones from the first frame
     own = replay_recording(replace(rec, calibrations=[]), make_poser("floor", body=recorded.body), calibration=cal)
     assert own.calibrations_used == 1 and len(own.poses) > len(once.poses)
+
+
+def test_a_recalibration_pauses_the_replay_where_it_paused_live(tmp_path):
+    """The clip is played twice and the pipeline recalibrates at the second start, as the
+    demo does at every loop: live, nothing is posed from the first frame that went back to
+    the calibrator until the new calibration; the replay must pose the very same frames."""
+    import itertools
+
+    from app.pipeline import RECALIBRATION_EVENT, Pipeline, frames_from_signals
+    from app.recording import Recorder
+    from calibration import Calibrator, synthesize_session
+    from inference.signals.synthesis import NoiseModel
+    from sim_devices.motions import generate
+
+    from .conftest import REC_PROTO, REC_SITES
+
+    act = generate("walk", seconds=2.0, seed=7)
+    sig, truth = synthesize_session(act, REC_PROTO, noise=NoiseModel.typical(), rng=3, sites=REC_SITES)
+    first = frames_from_signals(sig, t0=100.0)
+    span = first[-1].t - first[0].t + 1 / 60
+    second = [replace(f, index=f.index + len(first)) for f in frames_from_signals(sig, t0=100.0 + span)]
+    ticks = itertools.count(0.0, 0.01)
+    path = tmp_path / "twice.h5"
+    rec = Recorder(path, REC_SITES, metadata={"model": "floor"}, flush_interval=0.2, clock=lambda: next(ticks))
+    cal = Calibrator(REC_SITES, schedule=REC_PROTO.schedule())
+    pipe = Pipeline(make_poser("floor", body=truth.body), REC_SITES, calibrator=cal, sinks=[rec])
+    live = []
+    for f in first:
+        live += pipe.push(f)
+    assert pipe.calibration is not None
+    pipe.recalibrate(second[0].t)
+    for f in second:
+        live += pipe.push(f)
+    pipe.close()
+
+    r = read_recording(path)
+    assert len(r.calibrations) == 2
+    recal = [t for t, kind, _ in r.events if kind == RECALIBRATION_EVENT]
+    assert recal == [pytest.approx(second[0].t)]
+    # live posed nothing between the recalibration's start and the second calibration
+    t_cal2 = r.calibrations[1][0]
+    assert not any(recal[0] <= lp.t <= t_cal2 for lp in live)
+    again = replay_recording(r, make_poser("floor", body=truth.body))
+    assert again.calibrations_used == 2
+    assert len(again.poses) == len(live)
+    assert np.allclose([lp.t for lp in again.poses], [lp.t for lp in live])
+    assert np.allclose(_rot(again.poses), _rot(live), atol=1e-4)
+    # a recording from before the event (none in it): the old way, the stretch posed with the first calibration
+    old = replay_recording(replace(r, events=[]), make_poser("floor", body=truth.body))
+    assert sum(recal[0] <= lp.t <= t_cal2 for lp in old.poses) > 10
