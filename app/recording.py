@@ -562,6 +562,9 @@ def open_recording(path: str | os.PathLike) -> h5py.File:
 # sleep each time, in case a live writer is half way through it: on a damaged or cut file
 # that is a hang of hours. This many tries still give a live writer ~20 ms.
 SWMR_READ_ATTEMPTS = 24
+# a chunk of a file still (or last) open for writing that fails its read is tried again
+# twice after this pause, in case the writer was rewriting it
+IN_FLIGHT_RETRY_S = 0.01
 
 
 @functools.cache
@@ -830,7 +833,7 @@ class _Reader:
                         if attempt == (2 if self.in_flight else 0):
                             lost.append((a, b, why))
                         else:
-                            time.sleep(0.01)
+                            time.sleep(IN_FLIGHT_RETRY_S)
         if ds.name.rsplit("/", 1)[-1] in NEVER_ZERO:
             bad = {(a, b) for a, b, _ in lost}
             for a, b in good:
