@@ -9,6 +9,13 @@ process's resident memory, latency p50/p99 of that slice's poses, the hub's and 
 pipeline's queue depths, the frames dropped and filled in the slice, and the recording's
 size. A live demo that lagged further behind the longer it ran (TransPose's issue 55)
 shows here as a latency that climbs from slice to slice; a leak as a memory that does.
+
+    .venv/bin/python benchmarks/soak.py --recorder-only --minutes 60 [--json]
+
+The recorder alone, fed the frames of --minutes simulated minutes (six sensors, 60 Hz)
+as fast as it takes them: per simulated minute the CPU it spent, glibc's heap in use and
+the file's size. Whether writing gets slower or holds more as the file grows, without a
+live session's noise around it.
 """
 
 from __future__ import annotations
@@ -74,6 +81,35 @@ class SliceLatency(Sink):
         return out
 
 
+def recorder_only(minutes: int, as_json: bool) -> int:
+    from app.recording import Recorder
+    from drivers.hub import HubFrame
+
+    sites = ("pelvis", "head", "l_wrist", "r_wrist", "l_shank", "r_shank")
+    S = len(sites)
+    now = [0.0]
+    path = Path(tempfile.mkdtemp(prefix="imucap-soak-")) / "recorder.h5"
+    rec = Recorder(path, sites=sites, metadata={"source": "soak --recorder-only"}, clock=lambda: now[0])
+    rng = np.random.default_rng(0)
+    try:
+        for m in range(minutes):
+            c0 = time.process_time()
+            for k in range(3600):
+                i = m * 3600 + k
+                now[0] = i / 60
+                q = rng.normal(size=(S, 4))
+                rec.on_frame(HubFrame(now[0], i, sites, q / np.linalg.norm(q, axis=1, keepdims=True),
+                                      rng.normal(size=(S, 3)), rng.normal(size=(S, 3)), rng.normal(size=(S, 3)),
+                                      np.ones(S, bool), np.zeros(2), np.zeros(4, bool), True))
+            row = {"minute": m + 1, "cpu_s": round(time.process_time() - c0, 3),
+                   "heap_in_use_mb": malloc_stats()["in_use"], "file_mb": round(path.stat().st_size / 2**20, 1)}
+            print(json.dumps(row) if as_json else "  ".join(f"{k}={v}" for k, v in row.items()), flush=True)
+    finally:
+        rec.close()
+        path.unlink(missing_ok=True)
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--minutes", type=float, default=60.0)
@@ -89,7 +125,11 @@ def main() -> int:
     ap.add_argument("--tracemalloc", type=int, default=0, metavar="N",
                     help="trace Python and numpy allocations; per slice the N source lines whose memory grew most "
                          "since the first slice")
+    ap.add_argument("--recorder-only", action="store_true",
+                    help="only the recorder, fed --minutes simulated minutes of frames as fast as it takes them")
     args = ap.parse_args()
+    if args.recorder_only:
+        return recorder_only(int(args.minutes), args.json)
     if args.tracemalloc:
         tracemalloc.start(8)
     base_snapshot = None
