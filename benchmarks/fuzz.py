@@ -415,6 +415,8 @@ def _short_motion(frames: int = 4):  # type: ignore[no-untyped-def]
 
 
 def _bvh(tmp: Path) -> tuple[Run, list[bytes], Errors]:
+    import gzip
+
     from app.export.bvh import write_motion_bvh
     from inference.loaders import MotionFormatError, load_motion
 
@@ -425,8 +427,23 @@ def _bvh(tmp: Path) -> tuple[Run, list[bytes], Errors]:
         load_motion(path)
 
     write_motion_bvh(tmp / "seed.bvh", _short_motion())
-    seed = (tmp / "seed.bvh").read_bytes()
-    return run, [seed], (MotionFormatError, OSError)
+    seeds = [(tmp / "seed.bvh").read_bytes()]
+    # the CMU conversions' rigs (Daz names, iClone's CC_Base with twist bones) reach their own
+    # joint maps and rest-pose turns: three frames of the first take of each, where the data is
+    for layout in ("bvh_cgspeed", "bvh_iclone"):
+        take = next(iter(sorted((_data_root() / "cmu" / layout).glob("*.bvh.gz"))), None)
+        if take is not None:
+            seeds.append(_first_frames_bvh(gzip.decompress(take.read_bytes()), 3))
+    return run, seeds, (MotionFormatError, OSError)
+
+
+def _first_frames_bvh(text: bytes, n: int) -> bytes:
+    lines = text.splitlines()
+    m = next(i for i, ln in enumerate(lines) if ln.strip().upper() == b"MOTION")
+    head = lines[:m + 1] + [b"Frames: %d" % n]
+    timing = next(ln for ln in lines[m + 1:m + 4] if ln.strip().lower().startswith(b"frame time"))
+    body = [ln for ln in lines[m + 1:] if ln.strip() and not ln.strip().lower().startswith(b"frame")][:n]
+    return b"\n".join(head + [timing] + body) + b"\n"
 
 
 def _asf_amc(tmp: Path) -> tuple[Run, list[bytes], Errors]:
