@@ -771,9 +771,9 @@ class _Reader:
 
     def column(self, name: str, tail: tuple[int, ...], dtype: str) -> _Column:
         try:
-            if name not in self.f:
-                return _Column(name, None, [(0, 0, MISSING)])
-            ds = self.f[name]
+            ds = self.f.get(name)  # one lookup where the dataset is there (most of a read's time was lookups)
+            if ds is None:  # absent, or linked but its object unreadable
+                return _Column(name, None, [(0, 0, UNREADABLE if name in self.f else MISSING)])
             if not isinstance(ds, h5py.Dataset) or ds.shape[1:] != tail:
                 return _Column(name, None, [(0, 0, UNREADABLE)])
             return _Column(name, *self._read(ds))
@@ -781,8 +781,9 @@ class _Reader:
             return _Column(name, None, [(0, 0, UNREADABLE)])
 
     def _read(self, ds: h5py.Dataset) -> tuple[np.ndarray, list[tuple[int, int, str]]]:
-        L = ds.shape[0]
-        out = np.full(ds.shape, _fill(ds.dtype), dtype=ds.dtype)
+        shape, dtype = ds.shape, ds.dtype  # each a call into HDF5
+        L = shape[0]
+        out = np.full(shape, _fill(dtype), dtype=dtype)
         if L == 0:
             return out, []
         if ds.chunks is None:  # not written by the Recorder; nothing to go by but HDF5's word

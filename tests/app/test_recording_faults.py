@@ -160,6 +160,23 @@ def test_overwritten_bytes_are_detected_named_and_skipped(good, tmp_path):
     assert np.array_equal(r.recon["rot"], orig.recon["rot"]) and len(r.calibrations) == 1
 
 
+def test_a_dataset_whose_header_is_damaged_is_unreadable_not_missing(good, tmp_path):
+    """The link to the dataset is intact but its object header is not: the file does hold
+    it, so the damage line must not say it is missing (that reads as an older format)."""
+    bad = tmp_path / "bad_header.h5"
+    shutil.copy(good, bad)
+    with h5py.File(good, "r") as f:
+        addr = h5py.h5o.get_info(f["raw/r_wrist/gyro"].id).addr
+    with open(bad, "r+b") as fh:
+        fh.seek(addr)
+        fh.write(b"\x13\x37\xde\xad\xbe\xef\x00\x01")
+    r = read_recording(bad)
+    lines = [d for d in r.damage if "gyro" in d]
+    assert len(lines) == 1 and lines[0].startswith("raw/r_wrist/gyro frames 0-") and \
+        lines[0].endswith(": unreadable, skipped"), r.damage
+    assert np.isnan(r.raw["r_wrist"]["gyro"]).all() and len(r.raw["t"]) == read_recording(good).n_frames
+
+
 def test_a_damaged_pose_is_dropped_and_the_rest_kept(good, tmp_path):
     orig = read_recording(good)
     bad = tmp_path / "bad_recon.h5"
