@@ -196,11 +196,11 @@ class Recorder(Sink):
             raise OSError(f"cannot create the recording {self.path}: {_why(exc)}") from None
         self._f: h5py.File | None = f
         try:
-            f.attrs["format"] = FORMAT
+            _fixed_attr(f, "format", FORMAT)
             f.attrs["version"] = VERSION
-            f.attrs["created"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
-            f.attrs["sites"] = json.dumps(list(self.sites))
-            f.attrs["metadata"] = json.dumps(metadata or {}, default=str)
+            _fixed_attr(f, "created", time.strftime("%Y-%m-%dT%H:%M:%S%z"))
+            _fixed_attr(f, "sites", json.dumps(list(self.sites)))
+            _fixed_attr(f, "metadata", json.dumps(metadata or {}, default=str))
             raw = f.create_group("raw")
             self._raw: dict[str, h5py.Dataset] = {"t": _ds(raw, "t", (), "f8", chunk),
                                                   "index": _ds(raw, "index", (), "i8", chunk)}
@@ -531,6 +531,11 @@ def open_recording(path: str | os.PathLike) -> h5py.File:
     (SWMR read) or one cut short: HDF5 refuses a file shorter than its superblock says,
     but what it still holds is worth reading. Anything that is not a recording this
     version can read is a ``RecordingError``."""
+    return open_recording_header(path)[0]
+
+
+def open_recording_header(path: str | os.PathLike) -> tuple[h5py.File, dict[str, Any]]:
+    """``open_recording``, and the root's attributes read safely (``root_attributes``)."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"recording {path} not found")
@@ -551,11 +556,12 @@ def open_recording(path: str | os.PathLike) -> h5py.File:
         except OSError as exc:
             raise RecordingError(path, f"truncated or not an HDF5 file ({_why(exc)})") from None
     try:
-        _check_header(f, path)
+        attrs = root_attributes(f, path)
+        _check_header(attrs, path)
     except BaseException:
         f.close()
         raise
-    return f
+    return f, attrs
 
 
 # HDF5 re-reads metadata that fails its checksum up to 100 times in SWMR mode, doubling a
@@ -606,14 +612,104 @@ def _open_swmr(path: Path) -> h5py.File:
     return h5py.File(fid)
 
 
-def _check_header(f: h5py.File, path: Path) -> None:
+def _fixed_attr(f: h5py.File, name: str, text: str) -> None:
+    """A string attribute of fixed length (UTF-8): it lives in the object header, where a
+    variable-length one lives in HDF5's global heap (see ``root_attributes``)."""
+    b = text.encode("utf-8")
+    f.attrs.create(name, np.array(b, dtype=h5py.string_dtype("utf-8", max(len(b), 1))))
+
+
+# HDF5 (2.0) can loop forever deserializing a damaged global heap, where variable-length
+# strings live (a fuzzed recording hung it in H5HG__cache_heap_deserialize): such values are
+# read by a child process that is given this long
+HEAP_READ_TIMEOUT_S = 10.0
+
+_ATTRS_CHILD = r"""
+import json, sys
+import h5py, numpy as np
+path = sys.argv[1]
+try:
+    f = h5py.File(path, "r")
+except OSError:
+    f = h5py.File(path, "r", libver="latest", swmr=True)
+def plain(v):
+    if isinstance(v, bytes):
+        return v.decode("utf-8", "replace")
+    if isinstance(v, np.ndarray):
+        return [plain(x) for x in v.tolist()]
+    if isinstance(v, np.generic):
+        return plain(v.item())
+    if isinstance(v, (list, tuple)):
+        return [plain(x) for x in v]
+    return v if isinstance(v, (str, int, float, bool)) or v is None else str(v)
+print(json.dumps({k: plain(v) for k, v in f.attrs.items()}))
+"""
+
+
+def _in_heap(t: Any) -> bool:
+    """Whether values of HDF5 type ``t`` are stored in the global heap."""
+    if isinstance(t, h5py.h5t.TypeStringID):
+        return bool(t.is_variable_str())
+    if isinstance(t, h5py.h5t.TypeVlenID):
+        return True
+    if isinstance(t, h5py.h5t.TypeCompoundID):
+        return any(_in_heap(t.get_member_type(i)) for i in range(t.get_nmembers()))
+    if isinstance(t, h5py.h5t.TypeArrayID):
+        return _in_heap(t.get_super())
+    return False
+
+
+def fixed_dataset(f: h5py.File, name: str, path: str | os.PathLike) -> h5py.Dataset:
+    """``f[name]``, refused when its values would be read from the global heap (see
+    ``root_attributes``): not what the Recorder writes, and a damaged heap can hang HDF5."""
+    ds = f[name]
+    if not isinstance(ds, h5py.Dataset) or _in_heap(ds.id.get_type()):
+        raise RecordingError(Path(path), f"damaged: {name} is not the dataset a recording holds")
+    return ds
+
+
+def _decoded(v: Any) -> Any:
+    if isinstance(v, bytes):
+        return v.decode("utf-8", "replace")
+    if isinstance(v, np.generic):
+        return _decoded(v.item())
+    return v
+
+
+def root_attributes(f: h5py.File, path: str | os.PathLike) -> dict[str, Any]:
+    """The root's attributes, strings decoded. The Recorder writes fixed-length strings;
+    recordings from before that (and foreign files) hold variable-length ones in the global
+    heap, read by a child process with ``HEAP_READ_TIMEOUT_S``: a damaged heap costs that
+    wait and a one-line error, never a hang of the caller (the window lists recordings)."""
+    path = Path(path)
     try:
-        fmt = f.attrs.get("format")
-        version = f.attrs.get("version")
-    except (OSError, RuntimeError, KeyError):
+        names = list(f.attrs)
+        heap = any(_in_heap(h5py.h5a.open(f.id, n.encode()).get_type()) for n in names)
+        if not heap:
+            return {n: _decoded(f.attrs[n]) for n in names}
+    except (OSError, RuntimeError, KeyError, ValueError, TypeError):
         raise RecordingError(path, "truncated or not an HDF5 file (its header cannot be read)") from None
-    if isinstance(fmt, bytes):
-        fmt = fmt.decode("utf-8", "replace")
+    import subprocess
+
+    try:
+        out = subprocess.run([sys.executable, "-c", _ATTRS_CHILD, os.fspath(path)], capture_output=True, text=True,
+                             timeout=HEAP_READ_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        raise RecordingError(path, f"damaged: its header cannot be read (HDF5 did not return within "
+                                   f"{HEAP_READ_TIMEOUT_S:g} s)") from None
+    if out.returncode != 0:
+        last = (out.stderr.strip().splitlines() or ["no reason given"])[-1]
+        raise RecordingError(path, f"truncated or not an HDF5 file (its header cannot be read: {last})")
+    try:
+        attrs = json.loads(out.stdout)
+    except ValueError:
+        raise RecordingError(path, "damaged: its header cannot be read") from None
+    return attrs if isinstance(attrs, dict) else {}
+
+
+def _check_header(attrs: dict[str, Any], path: Path) -> None:
+    fmt = attrs.get("format")
+    version = attrs.get("version")
     if fmt != FORMAT:
         if fmt == "imucap-motion":
             raise RecordingError(path, "an exported motion (imucap export/replay --out), not a session recording")
@@ -774,7 +870,9 @@ class _Reader:
             ds = self.f.get(name)  # one lookup where the dataset is there (most of a read's time was lookups)
             if ds is None:  # absent, or linked but its object unreadable
                 return _Column(name, None, [(0, 0, UNREADABLE if name in self.f else MISSING)])
-            if not isinstance(ds, h5py.Dataset) or ds.shape[1:] != tail:
+            # a type in the global heap is never what the Recorder writes, and a damaged heap
+            # can hang HDF5 (root_attributes)
+            if not isinstance(ds, h5py.Dataset) or ds.shape[1:] != tail or _in_heap(ds.id.get_type()):
                 return _Column(name, None, [(0, 0, UNREADABLE)])
             return _Column(name, *self._read(ds))
         except (OSError, RuntimeError, KeyError, ValueError):
@@ -981,13 +1079,13 @@ def read_recording(path: str | os.PathLike) -> Recording:
     and listed in ``Recording.damage`` (see there for what becomes of those rows), so one
     bad block costs seconds of a session, not the session."""
     path = Path(path)
-    with open_recording(path) as f:
+    f, attrs = open_recording_header(path)
+    with f:
         rd = _Reader(f, path)
         try:
-            sites = tuple(json.loads(f.attrs["sites"]))
-            meta = json.loads(f.attrs.get("metadata", "{}"))
-            attrs = {k: (v if not isinstance(v, bytes) else v.decode()) for k, v in f.attrs.items()}
-        except (KeyError, ValueError, TypeError, OSError, RuntimeError) as exc:
+            sites = tuple(json.loads(attrs["sites"]))
+            meta = json.loads(attrs.get("metadata", "{}"))
+        except (KeyError, ValueError, TypeError) as exc:
             raise RecordingError(path, f"damaged: its root attributes cannot be read ({_why(exc)})") from None
         S = len(sites)
 
@@ -1079,5 +1177,6 @@ def read_recording(path: str | os.PathLike) -> Recording:
     return Recording(path, sites, meta, raw, cals, recon, attrs, events, damage, checksums)
 
 
-__all__ = ["Recorder", "Recording", "RecordingError", "read_recording", "open_recording", "FORMAT",
+__all__ = ["Recorder", "Recording", "RecordingError", "read_recording", "open_recording", "open_recording_header",
+           "root_attributes", "fixed_dataset", "FORMAT",
            "VERSION", "SITES"]

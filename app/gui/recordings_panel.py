@@ -52,27 +52,27 @@ def _last_finite(ds) -> float | None:
 
 def recording_info(path: Path) -> RecordingInfo:
     """The header of one recording, or a ``problem`` saying why it cannot be listed."""
-    from app.recording import open_recording
+    from app.recording import fixed_dataset, open_recording_header
 
     info = RecordingInfo(path)
     try:
-        with open_recording(path) as f:
-            meta = json.loads(f.attrs.get("metadata", "{}"))
-            info.sensors = tuple(json.loads(f.attrs.get("sites", "[]")))
-            created = f.attrs.get("created", "")
-            info.created = created.decode() if isinstance(created, bytes) else str(created)
+        f, attrs = open_recording_header(path)
+        with f:
+            meta = json.loads(attrs.get("metadata", "{}"))
+            info.sensors = tuple(json.loads(attrs.get("sites", "[]")))
+            info.created = str(attrs.get("created", ""))
             subject = meta.get("subject")
             info.subject = subject.get("id", "") if isinstance(subject, dict) else str(subject or "")
             info.insoles = bool(meta.get("insoles"))
             info.model = str(meta.get("model") or "")
-            t = f["raw/t"]
+            t = fixed_dataset(f, "raw/t", path)
             if t.shape[0]:
                 first = float(t[0])
                 last = _last_finite(t)
                 if np.isfinite(first) and last is not None:
                     info.seconds = last - first
             if "events/kind" in f:
-                kinds = np.asarray(f["events/kind"][:])
+                kinds = np.asarray(fixed_dataset(f, "events/kind", path)[:])
                 info.markers = int(np.sum(kinds == b"marker"))
     except Exception as exc:  # a damaged or foreign file is listed with its problem, not fatal
         info.problem = " ".join(str(exc).split())

@@ -147,6 +147,8 @@ def parse_bvh(path: str | Path) -> SourceSkeleton:
         frame_time = float(tline.split(":")[1])
     except (IndexError, ValueError):
         raise MotionFormatError(path, "expected 'Frames: N' and 'Frame Time: dt'", motion_line + 1) from None
+    if n_frames < 1:
+        raise MotionFormatError(path, f"header says {n_frames} frames: a motion needs at least one", motion_line + 1)
     if frame_time <= 0 or not np.isfinite(frame_time):
         raise MotionFormatError(path, f"bad frame time {frame_time}", motion_line + 2)
     n_chan = sum(len(c) for c in channels)

@@ -177,6 +177,56 @@ def test_a_dataset_whose_header_is_damaged_is_unreadable_not_missing(good, tmp_p
     assert np.isnan(r.raw["r_wrist"]["gyro"]).all() and len(r.raw["t"]) == read_recording(good).n_frames
 
 
+def _with_heap_strings(src: Path, dst: Path) -> None:
+    """``src`` as imucap wrote recordings before its string attributes were of fixed
+    length: variable-length strings, kept in HDF5's global heap."""
+    shutil.copy(src, dst)
+    with h5py.File(dst, "r+") as f:
+        for name in ("format", "created", "sites", "metadata"):
+            text = f.attrs[name].decode()
+            del f.attrs[name]
+            f.attrs[name] = text  # a Python str: variable length
+
+
+def test_string_attributes_are_written_of_fixed_length(good):
+    with h5py.File(good, "r") as f:
+        for name in ("format", "created", "sites", "metadata"):
+            t = h5py.h5a.open(f.id, name.encode()).get_type()
+            assert isinstance(t, h5py.h5t.TypeStringID) and not t.is_variable_str(), name
+
+
+def test_recordings_with_heap_strings_still_read(good, tmp_path):
+    old = tmp_path / "old.h5"
+    _with_heap_strings(good, old)
+    r, new = read_recording(old), read_recording(good)
+    assert r.sites == new.sites and r.metadata == new.metadata and r.attrs["created"] == new.attrs["created"]
+    assert np.array_equal(r.raw["t"], new.raw["t"]) and not r.damage
+
+
+def test_a_damaged_global_heap_is_an_error_not_a_hang(good, tmp_path, monkeypatch, capsys):
+    """The fuzzer found a recording whose global heap (the free space at its end, size 0)
+    sent HDF5 2.0 into an endless loop reading the 'format' attribute: the read is given
+    a time limit and the file a one-line error."""
+    import app.recording as recording
+
+    old = tmp_path / "heap.h5"
+    _with_heap_strings(good, old)
+    data = bytearray(old.read_bytes())
+    at = data.find(b"GCOL")
+    assert at > 0
+    p = at + 16
+    while struct.unpack_from("<H", data, p)[0] != 0:  # walk the heap's objects to its free space
+        p += 16 + (struct.unpack_from("<Q", data, p + 8)[0] + 7) // 8 * 8
+    struct.pack_into("<Q", data, p + 8, 0)
+    old.write_bytes(bytes(data))
+    monkeypatch.setattr(recording, "HEAP_READ_TIMEOUT_S", 3.0)
+    with pytest.raises(RecordingError, match="did not return within 3 s"):
+        read_recording(old)
+    code, _, err = _run(capsys, "replay", str(old))
+    assert code == 2
+    _one_line_error(err, str(old), "header cannot be read")
+
+
 def test_a_damaged_pose_is_dropped_and_the_rest_kept(good, tmp_path):
     orig = read_recording(good)
     bad = tmp_path / "bad_recon.h5"

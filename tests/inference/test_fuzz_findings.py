@@ -131,3 +131,31 @@ def test_truncated_gzip_motion_is_a_format_error(tmp_path):
     (tmp_path / "HDM_zz.asf").write_text(ASF)
     with pytest.raises(MotionFormatError, match="compressed"):
         load_motion(p)
+
+
+BVH = """HIERARCHY
+ROOT Hips
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  End Site
+  {
+    OFFSET 0 10 0
+  }
+}
+MOTION
+Frames: FRAMES
+Frame Time: 0.0333
+0 90 0 0 0 0
+0 90 0 5 0 0
+"""
+
+
+@pytest.mark.parametrize("frames", ["0", "-1"])
+def test_bvh_that_declares_no_frames(tmp_path, frames):
+    """'Frames: 0' reached the forward kinematics with an empty, one-dimensional array
+    (IndexError); a negative count would have sliced the data from its end."""
+    p = tmp_path / "clip.bvh"
+    p.write_text(BVH.replace("FRAMES", frames))
+    with pytest.raises(MotionFormatError, match=f"header says {frames} frames"):
+        load_motion(p)
