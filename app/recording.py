@@ -534,6 +534,18 @@ def open_recording(path: str | os.PathLike) -> h5py.File:
     return open_recording_header(path)[0]
 
 
+# A Recorder holds a new file locked while it lays out its datasets, until it switches to
+# SWMR mode (milliseconds); a reader that comes in between waits this long for it
+LOCKED_WAIT_S = 2.0
+
+
+def _locked(exc: OSError) -> bool:
+    import errno
+
+    return getattr(exc, "errno", None) in (errno.EAGAIN, errno.EWOULDBLOCK) or \
+        "Resource temporarily unavailable" in str(exc) or "unable to lock file" in str(exc)
+
+
 def open_recording_header(path: str | os.PathLike) -> tuple[h5py.File, dict[str, Any]]:
     """``open_recording``, and the root's attributes read safely (``root_attributes``)."""
     path = Path(path)
@@ -551,10 +563,18 @@ def open_recording_header(path: str | os.PathLike) -> tuple[h5py.File, dict[str,
     except OSError:
         if not h5py.is_hdf5(path):
             raise RecordingError(path, "truncated or not an HDF5 file") from None
-        try:
-            f = _open_swmr(path)
-        except OSError as exc:
-            raise RecordingError(path, f"truncated or not an HDF5 file ({_why(exc)})") from None
+        deadline = time.monotonic() + LOCKED_WAIT_S
+        while True:
+            try:
+                f = _open_swmr(path)
+                break
+            except OSError as exc:
+                if not _locked(exc):
+                    raise RecordingError(path, f"truncated or not an HDF5 file ({_why(exc)})") from None
+                if time.monotonic() > deadline:
+                    raise RecordingError(path, "locked by the program writing it, which has not made it readable "
+                                               "yet; try again in a moment") from None
+                time.sleep(0.05)
     try:
         attrs = root_attributes(f, path)
         _check_header(attrs, path)
