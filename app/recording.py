@@ -44,10 +44,12 @@ disk or a vanished folder must stop the recording, loudly (``Recorder.error``,
 from __future__ import annotations
 
 import ctypes
+import errno
 import functools
 import json
 import os
 import re
+import subprocess
 import sys
 import tempfile
 import threading
@@ -540,8 +542,6 @@ LOCKED_WAIT_S = 2.0
 
 
 def _locked(exc: OSError) -> bool:
-    import errno
-
     return getattr(exc, "errno", None) in (errno.EAGAIN, errno.EWOULDBLOCK) or \
         "Resource temporarily unavailable" in str(exc) or "unable to lock file" in str(exc)
 
@@ -709,8 +709,6 @@ def root_attributes(f: h5py.File, path: str | os.PathLike) -> dict[str, Any]:
             return {n: _decoded(f.attrs[n]) for n in names}
     except (OSError, RuntimeError, KeyError, ValueError, TypeError):
         raise RecordingError(path, "truncated or not an HDF5 file (its header cannot be read)") from None
-    import subprocess
-
     try:
         out = subprocess.run([sys.executable, "-c", _ATTRS_CHILD, os.fspath(path)], capture_output=True, text=True,
                              timeout=HEAP_READ_TIMEOUT_S)
