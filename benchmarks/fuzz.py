@@ -66,6 +66,9 @@ class Target:
     setup: Callable[[Path], tuple[Run, list[bytes], Errors]]  # scratch folder -> (run one input, seeds, own errors)
     max_len: int = 4096
     timeout: int = 10  # s per input
+    # the modules that parse the input: each must be instrumented, or libFuzzer mutates
+    # without seeing which branches of the parser an input reached
+    surface: tuple[str, ...] = ()
 
 
 def _scratch(name: str) -> Path:
@@ -563,26 +566,41 @@ def _recording(tmp: Path) -> tuple[Run, list[bytes], Errors]:
 
 
 TARGETS: dict[str, Target] = {t.name: t for t in (
-    Target("xbus", "Xsens Xbus: stream parser, frame, MTData2 and config decoders, XbusDevice.read_many", _xbus),
-    Target("bno08x-rvc", "BNO08x UART-RVC: frame decoder and Bno08xRvcDevice.read_many", _bno08x),
+    Target("xbus", "Xsens Xbus: stream parser, frame, MTData2 and config decoders, XbusDevice.read_many", _xbus,
+           surface=("drivers.xbus.protocol", "drivers.xbus.driver")),
+    Target("bno08x-rvc", "BNO08x UART-RVC: frame decoder and Bno08xRvcDevice.read_many", _bno08x,
+           surface=("drivers.bno08x.protocol", "drivers.bno08x.driver")),
     Target("xsens-can", "Xsens MTi CAN (DBC via cantools): frame decoder, group assembly, "
-           "XsensCanDevice.read_many", _xsens_can),
+           "XsensCanDevice.read_many", _xsens_can,
+           surface=("drivers.xsens_can.protocol", "drivers.xsens_can.driver")),
     Target("dualsense", "DualSense HID: input and calibration reports, DualSenseDevice open + read_many "
-           "(calibration, AHRS)", _dualsense),
-    Target("moticon", "Moticon UDP datagrams: decoder and the insole device's conversion", _moticon),
+           "(calibration, AHRS)", _dualsense,
+           surface=("drivers.dualsense.protocol", "drivers.dualsense.driver")),
+    Target("moticon", "Moticon UDP datagrams: decoder and the insole device's conversion", _moticon,
+           surface=("drivers.moticon.protocol", "drivers.moticon.driver")),
     Target("ximu3", "x-IMU3 GUI log folder (Inertial.csv + Quaternion.csv): drivers.ximu3.read_log", _ximu3,
-           max_len=8192),
+           max_len=8192,
+           surface=("drivers.ximu3.log",)),
     Target("xsens-export", "Xsens MT Manager / DOT export: detect_layout + read_export", _xsens_export,
-           max_len=8192),
-    Target("setup", "setup TOML: app.capture.setup_file.load_setup (parse_setup)", _setup),
-    Target("bvh", "BVH via inference.loaders.load_motion", _bvh, max_len=16384, timeout=20),
+           max_len=8192,
+           surface=("drivers.xsens_export.reader", "drivers.xsens_export.table", "drivers.xsens_export.samples")),
+    Target("setup", "setup TOML: app.capture.setup_file.load_setup (parse_setup)", _setup,
+           surface=("app.capture.setup_file",)),
+    Target("bvh", "BVH via inference.loaders.load_motion", _bvh, max_len=16384, timeout=20,
+           surface=("inference.loaders", "inference.loaders.bvh", "inference.loaders.joint_maps",
+                    "inference.loaders.retarget")),
     Target("asf-amc", "ASF + AMC pair via load_motion (needs HDM_dg.asf for the seed)", _asf_amc,
-           max_len=16384, timeout=20),
-    Target("amass", "AMASS .npz bytes via load_motion", _amass, max_len=32768, timeout=20),
+           max_len=16384, timeout=20,
+           surface=("inference.loaders", "inference.loaders.asf_amc", "inference.loaders.joint_maps",
+                    "inference.loaders.retarget")),
+    Target("amass", "AMASS .npz bytes via load_motion", _amass, max_len=32768, timeout=20,
+           surface=("inference.loaders", "inference.loaders.amass", "inference.loaders.amass_frames")),
     Target("amass-arrays", "AMASS .npz members (npy headers and data) via load_motion", _amass_arrays,
-           max_len=32768, timeout=20),
+           max_len=32768, timeout=20,
+           surface=("inference.loaders", "inference.loaders.amass", "inference.loaders.amass_frames")),
     Target("recording", "HDF5 session recording: app.recording.read_recording + hub_frames", _recording,
-           max_len=65536, timeout=20),
+           max_len=65536, timeout=20,
+           surface=("app.recording",)),
 )}
 
 
@@ -603,6 +621,14 @@ def _checked(target: Target, run: Run, errors: Errors, lenient: bool) -> Run:
     return one
 
 
+INSTRUMENTED = ("drivers", "app", "inference", "sim_devices", "calibration")
+
+
+def _ours() -> set[str]:
+    return {name for name, mod in sys.modules.items()
+            if name.split(".")[0] in INSTRUMENTED and getattr(mod, "__file__", None)}
+
+
 def _child(args: argparse.Namespace) -> None:
     """The fuzzing process: libFuzzer exits when done, so it cannot report back itself."""
     import atheris
@@ -610,11 +636,30 @@ def _child(args: argparse.Namespace) -> None:
     target = TARGETS[args.target]
     work = Path(args.workdir) / target.name
     scratch = _scratch(target.name)
-    with atheris.instrument_imports(include=["drivers", "app", "inference", "sim_devices", "calibration"]):
+    before = _ours()
+    if before:  # imported outside the block: libFuzzer would not see into them
+        raise SystemExit(f"fuzz {target.name}: imported before instrumentation: {', '.join(sorted(before))}")
+    with atheris.instrument_imports(include=list(INSTRUMENTED)):
         run, seeds, errors = target.setup(scratch)
+        # The readers import their parsers when first called (load_motion picks BVH, ASF/AMC or
+        # AMASS by the file name): each seed is run once here so those imports happen inside
+        # the block. Imported later, the parser's code gives libFuzzer no coverage, and the
+        # run mutates blind.
+        warm = _checked(target, run, errors, lenient=True)
+        for s in seeds:
+            try:
+                warm(s)
+            except Exception:  # noqa: BLE001 - a seed that fails is libFuzzer's to report
+                pass
+    instrumented = _ours()
+    blind = [m for m in target.surface if m not in instrumented]
+    if blind:
+        raise SystemExit(f"fuzz {target.name}: not instrumented (imported outside the block or never): "
+                         f"{', '.join(blind)}")
     seed_dir, corpus = work / "seeds", work / "corpus"
     seed_dir.mkdir(parents=True, exist_ok=True)
     corpus.mkdir(parents=True, exist_ok=True)
+    (work / "instrumented.txt").write_text("\n".join(sorted(instrumented)) + "\n")
     for i, s in enumerate(seeds):
         (seed_dir / f"seed-{i}").write_bytes(s)
     max_len = max(target.max_len, *(len(s) for s in seeds))
@@ -668,6 +713,8 @@ def _parent(args: argparse.Namespace) -> int:
     if found:
         tail = [ln for ln in text.splitlines() if "Error" in ln or "Exception" in ln or "==" in ln][-6:]
         summary["what"] = tail
+    elif rc:  # stopped before fuzzing (a surface module not instrumented, a seed missing): say why
+        summary["what"] = text.strip().splitlines()[-1:]
     print(json.dumps(summary))
     return 0 if not found and rc == 0 else 1
 
