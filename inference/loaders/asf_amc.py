@@ -72,6 +72,18 @@ def _word(path: str, line_no: int, parts: list[str], what: str) -> str:
     return parts[1]
 
 
+ROOT_CHANNELS = ("TX", "TY", "TZ", "RX", "RY", "RZ")
+
+
+def _axis_order(path: str, line_no: int, word: str) -> str:
+    """An Euler axis order (``XYZ``, ``ZYX``...): each axis once, or the rotation it names
+    is not one."""
+    order = word.upper()
+    if sorted(order) != ["X", "Y", "Z"]:
+        raise MotionFormatError(path, f"axis order {word!r}: X, Y and Z once each", line_no)
+    return order
+
+
 def parse_asf(path: str | Path) -> AsfSkeleton:
     path = str(path)
     lines = read_text_lines(path)
@@ -102,8 +114,12 @@ def parse_asf(path: str | Path) -> AsfSkeleton:
         elif section == "root":
             if key == "order":
                 root_order = [p.upper() for p in parts[1:]]
+                bad = [d for d in root_order if d not in ROOT_CHANNELS]
+                if bad or len(set(root_order)) != len(root_order) or not {"TX", "TY", "TZ"} <= set(root_order):
+                    raise MotionFormatError(path, f"root order {' '.join(root_order)!r}: each of TX TY TZ once, "
+                                                  f"rotations from RX RY RZ", n)
             elif key == "axis":
-                root_axis = _word(path, n, parts, "root axis").upper()
+                root_axis = _axis_order(path, n, _word(path, n, parts, "root axis"))
             elif key == "position":
                 root_pos = _floats(path, n, parts[1:], 3, "root position")
             elif key == "orientation":
@@ -129,7 +145,7 @@ def parse_asf(path: str | Path) -> AsfSkeleton:
                     cur["length"] = float(_floats(path, n, parts[1:], 1, "bone length")[0])
                 elif key == "axis":
                     v = _floats(path, n, parts[1:], 3, "bone axis")
-                    cur["axis"] = (v, parts[4].upper() if len(parts) > 4 else "XYZ")
+                    cur["axis"] = (v, _axis_order(path, n, parts[4]) if len(parts) > 4 else "XYZ")
                 elif key == "dof":
                     dofs = [d.lower() for d in parts[1:]]
                     bad = [d for d in dofs if d not in ("rx", "ry", "rz", "tx", "ty", "tz", "l")]

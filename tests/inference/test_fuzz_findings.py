@@ -159,3 +159,25 @@ def test_bvh_that_declares_no_frames(tmp_path, frames):
     p.write_text(BVH.replace("FRAMES", frames))
     with pytest.raises(MotionFormatError, match=f"header says {frames} frames"):
         load_motion(p)
+
+
+@pytest.mark.parametrize("line, match", [
+    ("   order TX TY TZ RX RY R", "root order 'TX TY TZ RX RY R'"),  # fuzz target asf-amc: an IndexError
+    ("   order TX TY RX RY RZ", "each of TX TY TZ once"),
+    ("   order TX TY TZ RX RX RZ", "each of TX TY TZ once"),
+])
+def test_asf_root_order_with_a_channel_that_is_not_one(tmp_path, line, match):
+    """Was an IndexError (``R`` taken as a rotation whose axis is its second letter), or a
+    ValueError without a line for a missing translation."""
+    amc = _asf_amc(tmp_path, ASF.replace("   order TX TY TZ RX RY RZ", line))
+    with pytest.raises(MotionFormatError, match=match) as exc:
+        load_motion(amc)
+    assert exc.value.line is not None
+
+
+@pytest.mark.parametrize("old, new", [("   axis XYZ", "   axis XQZ"), ("axis 0 0 20 XYZ", "axis 0 0 20 XY")])
+def test_asf_axis_order_that_is_not_one(tmp_path, old, new):
+    amc = _asf_amc(tmp_path, ASF.replace(old, new, 1))
+    with pytest.raises(MotionFormatError, match="X, Y and Z once each") as exc:
+        load_motion(amc)
+    assert exc.value.line is not None
