@@ -35,3 +35,12 @@ def test_target_fuzzes_with_its_parser_instrumented(name: str, tmp_path: Path) -
     instrumented = set((tmp_path / name / "instrumented.txt").read_text().split())
     assert set(fuzz.TARGETS[name].surface) <= instrumented
     assert fuzz.TARGETS[name].surface, "each target names the modules that parse its input"
+
+
+def test_memory_mode_runs_the_reader_uninstrumented(tmp_path: Path) -> None:
+    out = subprocess.run([sys.executable, str(REPO / "benchmarks" / "fuzz.py"), "moticon", "--memory", "120",
+                          "--workdir", str(tmp_path)], capture_output=True, text=True, timeout=300, cwd=REPO)
+    assert out.returncode == 0, out.stderr
+    report = json.loads(out.stdout.strip().splitlines()[-1])
+    assert report["inputs"] == 120 and len(report["rss_mb"]) == 7 and report["escaped"] == 0
+    assert "Instrumenting" not in out.stderr
