@@ -257,7 +257,7 @@ def to_source_skeleton(asf: AsfSkeleton, amc: dict[str, np.ndarray], fps: float)
     ends = np.zeros((T, J, 3))
     # root
     rv = amc["root"]
-    ro = asf.root_order or ["TX", "TY", "TZ", "RX", "RY", "RZ"]
+    ro = asf.root_order or list(ROOT_CHANNELS)
     tcols = [ro.index(a) for a in ("TX", "TY", "TZ")]
     rdofs = [c.lower() for c in ro if c.startswith("R")]
     rcols = [k for k, c in enumerate(ro) if c.startswith("R")]
