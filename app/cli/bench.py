@@ -5,10 +5,14 @@ values) measured in the same run, so the two figures share the machine's load.
 
     imucap bench [--json] [--frames N] [--paper-frames N] [--threads N] [--model SPEC]
                  [--steps K] [--random-weights] [--no-paper] [--mirror/--no-mirror] [--no-onnx]
+    imucap bench --sizes L/D/FF[,...] [--json] [--frames N] [--model SPEC] [--no-onnx]
     imucap bench --end-to-end [--json] [--seconds S] [--rounds R] [--model SPEC] [--suit process|thread]
 
 ``onnx_p50_ms``/``onnx_p99_ms``: the same loop with the model call through ONNX Runtime
 (when installed; what live sessions then use), right after the torch figures.
+``--sizes``: which larger denoiser would fit the live budget: the loop with the model's own
+settings (steps, mirror averaging, runtime) but random weights of each size, all stepped in
+turn with the model itself, each row's p50 also as a ratio to it.
 ``--end-to-end``: sensor-to-pose latency of the whole live path in both latency modes in
 one run (``centred_p50_ms``, ``low_p50_ms``, ...; app/capture/end_to_end_bench.py, docs/latency.md).
 
@@ -75,13 +79,30 @@ def bench_poser(model, steps=None, frames: int = 200, warmup: int = 10, label: s
     }
 
 
+def _interleaved(posers: dict, inp, frames: int, warmup: int) -> dict[str, np.ndarray]:
+    """Step every poser on the same frames, one after the other within each frame, the
+    order turning by one each frame: the shared machine's load changes within seconds, and
+    timing one poser after the other would hand the difference to whichever ran in the
+    quieter stretch. Returns each poser's timed frames in ms."""
+    names = list(posers)
+    n = inp.features.shape[0]
+    ms = {name: np.empty(frames) for name in names}
+    for i in range(warmup + frames):
+        k = i % n
+        r = i % len(names)
+        for name in names[r:] + names[:r]:
+            t0 = time.perf_counter()
+            posers[name].step(inp.features[k], inp.mask[k])
+            if i >= warmup:
+                ms[name][i - warmup] = (time.perf_counter() - t0) * 1e3
+    return ms
+
+
 def bench_runtimes(model, steps=None, frames: int = 200, warmup: int = 10, seed: int = 0,
                    mirror: bool | None = None) -> dict:
     """``Poser.step`` with the model call on torch and on ONNX Runtime, the two posers
-    stepped in turn on the same frames (which goes first alternates): the shared machine's
-    load changes within seconds, and timing one runtime after the other would hand the
-    difference to whichever ran in the quieter half. Returns torch_/onnx_ p50_ms, p99_ms
-    and the speed-up of the medians."""
+    stepped in turn on the same frames (``_interleaved``). Returns torch_/onnx_ p50_ms,
+    p99_ms and the speed-up of the medians."""
     from inference.evaluation.runner import SIX, clip_input, synthetic_motion
     from inference.poser.poser import Poser
 
@@ -89,21 +110,62 @@ def bench_runtimes(model, steps=None, frames: int = 200, warmup: int = 10, seed:
     inp = clip_input(motion, SIX)
     posers = {rt: Poser(model, body=motion.body, steps=steps, seed=seed, mirror=mirror, runtime=rt)
               for rt in ("torch", "onnx")}
-    n = inp.features.shape[0]
-    ms = {rt: np.empty(frames) for rt in posers}
-    for i in range(warmup + frames):
-        k = i % n
-        for rt in (("torch", "onnx") if i % 2 == 0 else ("onnx", "torch")):
-            t0 = time.perf_counter()
-            posers[rt].step(inp.features[k], inp.mask[k])
-            if i >= warmup:
-                ms[rt][i - warmup] = (time.perf_counter() - t0) * 1e3
+    ms = _interleaved(posers, inp, frames, warmup)
     out: dict = {"frames": int(frames), "interleaved": True}
     for rt, v in ms.items():
         out[f"{rt}_p50_ms"] = round(float(np.percentile(v, 50)), 3)
         out[f"{rt}_p99_ms"] = round(float(np.percentile(v, 99)), 3)
     out["speedup_p50"] = round(out["torch_p50_ms"] / out["onnx_p50_ms"], 3)
     return out
+
+
+def parse_sizes(text: str) -> list[tuple[int, int, int]]:
+    """``"6/128/512,4/192/768"`` -> [(6, 128, 512), (4, 192, 768)]: layers / width / FF."""
+    sizes = []
+    for part in text.split(","):
+        try:
+            layers, d, ff = (int(v) for v in part.strip().split("/"))
+        except ValueError:
+            raise ValueError(f"--sizes: {part.strip()!r} is not LAYERS/WIDTH/FF (e.g. 6/128/512)") from None
+        if min(layers, d, ff) < 1 or d % 32:
+            raise ValueError(f"--sizes: {part.strip()!r}: all positive, width a multiple of 32 (32-wide heads)")
+        sizes.append((layers, d, ff))
+    return sizes
+
+
+def bench_sizes(model, sizes: list[tuple[int, int, int]], steps=None, frames: int = 100, warmup: int = 5,
+                seed: int = 0, mirror: bool | None = None, runtime: str = "auto") -> dict:
+    """The live loop with ``model``'s settings (steps, mirror averaging, normaliser, meta)
+    but randomly initialised denoisers of other sizes, all stepped in turn on the same
+    frames with ``model`` itself: which larger model would stay inside the live budget,
+    as ratios to the model in use measured in one run. Heads stay 32 wide."""
+    import dataclasses
+
+    import torch
+
+    from inference.evaluation.runner import SIX, clip_input, synthetic_motion
+    from inference.model.files import build_model
+    from inference.poser.poser import Poser
+
+    motion = synthetic_motion(seconds=max(2.0, (frames + warmup) / 20.0 + 0.5), seed=seed)
+    inp = clip_input(motion, SIX)
+    base = _config_label(model).split()[-1]
+    models = {base: model}
+    for layers, d, ff in sizes:
+        cfg = dataclasses.replace(model.config, layers=layers, d_model=d, ff=ff, heads=d // 32, dropout=0.0)
+        torch.manual_seed(seed)
+        models.setdefault(f"{layers}/{d}/{ff}", dataclasses.replace(
+            model, model=build_model(model.kind, cfg).eval(), config=cfg))
+    posers = {name: Poser(m, body=motion.body, steps=steps, seed=seed, mirror=mirror, runtime=runtime)
+              for name, m in models.items()}
+    ms = _interleaved(posers, inp, frames, warmup)
+    p50 = {name: float(np.percentile(v, 50)) for name, v in ms.items()}
+    rows = [{"size": name, "parameters": sum(p.numel() for p in models[name].model.parameters()),
+             "p50_ms": round(p50[name], 3), "p99_ms": round(float(np.percentile(ms[name], 99)), 3),
+             "ratio_p50": round(p50[name] / p50[base], 3)} for name in posers]
+    first = posers[base]
+    return {"base": base, "runtime": first.runtime, "steps": len(first.steps), "mirror": first.mirror,
+            "frames": int(frames), "interleaved": True, "rows": rows}
 
 
 def paper_model():
@@ -195,6 +257,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-paper", action="store_true", help="skip the paper-size model")
     p.add_argument("--no-confidence", action="store_true", help="skip the loop with the per-segment spread on")
     p.add_argument("--no-onnx", action="store_true", help="skip the loop through ONNX Runtime (onnx_p50_ms)")
+    p.add_argument("--sizes", default=None, metavar="L/D/FF,...",
+                   help="instead: the live loop with the model's settings but randomly initialised denoisers "
+                        "of these sizes (layers/width/FF), stepped in turn with the model itself, as ratios to it")
     p.add_argument("--end-to-end", action="store_true",
                    help="sensor-to-pose latency of the live path per latency mode instead "
                         "(app/capture/end_to_end_bench.py)")
@@ -216,6 +281,8 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if args.frames < 1 or args.paper_frames < 1:
         raise ValueError("--frames and --paper-frames must be at least 1")
+    if args.sizes is not None:
+        return _run_sizes(args)
     res = run_bench(args.model, args.steps, args.frames, args.paper_frames, args.threads, args.random_weights,
                     not args.no_paper, max(0, args.warmup), args.mirror, not args.no_confidence, not args.no_onnx)
     if args.json:
@@ -239,4 +306,32 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-__all__ = ["bench_poser", "paper_model", "run_bench", "register", "run"]
+def _run_sizes(args: argparse.Namespace) -> int:
+    import torch
+
+    from inference.model.diffusion import parse_steps
+    from inference.poser.models import resolve_model
+
+    sizes = parse_sizes(args.sizes)
+    if args.threads > 0:
+        torch.set_num_threads(args.threads)
+    model = resolve_model(args.model)
+    if model is None or model.kind != "diffusion":
+        raise ValueError(f"--sizes times denoisers: --model {args.model} is not a diffusion model")
+    steps = parse_steps(args.steps) if args.steps is not None else None
+    res = bench_sizes(model, sizes, steps, args.frames, max(0, args.warmup), mirror=args.mirror,
+                      runtime="torch" if args.no_onnx else "auto")
+    res["threads"] = torch.get_num_threads()
+    if args.json:
+        print(json.dumps(res))
+    else:
+        print(f"{res['runtime']}, {res['steps']} steps{', mirror-averaged' if res['mirror'] else ''}, "
+              f"{res['frames']} frames each, in turn:")
+        for r in res["rows"]:
+            print(f"  {r['size']:>12}  {r['parameters'] / 1e6:5.2f} M  p50 {r['p50_ms']:6.1f} ms  "
+                  f"p99 {r['p99_ms']:6.1f} ms  x{r['ratio_p50']:.2f}")
+    sys.stdout.flush()
+    return 0
+
+
+__all__ = ["bench_poser", "bench_sizes", "parse_sizes", "paper_model", "run_bench", "register", "run"]

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 import torch
 
 import app.cli.bench as cli_bench
@@ -45,3 +46,25 @@ def test_bench_times_the_loop_without_mirror_averaging_too_when_it_mirrors(capsy
                  "--steps", "2", "--no-paper"])
     res = json.loads(capsys.readouterr().out)
     assert res["mirror"] is False and "without_mirror" not in res
+
+
+def test_bench_sizes_steps_larger_denoisers_in_turn_with_the_shipped_one(capsys):
+    code = main(["bench", "--json", "--sizes", "6/128/512,4/192/768", "--frames", "3", "--warmup", "1",
+                 "--threads", "1", "--no-onnx"])
+    res = json.loads(capsys.readouterr().out)
+    assert code == 0 and res["interleaved"] and res["runtime"] == "torch" and res["base"] == "4/128/512"
+    rows = {r["size"]: r for r in res["rows"]}
+    assert list(rows) == ["4/128/512", "6/128/512", "4/192/768"]
+    assert rows["4/128/512"]["ratio_p50"] == 1.0
+    # the shipped file's settings carry over: its steps and mirror averaging, for every size
+    assert res["steps"] == 3 and res["mirror"] is True
+    n = {k: r["parameters"] for k, r in rows.items()}
+    assert n["4/128/512"] < n["6/128/512"] < n["4/192/768"]
+    assert all(0 < r["p50_ms"] <= r["p99_ms"] for r in rows.values())
+
+
+def test_bench_sizes_names_a_size_it_cannot_read():
+    with pytest.raises(ValueError, match=r"'6/130/512'.*multiple of 32"):
+        cli_bench.parse_sizes("6/128/512,6/130/512")
+    with pytest.raises(ValueError, match="is not LAYERS/WIDTH/FF"):
+        cli_bench.parse_sizes("6x128")
