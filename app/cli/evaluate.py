@@ -1,7 +1,7 @@
 """`imucap evaluate`: reconstruct motion files from synthesized sensor signals with the
 live poser and score the result against the truth (GA, LA, JPE, jitter, RE2/5/10).
 
-    imucap evaluate --data PATH... --sensors pelvis,head,l_wrist,r_wrist,l_shank,r_shank
+    imucap evaluate --data PATH|@SET... --sensors pelvis,head,l_wrist,r_wrist,l_shank,r_shank
                     [--insoles] [--steps K] [--model diffusion|regressor|floor|PATH.pt] [--against SPEC]
                     [--noise/--no-noise] [--inpaint-noise fresh|fixed|mean] [--limit N] [--seed S]
                     [--threads N] --json
@@ -12,6 +12,10 @@ so no mounting/heading rotation) unless --no-noise. With --json, stdout holds ex
 JSON object (clips, frames, ga_deg, la_deg, jpe_cm, jitter_ratio, re2_m, re5_m, re10_m,
 model, sensors, insoles, steps, ...); progress goes to stderr. A metric that needs a
 longer clip than any given is null.
+
+--data takes files, folders and the held-out sets by name (inference/training/splits.py,
+``HELD_OUT_SETS``): @dg (HDM05 actor dg), @sad (Bandai's held-out style), @cmu-val (the CMU
+validation subjects), read from $IMUCAP_DATA; a report's reproduce line keeps the name.
 
 --against SPEC scores a second model on the same clips, sensors and noise, and adds
 ``against``: its figures and, for GA, LA and JPE, --model minus it with a percentile
@@ -47,10 +51,24 @@ from pathlib import Path
 from app.cli.train import NOISE_MODES
 
 
+def data_paths(data: list) -> list:
+    """--data with every ``@NAME`` replaced by the files of that held-out set."""
+    out: list = []
+    for d in data:
+        if str(d).startswith("@"):
+            from inference.training.splits import held_out_files
+
+            out += held_out_files(str(d))
+        else:
+            out.append(d)
+    return out
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("evaluate", help="score reconstructions of motion files from synthesized sensors",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--data", nargs="+", required=True, metavar="PATH", help="motion files or folders (BVH, AMC, npz)")
+    p.add_argument("--data", nargs="+", required=True, metavar="PATH",
+                   help="motion files or folders (BVH, AMC, npz), or held-out sets by name: @dg, @sad, @cmu-val")
     p.add_argument("--sensors", default="pelvis,head,l_wrist,r_wrist,l_shank,r_shank",
                    help="comma separated sensor sites (default: the paper's 6)")
     p.add_argument("--insoles", action="store_true", help="also observe the 4 foot contacts (pressure insoles)")
@@ -180,7 +198,7 @@ def run(args: argparse.Namespace) -> int:
     noise = evaluation_noise() if args.noise else None
     progress = not args.no_progress
     t0 = time.time()
-    motions = load_motions(args.data, args.limit)
+    motions = load_motions(data_paths(args.data), args.limit)
     print(f"evaluate: {len(motions)} clip(s) loaded", file=sys.stderr)
     repaired = None
     if args.repair_truth:

@@ -81,6 +81,30 @@ def root_val_files(root: Path | None = None) -> list[Path]:
     return [f for f in find_motion_files((root or data_root()) / "bandai" / "d1") if HELD_OUT_BANDAI_STYLE in f.name]
 
 
+# the held-out sets by name, for `imucap evaluate --data @NAME`: a report's reproduce line then
+# names the set instead of listing its files, and no one has to remember which CMU takes it holds
+HELD_OUT_SETS = {
+    "dg": val_files,  # HDM05 actor dg: an unseen person
+    "sad": root_val_files,  # Bandai dataset 1, style "sad": an unseen style, walks long enough for RE10
+    "cmu-val": cmu_val_files,  # CMU subjects CMU_VAL_SUBJECTS: unseen people, studio and skeletons
+}
+
+
+def held_out_files(name: str, root: Path | None = None) -> list[Path]:
+    """The motion files of a held-out set named in ``HELD_OUT_SETS`` (with or without its ``@``)."""
+    key = name.removeprefix("@")
+    if key not in HELD_OUT_SETS:
+        raise ValueError(f"unknown held-out set @{key}; choose from "
+                         f"{', '.join('@' + k for k in HELD_OUT_SETS)}")
+    try:
+        files = HELD_OUT_SETS[key](root)
+    except FileNotFoundError as e:
+        raise FileNotFoundError(f"held-out set @{key}: {e}") from None
+    if not files:
+        raise FileNotFoundError(f"held-out set @{key}: no motion files under {root or data_root()}")
+    return files
+
+
 def _build(files: list[Path], progress: bool = True, speed: float = 1.0, repair: bool = False,
            causal: bool = False, tag: str = "") -> FeatureDataset:
     """The cached feature dataset of ``files``, performed at ``speed`` (copies at another

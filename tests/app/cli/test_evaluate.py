@@ -228,3 +228,21 @@ def test_mirror_averaging_is_reported_and_changes_the_answer(capsys, data_dir, t
     assert code == 0 and plain["mirror"] is False and plain["against"]["mirror"] is False
     assert mirrored["mirror"] is True and mirrored["against"]["mirror"] is True  # both models, same poser
     assert mirrored["ga_deg"] != plain["ga_deg"] and mirrored["against"]["ga_deg"] != plain["against"]["ga_deg"]
+
+
+def test_a_held_out_set_by_name_reads_its_files_and_keeps_the_name(capsys, tmp_path, monkeypatch):
+    root = tmp_path / "data"
+    (root / "cmu" / "bvh_cgspeed").mkdir(parents=True)
+    write_motion_bvh(root / "cmu" / "bvh_cgspeed" / "08_01.bvh", synthetic_motion(seconds=2.2, seed=3))
+    write_motion_bvh(root / "cmu" / "bvh_cgspeed" / "07_01.bvh", synthetic_motion(seconds=2.2, seed=4))
+    monkeypatch.setenv("IMUCAP_DATA", str(root))
+    report = tmp_path / "r.md"
+    code, out, _ = _run(capsys, "--data", "@cmu-val", "--model", "floor", "--no-noise", "--json",
+                        "--report", str(report))
+    assert code == 0 and json.loads(out)["clips"] == 1  # subject 08 is held out, 07 is trained on
+    text = report.read_text()
+    assert "Reproduce: `imucap evaluate --data @cmu-val" in text and "| cmu 08 |" in text
+    code, _, err = _run(capsys, "--data", "@cmu", "--model", "floor")
+    assert code != 0 and "unknown held-out set @cmu; choose from @dg, @sad, @cmu-val" in err
+    code, _, err = _run(capsys, "--data", "@dg", "--model", "floor")
+    assert code != 0 and "held-out set @dg: " in err and "hdm05/dg" in err
