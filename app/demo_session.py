@@ -26,6 +26,9 @@ DEFAULT_SENSORS = ("pelvis", "head", "l_wrist", "r_wrist", "l_shank", "r_shank")
 APP_VERSION = "0.1.0"
 
 
+SUIT_PLACES = ("process", "thread")
+
+
 @dataclass
 class DemoConfig:
     """Everything a demo session is made of (the CLI's options)."""
@@ -46,6 +49,10 @@ class DemoConfig:
     latency: str = "centred"  # app.latency.LATENCY_MODES: "low" waits for no future sample
     runtime: str = "auto"  # the live model call: ONNX Runtime when installed (faster), else torch
     confidence: bool = False  # each pose with its per-segment spread (inference/poser/confidence.py)
+    # where the simulated suit runs: "process", a child process as real sensors are outside
+    # imucap (sim_devices/suit_process.py), or "thread", inside this one (its packet writing
+    # then competes with the model for the interpreter)
+    suit: str = "process"
     calibration_protocol: Any = None  # a calibration.Protocol overriding the default timings
     # sinks streaming the body to other programs (--stream: app.streams.make_stream_sinks builds
     # them, above this module); the session adds them to its pipeline, which closes them
@@ -185,7 +192,9 @@ class DemoSession:
         self.calibrator = Calibrator(cfg.sensors, schedule=self.protocol.schedule())
         self.pipeline = Pipeline(self.poser, cfg.sensors, calibrator=self.calibrator, insoles=cfg.insoles,
                                  clock=time.monotonic, causal=self.causal)
-        self.suit = None
+        if cfg.suit not in SUIT_PLACES:
+            raise ValueError(f"--suit must be one of {', '.join(SUIT_PLACES)}, not {cfg.suit!r}")
+        self.suit = None  # SimulatedSuit (suit "thread") or SuitProcess ("process")
         self.hub: SuitHub | None = None
         self.live: LivePipeline | None = None
         self.recorder = None
@@ -201,13 +210,18 @@ class DemoSession:
         import drivers
         from app.latency import hub_options
         from sim_devices.suit import SimulatedSuit
+        from sim_devices.suit_process import SuitProcess
 
-        self.suit = SimulatedSuit(self.signals, self.assignment, seed=self.cfg.seed)
-        self.suit.start()
+        if self.cfg.suit == "process":
+            self.suit = SuitProcess(self.signals, self.assignment, seed=self.cfg.seed).start()
+            t0s = list(self.suit.t0s.values())
+        else:
+            self.suit = SimulatedSuit(self.signals, self.assignment, seed=self.cfg.seed).start()
+            t0s = [d.sim._t0 for d in self.suit.devices.values()]
         self.started = True
-        t0s = [getattr(d.sim, "_t0", None) for d in self.suit.devices.values()]
-        # the clip's time zero on the session clock (each twin starts its clock as it starts)
-        self.origin = float(np.mean([t for t in t0s if t is not None])) if any(t0s) else time.monotonic()
+        # the clip's time zero on the session clock (each twin starts its clock as it starts;
+        # CLOCK_MONOTONIC is one clock for every process of the machine)
+        self.origin = float(np.mean(t0s)) if t0s else time.monotonic()
         self.calibrator.reset(self.origin)
         self.truth_sink = TruthSink(self.truth, self.origin, self.signals.meta["activity_start"])
         self.pipeline.add_sink(self.truth_sink)
@@ -333,7 +347,7 @@ class DemoSession:
             "ga_deg": round(float(np.mean(ga)), 3) if ga else None, "ga_frames": len(ga),
             "model": self.model_label, "steps": self.steps_count(),
             "sensors": list(self.cfg.sensors), "insoles": self.cfg.insoles, "protocol": self.cfg.protocol,
-            "motion": self.cfg.file or self.cfg.motion, "seconds": self.cfg.seconds,
+            "motion": self.cfg.file or self.cfg.motion, "seconds": self.cfg.seconds, "suit": self.cfg.suit,
             "hub_frames": stats["frames_in"], "dropped": stats["dropped"],
             "hub_frames_skipped": self.hub.stats.frames_skipped if self.hub else 0,
             "frames_filled": stats["frames_filled"], "resampler_restarts": stats["resampler_restarts"],

@@ -118,6 +118,9 @@ def main() -> int:
     ap.add_argument("--no-record", action="store_true", help="no recording (what the rest costs)")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--model", default="diffusion", help="diffusion | regressor | floor (no network) | PATH.pt")
+    ap.add_argument("--suit", default="thread", choices=("thread", "process"),
+                    help="the simulated suit inside this process (the figures in docs/robustness.md) or in a child "
+                         "process, as imucap demo runs it")
     ap.add_argument("--protocol", default="mixed", help="the suit's wire protocol(s), as imucap demo --protocol")
     ap.add_argument("--malloc", action="store_true",
                     help="per slice also glibc's heap totals (in use / free / mmapped, MB): a leak or fragmentation")
@@ -138,7 +141,7 @@ def main() -> int:
     # the window's looping session, without a window)
     cfg = DemoConfig(motion="walk", insoles=True, protocol=args.protocol, seconds=60.0, headless=False,
                      record=None if args.no_record else str(rec),
-                     model=args.model)
+                     model=args.model, suit=args.suit)
     session = DemoSession(cfg)
     lat = SliceLatency()
     session.pipeline.add_sink(lat)

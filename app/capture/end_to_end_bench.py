@@ -124,7 +124,8 @@ def measure_mode(mode: str, seconds: float, model: str = "diffusion", protocol: 
     protocol_cal = Protocol.fitted(4.0)
     cfg = DemoConfig(motion="walk", sensors=tuple(sensors or DEFAULT_SENSORS), protocol=protocol,
                      seconds=protocol_cal.prefix + seconds, model=model, seed=seed, headless=True,
-                     threads=threads, calibration_protocol=protocol_cal, latency=mode, runtime=runtime)
+                     threads=threads, calibration_protocol=protocol_cal, latency=mode, runtime=runtime,
+                     suit="thread")  # the send logs are read off the twins in this process
     session = DemoSession(cfg)
     probe = LatencyProbe(tuple(session.cfg.sensors))
     session.pipeline.add_sink(probe)  # first: the sessions add theirs in start()

@@ -20,6 +20,9 @@ model, steps (and more, see ``DemoSession.result``; with ``--stream``, what each
 Without weights for the default model the floor baseline runs instead and the output says
 so loudly.
 
+The simulated suit runs in a process of its own (``--suit thread``: inside this one), as
+real sensors are outside imucap: its packet writing does not compete with the model.
+
 ``--stream lsl,vmc,vrchat`` also sends the live body to other programs (a lab recorder,
 an avatar app, VRChat), to this machine unless ``--stream-host`` names another: see
 docs/streams.md.
@@ -64,6 +67,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "it, larger where the model guessed; coloured in the window, in the recording, on LSL "
                         "(docs/confidence.md); costs ~40 %% more per frame")
     add_stream_arguments(p)
+    p.add_argument("--suit", default="process", choices=("process", "thread"),
+                   help="where the simulated suit runs: its own process, as real sensors are outside imucap "
+                        "(default), or threads of this one")
     p.add_argument("--headless", action="store_true", help="no window")
     p.add_argument("--json", action="store_true", help="headless: print one JSON object")
     p.add_argument("--screenshot", help="with the window: save it to this PNG after --quit-after seconds")
@@ -85,7 +91,7 @@ def config_from_args(args: argparse.Namespace) -> DemoConfig:
         motion=args.motion, file=args.file, sensors=tuple(parse_sites(args.sensors)), insoles=args.insoles,
         protocol=args.protocol, seconds=seconds, model=args.model, steps=args.steps, seed=args.seed,
         record=args.record, noise=not args.no_noise, headless=args.headless, threads=args.threads,
-        latency=args.latency, confidence=args.confidence,
+        latency=args.latency, confidence=args.confidence, suit=args.suit,
     )
 
 

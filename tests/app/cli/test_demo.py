@@ -28,6 +28,14 @@ def tiny_model(tmp_path_factory):
     return path
 
 
+def test_the_suit_can_run_inside_the_demo_process_too(tiny_model, capsys):
+    rc = main(["demo", "--headless", "--json", "--seconds", "5", "--model", str(tiny_model), "--threads", "1",
+               "--sensors", "pelvis,r_shank", "--protocol", "mixed", "--suit", "thread"])
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert rc == 0 and out["suit"] == "thread" and out["calibration_status"] == "calibrated"
+    assert out["frames"] > 10 and all(st["packets"] > 100 for st in out["sites"].values())
+
+
 def test_headless_json_contract(tiny_model, tmp_path, capsys):
     rec = tmp_path / "demo.h5"
     rc = main(["demo", "--headless", "--json", "--seconds", "6", "--model", str(tiny_model), "--threads", "1",
@@ -39,6 +47,7 @@ def test_headless_json_contract(tiny_model, tmp_path, capsys):
         assert key in out, key
     assert out["frames"] > 10 and out["steps"] == 3 and out["model"].startswith("diffusion 1/32/64")
     assert out["calibration_status"] == "calibrated"
+    assert out["suit"] == "process"  # the simulated devices in a child process, as real ones are outside
     assert out["calibration_residual_deg"] < 2.0
     assert out["calibration_error_deg"] < 2.0  # recovered strap rotations vs the drawn ones, through 3 drivers
     assert out["ga_deg"] is not None and np.isfinite(out["ga_deg"])
