@@ -164,6 +164,8 @@ class DemoSession:
             raise ValueError("--sensors: give at least one site")
         if not cfg.seconds > 0:
             raise ValueError("--seconds must be positive")
+        if cfg.suit not in SUIT_PLACES:
+            raise ValueError(f"--suit must be one of {', '.join(SUIT_PLACES)}, not {cfg.suit!r}")
         if cfg.threads > 0:
             import torch
 
@@ -192,8 +194,6 @@ class DemoSession:
         self.calibrator = Calibrator(cfg.sensors, schedule=self.protocol.schedule())
         self.pipeline = Pipeline(self.poser, cfg.sensors, calibrator=self.calibrator, insoles=cfg.insoles,
                                  clock=time.monotonic, causal=self.causal)
-        if cfg.suit not in SUIT_PLACES:
-            raise ValueError(f"--suit must be one of {', '.join(SUIT_PLACES)}, not {cfg.suit!r}")
         self.suit = None  # SimulatedSuit (suit "thread") or SuitProcess ("process")
         self.hub: SuitHub | None = None
         self.live: LivePipeline | None = None
@@ -217,7 +217,7 @@ class DemoSession:
             t0s = list(self.suit.t0s.values())
         else:
             self.suit = SimulatedSuit(self.signals, self.assignment, seed=self.cfg.seed).start()
-            t0s = [d.sim._t0 for d in self.suit.devices.values()]
+            t0s = [d.sim.started_at for d in self.suit.devices.values()]
         self.started = True
         # the clip's time zero on the session clock (each twin starts its clock as it starts;
         # CLOCK_MONOTONIC is one clock for every process of the machine)

@@ -34,7 +34,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from app.demo_session import DemoConfig, DemoSession  # noqa: E402
+from app.demo_session import SUIT_PLACES, DemoConfig, DemoSession  # noqa: E402
 from app.pipeline import Sink  # noqa: E402
 
 
@@ -118,7 +118,7 @@ def main() -> int:
     ap.add_argument("--no-record", action="store_true", help="no recording (what the rest costs)")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--model", default="diffusion", help="diffusion | regressor | floor (no network) | PATH.pt")
-    ap.add_argument("--suit", default="thread", choices=("thread", "process"),
+    ap.add_argument("--suit", default="thread", choices=SUIT_PLACES,
                     help="the simulated suit inside this process (the figures in docs/robustness.md) or in a child "
                          "process, as imucap demo runs it")
     ap.add_argument("--protocol", default="mixed", help="the suit's wire protocol(s), as imucap demo --protocol")

@@ -107,8 +107,8 @@ class SuitProcess:
         try:
             if proc.stdin is not None:
                 proc.stdin.close()  # the child's signal to stop
+            proc.wait(10)  # its last line (the counts) is far smaller than a pipe's buffer
             out = proc.stdout.read() if proc.stdout is not None else ""
-            proc.wait(10)
         except (subprocess.TimeoutExpired, OSError, ValueError):
             proc.kill()
             proc.wait()
@@ -142,7 +142,8 @@ def main(argv: list[str] | None = None) -> int:
         kw.update(can_interface="udp_multicast", can_channel=args[3])
     suit = SimulatedSuit(signals, assignment, seed=int(args[2]), **kw).start()
     try:
-        print(json.dumps({"urls": suit.urls(), "t0": {s: d.sim._t0 for s, d in suit.devices.items()}}), flush=True)
+        t0 = {s: d.sim.started_at for s, d in suit.devices.items()}
+        print(json.dumps({"urls": suit.urls(), "t0": t0}), flush=True)
         for _ in sys.stdin:  # until the parent closes it, or dies
             pass
     except KeyboardInterrupt:

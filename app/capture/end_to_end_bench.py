@@ -46,7 +46,7 @@ import numpy as np
 
 from app.pipeline import LivePose, Sink
 
-SUITS = ("process", "thread")
+SUITS = ("process", "thread")  # as app.demo_session.SUIT_PLACES (a bench's suit runs where a demo's can)
 CALIBRATION_TIMEOUT_S = 120.0
 
 WARMUP_POSES = 20  # the first poses after calibration also pay for the model's first calls

@@ -120,7 +120,7 @@ class SimulatedSetup:
     def start(self) -> SimulatedSetup:
         for d in self.devices.values():
             d.start()
-        self.t0 = float(np.mean([d._t0 for d in self.devices.values()]))
+        self.t0 = float(np.mean([d.started_at for d in self.devices.values()]))
         return self
 
     def stop(self) -> None:

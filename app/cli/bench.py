@@ -36,6 +36,14 @@ import time
 import numpy as np
 
 
+def _walk(n_frames: int, seed: int):
+    """A generated walking clip (at least ``n_frames`` at 20 Hz) and its input at the paper's 6 sites."""
+    from inference.evaluation.runner import SIX, clip_input, synthetic_motion
+
+    motion = synthetic_motion(seconds=max(2.0, n_frames / 20.0 + 0.5), seed=seed)
+    return motion, clip_input(motion, SIX)
+
+
 def bench_poser(model, steps=None, frames: int = 200, warmup: int = 10, label: str = "",
                 seed: int = 0, mirror: bool | None = None, confidence=None, runtime: str = "torch") -> dict:
     """Time ``frames`` calls of ``Poser.step`` (after ``warmup`` untimed ones) for a
@@ -46,11 +54,9 @@ def bench_poser(model, steps=None, frames: int = 200, warmup: int = 10, label: s
     (``inference/model/onnx_runtime.py``: "torch" or "onnx")."""
     import torch
 
-    from inference.evaluation.runner import SIX, clip_input, synthetic_motion
     from inference.poser.poser import Poser
 
-    motion = synthetic_motion(seconds=max(2.0, (frames + warmup) / 20.0 + 0.5), seed=seed)
-    inp = clip_input(motion, SIX)
+    motion, inp = _walk(frames + warmup, seed)
     poser = Poser(model, body=motion.body, steps=steps, seed=seed, mirror=mirror, confidence=confidence,
                   runtime=runtime)
     n = inp.features.shape[0]
@@ -103,11 +109,9 @@ def bench_runtimes(model, steps=None, frames: int = 200, warmup: int = 10, seed:
     """``Poser.step`` with the model call on torch and on ONNX Runtime, the two posers
     stepped in turn on the same frames (``_interleaved``). Returns torch_/onnx_ p50_ms,
     p99_ms and the speed-up of the medians."""
-    from inference.evaluation.runner import SIX, clip_input, synthetic_motion
     from inference.poser.poser import Poser
 
-    motion = synthetic_motion(seconds=max(2.0, (frames + warmup) / 20.0 + 0.5), seed=seed)
-    inp = clip_input(motion, SIX)
+    motion, inp = _walk(frames + warmup, seed)
     posers = {rt: Poser(model, body=motion.body, steps=steps, seed=seed, mirror=mirror, runtime=rt)
               for rt in ("torch", "onnx")}
     ms = _interleaved(posers, inp, frames, warmup)
@@ -143,12 +147,10 @@ def bench_sizes(model, sizes: list[tuple[int, int, int]], steps=None, frames: in
 
     import torch
 
-    from inference.evaluation.runner import SIX, clip_input, synthetic_motion
     from inference.model.files import build_model
     from inference.poser.poser import Poser
 
-    motion = synthetic_motion(seconds=max(2.0, (frames + warmup) / 20.0 + 0.5), seed=seed)
-    inp = clip_input(motion, SIX)
+    motion, inp = _walk(frames + warmup, seed)
     base = _config_label(model).split()[-1]
     models = {base: model}
     for layers, d, ff in sizes:

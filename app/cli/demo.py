@@ -36,7 +36,7 @@ import os
 import sys
 from pathlib import Path
 
-from app.demo_session import DEFAULT_SENSORS, PROTOCOL_CHOICES, DemoConfig, DemoSession
+from app.demo_session import DEFAULT_SENSORS, PROTOCOL_CHOICES, SUIT_PLACES, DemoConfig, DemoSession
 from app.streams import add_stream_arguments, parse_stream_spec, sinks_from_args
 
 
@@ -67,7 +67,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "it, larger where the model guessed; coloured in the window, in the recording, on LSL "
                         "(docs/confidence.md); costs ~40 %% more per frame")
     add_stream_arguments(p)
-    p.add_argument("--suit", default="process", choices=("process", "thread"),
+    p.add_argument("--suit", default="process", choices=SUIT_PLACES,
                    help="where the simulated suit runs: its own process, as real sensors are outside imucap "
                         "(default), or threads of this one")
     p.add_argument("--headless", action="store_true", help="no window")

@@ -179,6 +179,11 @@ class SimDevice(ABC):
         # only the device knows it
         self.send_log: list[tuple[int, float]] | None = None
 
+    @property
+    def started_at(self) -> float:
+        """When this twin's clock started (time.monotonic, one clock for every process of the machine)."""
+        return self._t0
+
     def log_sends(self) -> SimDevice:
         """Keep the send time of every packet from now on (``send_log``)."""
         self.send_log = []
