@@ -131,6 +131,7 @@ class PipelineStats:
     frames_filled: int = 0  # 60 Hz frames missing in the stream, filled as unobserved
     resampler_restarts: int = 0
     poses: int = 0
+    poses_skipped: int = 0  # 20 Hz frames of frames passed over (pass_over), not posed
     dropped: int = 0  # set by LivePipeline: frames dropped from its queue
     sink_errors: int = 0
     latency_ms: deque = field(default_factory=lambda: deque(maxlen=2000))
@@ -143,7 +144,7 @@ class PipelineStats:
 
         return {
             "frames_in": self.frames_in, "frames_calibrating": self.frames_calibrating, "poses": self.poses,
-            "dropped": self.dropped, "frames_filled": self.frames_filled,
+            "poses_skipped": self.poses_skipped, "dropped": self.dropped, "frames_filled": self.frames_filled,
             "resampler_restarts": self.resampler_restarts, "sink_errors": self.sink_errors,
             "latency_p50_ms": pct(self.latency_ms, 50), "latency_p99_ms": pct(self.latency_ms, 99),
             "compute_p50_ms": pct(self.compute_ms, 50), "compute_p99_ms": pct(self.compute_ms, 99),
@@ -271,31 +272,42 @@ class Pipeline:
         if frame.sites != self.sites:
             raise ValueError(f"frame sites {frame.sites} differ from the pipeline's {self.sites}")
         self._emit("on_frame", frame)
-        out: list[LivePose] = []
         if self._calibrating(frame):
-            return out
+            return []
+        return self._take(frame, t_start, pose=True)
+
+    def _take(self, frame: HubFrame, t_start: float, pose: bool) -> list[LivePose]:
+        """A calibrated frame into the resampler (packets lost before it as unobserved
+        samples); the 20 Hz frames it completes are posed, or with ``pose`` False skipped."""
+        out: list[LivePose] = []
         if self._last_index is not None:
             gap = frame.index - self._last_index - 1
             if 0 < gap <= MAX_FILLED_GAP:
                 for k in range(gap):
                     t_fill = frame.t - (gap - k) * (1.0 / 60.0)
-                    out += self._resample(t_fill, np.full((N_SITES, 3), np.nan), self._empty_rest(), t_start)
+                    out += self._resample(t_fill, np.full((N_SITES, 3), np.nan), self._empty_rest(), t_start,
+                                          pose=pose)
                 self.stats.frames_filled += gap
             elif gap > MAX_FILLED_GAP or gap < 0:
                 self.resampler.reset()
                 self.stats.resampler_restarts += 1
         self._last_index = frame.index
         acc, rest = self._observe(frame)
-        out += self._resample(frame.t, acc, rest, t_start, _newest_sample(frame))
+        out += self._resample(frame.t, acc, rest, t_start, _newest_sample(frame), pose=pose)
         return out
 
     def pass_over(self, frame: HubFrame) -> None:
         """A frame the live loop has no time to reconstruct: the sinks still get it raw (a
         recording keeps the whole stream, and a replay rebuilds the poses) and a calibration
-        in progress still sees it (a still pose with holes reads as motion). Counted as
-        dropped by the caller, not as a frame in."""
+        in progress still sees it (a still pose with holes reads as motion). After
+        calibration it still goes through the resampler, whose moving average spans it, but
+        the 20 Hz frames it completes are not posed (``poses_skipped``): left out, it would
+        read as lost packets, and the frames around it would be posed blind, with no sensor
+        at all, at a cost the loop had just shown it could not pay. Counted as dropped by
+        the caller, not as a frame in."""
         self._emit("on_frame", frame)
-        self._calibrating(frame)
+        if not self._calibrating(frame):
+            self._take(frame, time.perf_counter(), pose=False)
 
     def _calibrating(self, frame: HubFrame) -> bool:
         """Before the first calibration a frame goes to the calibrator (which may finish
@@ -338,9 +350,12 @@ class Pipeline:
         return acc13, rest
 
     def _resample(self, t: float, acc: np.ndarray, rest: np.ndarray, t_start: float,
-                  newest: float | None = None) -> list[LivePose]:
+                  newest: float | None = None, pose: bool = True) -> list[LivePose]:
         out = []
         for f20 in self.resampler.push(acc, rest, t):
+            if not pose:
+                self.stats.poses_skipped += 1
+                continue
             out.append(self._pose(f20.index, f20.t if f20.t is not None else t, t if newest is None else newest,
                                   f20.acc, f20.rest, t_start))
         return out

@@ -70,6 +70,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--mirror", action=argparse.BooleanOptionalAction, default=None,
                    help="with --export: the poser averages each model answer with the answer for the mirror-image "
                         "window (inference.mirror; twice the batch per call)")
+    p.add_argument("--reading", metavar="NAME",
+                   help="with --export: the dataset reading (none, bandai, hdm05, cmu) a model with reading tokens "
+                        "answers in when not told, which is what the poser gets; none = the untold answer")
     p.add_argument("--contact-detector", action="store_true",
                    help="train the shank contact detector (writes OUT/contact_detector.pt)")
     p.add_argument("--pelvis-odometry", action="store_true",
@@ -111,10 +114,11 @@ def run(args: argparse.Namespace) -> int:
 
             if args.default_steps is not None:
                 poser["default_steps"] = args.default_steps
-            retag_model(args.retag, args.export, poser)
+            retag_model(args.retag, args.export, poser, reading=args.reading)
             print(json.dumps({"exported": str(args.export), "retagged": str(args.retag), **poser}))
             return 0
-        export_model(args.out / LAST, args.export, fp16=args.fp16, default_steps=args.default_steps, poser=poser)
+        export_model(args.out / LAST, args.export, fp16=args.fp16, default_steps=args.default_steps, poser=poser,
+                     reading=args.reading)
         print(json.dumps({"exported": str(args.export), "fp16": args.fp16}))
         return 0
     if args.config is not None:

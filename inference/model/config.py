@@ -19,6 +19,11 @@ HEIGHT_MEAN = 1.70
 
 HEIGHT_STD = 0.10
 
+# The datasets' readings of a body a model can be told apart (ModelConfig.readings): each
+# studio's marker set and skeleton solver put a segment's frame a few degrees off another's,
+# and a model trained on several blends them. Index 0 is "not told".
+READINGS = ("none", "bandai", "hdm05", "cmu")
+
 
 @dataclass
 class ModelConfig:
@@ -47,6 +52,12 @@ class ModelConfig:
     # trained by replacement (TrainConfig.cond_prob) must guess from the values alone
     # whether an entry is a clean measurement or noise, which a CPU budget did not teach.
     mask_input: bool = False
+    # a reading token added to the height token (READINGS[1:]; 0 = no token): trained with
+    # the window's dataset, or "none" in a share of windows (TrainConfig.reading_drop), so
+    # the readings are learnt apart instead of averaged. ``reading`` is the one the model
+    # answers in when not told (chosen at export), which is what the poser gets.
+    readings: int = 0
+    reading: int = 0
     T: int = 1000
 
     @classmethod

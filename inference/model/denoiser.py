@@ -48,6 +48,10 @@ class Denoiser(nn.Module):
         nn.init.normal_(self.pos, std=0.02)
         self.step_mlp = nn.Sequential(nn.Linear(d, d), nn.SiLU(), nn.Linear(d, d))
         self.height_mlp = nn.Sequential(nn.Linear(1, d), nn.SiLU(), nn.Linear(d, d))
+        if cfg.readings:
+            # zero at first: a model fine-tuned from one without readings starts as that model
+            self.reading_emb = nn.Embedding(cfg.readings + 1, d)
+            nn.init.zeros_(self.reading_emb.weight)
         layer = nn.TransformerDecoderLayer(
             d_model=d, nhead=cfg.heads, dim_feedforward=cfg.ff, dropout=cfg.dropout,
             activation="gelu", batch_first=True, norm_first=True,
@@ -60,20 +64,28 @@ class Denoiser(nn.Module):
             self.register_buffer("skip_a", ab.sqrt(), persistent=False)
             self.register_buffer("skip_b", (1.0 - ab).clamp(min=0.0).sqrt(), persistent=False)
 
-    def cond_tokens(self, t: Tensor, height: Tensor) -> Tensor:
-        """(B, 2, d): the step token and the height token."""
+    def cond_tokens(self, t: Tensor, height: Tensor, reading: Tensor | None = None) -> Tensor:
+        """(B, 2, d): the step token and the height token (with the reading's embedding)."""
         d = self.config.d_model
         dtype = self.pos.dtype
         step = self.step_mlp(timestep_embedding(t, d).to(dtype))
         h = ((height.to(dtype) - HEIGHT_MEAN) / HEIGHT_STD)[:, None]
-        return torch.stack([step, self.height_mlp(h)], dim=1)
+        body = self.height_mlp(h)
+        if self.config.readings:
+            if reading is None:
+                body = body + self.reading_emb.weight[self.config.reading].to(dtype)
+            else:
+                body = body + self.reading_emb(reading.long()).to(dtype)
+        return torch.stack([step, body], dim=1)
 
-    def forward(self, z: Tensor, t: Tensor, height: Tensor, mask: Tensor | None = None) -> Tensor:
+    def forward(self, z: Tensor, t: Tensor, height: Tensor, mask: Tensor | None = None,
+                reading: Tensor | None = None) -> Tensor:
         """z (B, N, F) noised window, t (B,) int levels, height (B,) metres -> x0 (B, N, F).
         mask (B, N, F) bool, True = known: read only by ``mask_input`` models (None there
-        means nothing is known: unconditional generation)."""
+        means nothing is known: unconditional generation). reading (B,) int indices of
+        READINGS for models with ``readings``; None = the model's own ``reading``."""
         n = z.shape[1]
-        cond = self.cond_tokens(t, height)
+        cond = self.cond_tokens(t, height, reading)
         inp = z
         if self.config.mask_input:
             m = torch.zeros_like(z) if mask is None else mask.to(z.dtype)

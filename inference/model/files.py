@@ -5,14 +5,14 @@ from __future__ import annotations
 
 import os
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 import torch
 from torch import Tensor, nn
 
-from inference.model.config import ModelConfig, atomic_torch_save
+from inference.model.config import READINGS, ModelConfig, atomic_torch_save
 from inference.model.denoiser import Denoiser
 from inference.model.regressor import Regressor
 
@@ -123,13 +123,25 @@ def _what(obj: Any) -> str:
     return f"a {type(obj).__name__}"
 
 
-def retag_model(path: str | os.PathLike, dest: str | os.PathLike, meta: dict) -> None:
+def with_reading(cfg: ModelConfig, reading: str | None) -> ModelConfig:
+    """``cfg`` answering in ``reading`` (a name in READINGS) when not told; None keeps it."""
+    if reading is None:
+        return cfg
+    if reading not in READINGS:
+        raise ValueError(f"unknown reading {reading!r}: one of {', '.join(READINGS)}")
+    if not cfg.readings:
+        raise ValueError("this model has no reading tokens (ModelConfig.readings is 0)")
+    return replace(cfg, reading=READINGS.index(reading))
+
+
+def retag_model(path: str | os.PathLike, dest: str | os.PathLike, meta: dict, reading: str | None = None) -> None:
     """Write model file ``path`` to ``dest`` with ``meta`` merged into its metadata (the
-    poser defaults it carries) and every tensor as it was, bit for bit: a shipped file's
-    defaults can change without its training run at hand."""
+    poser defaults it carries), and answering in ``reading`` if given, with every tensor as
+    it was, bit for bit: a shipped file's defaults can change without its training run at hand."""
     obj = _read_file(path)
     if not isinstance(obj, dict) or obj.get("format") != MODEL_FORMAT or "state_dict" not in obj:
         raise ModelFileError(path, "not an imucap model file (a training checkpoint exports with --out RUN)")
+    obj["model_config"] = with_reading(ModelConfig.from_dict(obj["model_config"]), reading).to_dict()
     obj["meta"] = {**(obj.get("meta") or {}), **meta}
     atomic_torch_save(obj, dest)
 

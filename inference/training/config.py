@@ -122,6 +122,9 @@ class TrainConfig:
     # without it the height token tells the model who is moving and it learns that
     # actor's habits (docs/model.md, "Conditioning, masks and noise levels")
     augment_scale: float = 0.0
+    # for models with reading tokens (ModelConfig.readings): share of windows told no
+    # reading, so the model also answers untold (docs/model.md, "What the CMU runs say")
+    reading_drop: float = 0.0
     seed: int = 0
     T: int = 1000
     log_every: int = 50

@@ -52,7 +52,7 @@ from inference.features.mirror import MirrorAveraged, mirror_features, mirror_po
 from inference.model.config import ModelConfig, atomic_torch_save
 from inference.model.denoiser import deepened_state_dict
 from inference.model.diffusion import Schedule, inpaint, paper_steps, parse_steps
-from inference.model.files import MODEL_FORMAT, build_model, save_model
+from inference.model.files import MODEL_FORMAT, build_model, save_model, with_reading
 from inference.model.regressor import random_observation_mask
 from inference.training.augment import rotate_yaw, scale_features
 from inference.training.config import CHECKPOINT_FORMAT, LAST, LOG_FILE, MODEL_FILE, VAL_SITES, TrainConfig
@@ -152,6 +152,17 @@ def training_levels(cfg: TrainConfig, batch: int, gen: torch.Generator, T: int) 
     return t
 
 
+def with_readings(batch: dict, ds: Dataset, cfg: TrainConfig) -> dict:
+    """The batch with each window's reading token (its clip's dataset), for models that
+    take one and datasets whose clips are named by their files."""
+    names = getattr(ds, "names", None)
+    if cfg.model.readings and names and "clip" in batch:
+        from inference.training.splits import readings_of
+
+        batch["reading"] = readings_of([names[int(i)] for i in batch["clip"]])
+    return batch
+
+
 def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.Generator,
                gen: torch.Generator) -> tuple[Tensor, dict[str, float]]:
     """Loss of one batch for either model kind; returns (weighted total, unweighted terms)."""
@@ -181,6 +192,14 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
     xn = (x - ctx.mean) / ctx.std
     if cfg.mirror_average:
         model = MirrorAveraged(model, ctx.mean, ctx.std)
+    told = ()  # the reading token, for models that take one
+    if cfg.model.readings and "reading" in batch:
+        reading = torch.as_tensor(batch["reading"], dtype=torch.long)
+        if cfg.reading_drop > 0:
+            reading = torch.where(torch.rand(B, generator=gen) < cfg.reading_drop, torch.zeros((), dtype=torch.long),
+                                  reading)
+        told = (reading,)
+    unmasked = (None, *told) if told else ()  # the mask argument a mask-blind model is given
     m = None  # known entries, where the model is told them
     if cfg.kind == "diffusion":
         t = training_levels(cfg, B, gen, ctx.schedule.T)
@@ -195,10 +214,10 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
             m = torch.as_tensor(random_observation_mask(rng, B, x.shape[1], cfg.mask))
             m &= torch.as_tensor(rng.random(B) < cfg.cond_prob)[:, None, None]
             z = torch.where(m, xn, z)
-            out = model(z, t, height, m) if cfg.model.mask_input else model(z, t, height)
+            out = model(z, t, height, m, *told) if cfg.model.mask_input else model(z, t, height, *unmasked)
             pred = torch.where(m, xn, out)
         else:
-            pred = model(z, t, height)
+            pred = model(z, t, height, *unmasked)
     else:
         m = torch.as_tensor(random_observation_mask(rng, B, x.shape[1], cfg.mask))
         pred = model(torch.where(m, xn, torch.zeros(())), m, height)
@@ -222,7 +241,7 @@ def validate(model: nn.Module, val_set: Dataset, ctx: StepContext) -> dict[str, 
     obs = torch.as_tensor(observation_mask(list(VAL_SITES)))
     for i in range(cfg.val_batches):
         rng, gen = step_seeds(cfg.seed + 1_000_003, 0, i)
-        batch = val_set.sample(rng, cfg.val_batch, cfg.window)
+        batch = with_readings(val_set.sample(rng, cfg.val_batch, cfg.window), val_set, cfg)
         _, terms = batch_loss(model, batch, ctx, rng, gen)
         for k, v in terms.items():
             sums[k] = sums.get(k, 0.0) + v
@@ -361,7 +380,11 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
         # dropout is training behaviour, not architecture: a fine-tune may switch it
         init_model = replace(ModelConfig.from_dict(init["model_config"]), dropout=cfg.model.dropout)
         deeper = replace(init_model, layers=cfg.model.layers) == cfg.model and cfg.model.layers > init_model.layers
-        if init["kind"] != cfg.kind or (init_model != cfg.model and not (deeper and cfg.kind == "diffusion")):
+        # reading tokens added to a model without them start at zero: the same model at first
+        added = (not init_model.readings and cfg.model.readings
+                and replace(init_model, readings=cfg.model.readings, reading=cfg.model.reading) == cfg.model)
+        grown = (deeper or added) and cfg.kind == "diffusion"
+        if init["kind"] != cfg.kind or (init_model != cfg.model and not grown):
             raise ValueError(f"--init {init_from}: its model ({init['kind']}, {init['model_config']}) "
                              f"differs from this config's ({cfg.kind}, {cfg.model.to_dict()})")
 
@@ -401,7 +424,12 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
     elif init is not None:
         # start from the averaged weights (the better model) and keep averaging from there
         # a deeper diffusion model takes the trained layers and starts its extra ones as identities
-        state = init["ema"] if init_model == cfg.model else deepened_state_dict(init["ema"], model)
+        if init_model == cfg.model:
+            state = init["ema"]
+        elif added:
+            state = {**model.state_dict(), **init["ema"]}
+        else:
+            state = deepened_state_dict(init["ema"], model)
         model.load_state_dict(state)
         ema.load_state_dict(state)
     net: nn.Module = model
@@ -460,7 +488,7 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
             while step < end:
                 net.train()
                 rng, gen = step_seeds(cfg.seed, d.rank, step)
-                batch = train_set.sample(rng, per_rank, cfg.window)
+                batch = with_readings(train_set.sample(rng, per_rank, cfg.window), train_set, cfg)
                 lr = lr_at(step, cfg)
                 for g in opt.param_groups:
                     g["lr"] = lr
@@ -525,16 +553,17 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
 
 
 def export_model(checkpoint: str | os.PathLike, dest: str | os.PathLike, fp16: bool = False,
-                 default_steps: str | None = None, poser: dict | None = None) -> None:
+                 default_steps: str | None = None, poser: dict | None = None, reading: str | None = None) -> None:
     """Write the EMA weights of a training checkpoint as an inference model file (what is
     shipped: fp16 halves it; files.load_model casts back to float32). ``poser``: the
     poser defaults to record with it (``inpaint_mode``, ``history``, ``noise``,
     ``contact_threshold``, ``mirror``; see Poser),
-    chosen by whoever measured them on this model."""
+    chosen by whoever measured them on this model. ``reading``: the name in READINGS a
+    model with reading tokens answers in when not told."""
     ck = torch.load(checkpoint, map_location="cpu", weights_only=False)
     if ck.get("format") != CHECKPOINT_FORMAT:
         raise ValueError(f"{checkpoint} is not an imucap training checkpoint")
-    model = build_model(ck["kind"], ModelConfig.from_dict(ck["model_config"]))
+    model = build_model(ck["kind"], with_reading(ModelConfig.from_dict(ck["model_config"]), reading))
     model.load_state_dict(ck["ema"])
     cfg = dict(ck["train_config"])
     steps = default_steps if default_steps is not None else cfg.get("infer_steps")

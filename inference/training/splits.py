@@ -146,6 +146,13 @@ def source_of(name: str) -> str:
     return "cmu" if "/cmu/" in str(name).replace("\\", "/") else "bandai"
 
 
+def readings_of(names: Sequence[str]) -> np.ndarray:
+    """(n,) index in ``READINGS`` of each clip's dataset: the reading token it trains."""
+    from inference.model.config import READINGS
+
+    return np.array([READINGS.index(source_of(str(n))) for n in names], dtype=np.int64)
+
+
 def balance_shares(ds: FeatureDataset, shares: dict[str, float]) -> FeatureDataset:
     """Rescale the clip sampling probabilities so each source gets its share of the draws
     (sources absent from ``ds`` give theirs to the others, in proportion)."""

@@ -217,9 +217,16 @@ def test_frames_passed_over_still_reach_the_sinks_and_the_calibration(session):
     pipe = _pipeline(truth, sinks=[CallbackSink(on_frame=raw.append)])
     poses = []
     for k, f in enumerate(frames):
-        if k % 3 == 1:  # a third of the frames passed over, during calibration too
+        if k % 12 >= 8:  # a third of the frames passed over, in runs of four, during calibration too
             pipe.pass_over(f)
         else:
             poses += pipe.push(f)
     assert len(raw) == len(frames) and [f.index for f in raw] == [f.index for f in frames]
     assert pipe.calibration is not None and poses
+    # frames passed over are not lost packets: no pose is made blind, none for them at all
+    assert pipe.stats.frames_filled == 0 and pipe.stats.resampler_restarts == 0
+    assert all(lp.observed_sites.sum() == len(SITES) for lp in poses), [int(lp.observed_sites.sum()) for lp in poses]
+    calibrated = len(frames) - pipe.stats.frames_calibrating  # pushed or passed over, after calibration
+    twenty_hz = len(poses) + pipe.stats.poses_skipped
+    assert pipe.stats.poses_skipped > 0 and abs(twenty_hz - calibrated / 3) <= 3, (twenty_hz, calibrated)
+    assert np.all(np.diff([lp.index for lp in poses]) > 0)

@@ -557,3 +557,52 @@ def test_retag_changes_a_model_files_poser_defaults_and_not_its_weights(tmp_path
     assert "not an imucap model file" in capsys.readouterr().err and not (tmp_path / "x.pt").exists()
     assert main(["train", "--config", "c.json"]) != 0
     assert "--out is required" in capsys.readouterr().err
+
+
+def _named_dataset(names: list[str]):
+    """A synthetic FeatureDataset whose clips are named as the three datasets' files are."""
+    from inference.training.dataset import FeatureDataset
+
+    syn = synthetic_dataset(clips=len(names), frames=70, seed=4)
+    return FeatureDataset._assemble(syn.clips, syn.heights, syn.offsets,
+                                    contact_offsets_for(syn.offsets, syn.heights), np.ones(len(names)), names)
+
+
+def test_reading_tokens_train_on_each_windows_dataset_from_a_model_without_them(tmp_path):
+    """A model told which dataset's reading of a body a window is in (ModelConfig.readings)
+    starts, fine-tuned from one without tokens, as that model; the tokens then train from
+    the clips' datasets, and an exported file answers in the reading it was given."""
+    from inference.model.files import retag_model, with_reading
+    from inference.training.splits import readings_of
+
+    names = ["d/bandai/dataset-1/walk.bvh", "d/hdm05/dg/HDM_dg_01-01_01_120.amc", "d/cmu/bvh_cgspeed/05_01.bvh"]
+    assert readings_of(names).tolist() == [1, 2, 3]
+    ds = _named_dataset(names)
+    train(_cfg(steps=2), tmp_path / "base", progress=False)
+    told = {**TINY, "readings": 3}
+    frozen = train(_cfg(steps=1, lr=0.0, lr_min=0.0, model=told, reading_drop=0.5), tmp_path / "same",
+                   train_set=ds, val_set=ds, progress=False, init_from=tmp_path / "base" / "last.pt")
+    assert frozen.step == 1
+    src = torch.load(tmp_path / "base" / "last.pt", weights_only=False)["ema"]
+    same = torch.load(tmp_path / "same" / "last.pt", weights_only=False)["model"]
+    assert all(torch.equal(same[k], v) for k, v in src.items()) and not same["reading_emb.weight"].any()
+
+    train(_cfg(steps=6, model=told, reading_drop=0.3), tmp_path / "told", train_set=ds, val_set=ds,
+          progress=False, init_from=tmp_path / "base" / "last.pt")
+    emb = torch.load(tmp_path / "told" / "last.pt", weights_only=False)["model"]["reading_emb.weight"]
+    assert (emb.abs().sum(1) > 0).all()  # every dataset's token, and the untold one, trained
+
+    export_model(tmp_path / "told" / "last.pt", tmp_path / "cmu.pt", reading="cmu")
+    retag_model(tmp_path / "cmu.pt", tmp_path / "hdm05.pt", {}, reading="hdm05")
+    cmu, hdm = load_model(tmp_path / "cmu.pt"), load_model(tmp_path / "hdm05.pt")
+    assert (cmu.config.reading, hdm.config.reading) == (3, 2)
+    g = torch.Generator().manual_seed(5)
+    z, t, h = torch.randn(2, 61, 190, generator=g), torch.tensor([1000, 400]), torch.tensor([1.6, 1.8])
+    with torch.no_grad():
+        a, b = cmu.model(z, t, h), hdm.model(z, t, h)
+        assert not torch.allclose(a, b)
+        assert torch.allclose(a, hdm.model(z, t, h, None, torch.tensor([3, 3])))
+    with pytest.raises(ValueError, match="no reading tokens"):
+        with_reading(ModelConfig.from_dict(TINY), "cmu")
+    with pytest.raises(ValueError, match="unknown reading"):
+        with_reading(cmu.config, "mocap")
