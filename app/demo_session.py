@@ -14,6 +14,8 @@ import numpy as np
 
 from app.pipeline import LivePipeline, LivePose, Pipeline, Sink, SuitHub, close_sink
 
+FRAMES_PATIENCE = 20.0  # --frames: wait at most this many times --seconds for the poses
+
 PROTOCOL_CHOICES = ("xbus", "bno08x-rvc", "xsens-can", "dualsense", "mixed")
 
 
@@ -39,6 +41,7 @@ class DemoConfig:
     insoles: bool = False
     protocol: str = "xbus"
     seconds: float = 20.0
+    frames: int = 0  # headless: run on past ``seconds`` until this many poses (run_for)
     model: str = "diffusion"
     steps: str | None = None
     seed: int = 0
@@ -275,12 +278,19 @@ class DemoSession:
     def session_time(self) -> float:
         return time.monotonic() - self.origin
 
-    def run_for(self, seconds: float) -> None:
-        """Block for ``seconds`` of session time (the pipeline runs on its threads)."""
+    def run_for(self, seconds: float, poses: int = 0, patience: float = FRAMES_PATIENCE) -> bool:
+        """Block for ``seconds`` of session time (the pipeline runs on its threads), and on
+        until ``poses`` poses were made, for at most ``patience`` times ``seconds`` in all:
+        a busy machine makes fewer poses a second, and a script that needs N of them gets
+        them however slow it runs. False when the poses were not reached."""
         assert self.live is not None
         self.live.wait_for(lambda: self.session_time() >= seconds, seconds + 5.0)
+        if poses > 0:
+            self.live.wait_for(lambda: self.pipeline.stats.poses >= poses,
+                               max(seconds * patience - self.session_time(), 0.0))
         if self.live.error is not None:
             raise RuntimeError(f"the pipeline stopped: {self.live.error!r}") from self.live.error
+        return self.pipeline.stats.poses >= poses
 
     # ------------------------------------------------------------------ reporting
     def metadata(self) -> dict[str, Any]:

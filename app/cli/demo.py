@@ -14,6 +14,9 @@ and the live poser reconstructs the body from the chosen sensors at 20 Hz.
 gets a proportionally shorter protocol); with the window, the clip's length (it loops,
 and every loop calibrates again, as the subject would after taking the sensors off).
 
+``--frames N`` (headless): after the N s, run on until N poses were made, for at most
+20 times the seconds, so a script that needs N poses gets them on a busy machine too.
+
 ``--headless --json`` prints one JSON object: frames, fps, latency_p50_ms/p99_ms, per-site
 packets/errors/gaps, calibration_residual_deg, ga_deg against the synthesized truth,
 model, steps (and more, see ``DemoSession.result``; with ``--stream``, what each stream sent).
@@ -36,7 +39,14 @@ import os
 import sys
 from pathlib import Path
 
-from app.demo_session import DEFAULT_SENSORS, PROTOCOL_CHOICES, SUIT_PLACES, DemoConfig, DemoSession
+from app.demo_session import (
+    DEFAULT_SENSORS,
+    FRAMES_PATIENCE,
+    PROTOCOL_CHOICES,
+    SUIT_PLACES,
+    DemoConfig,
+    DemoSession,
+)
 from app.streams import add_stream_arguments, parse_stream_spec, sinks_from_args
 
 
@@ -53,6 +63,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--protocol", default="xbus", choices=PROTOCOL_CHOICES, help="wire protocol of the sensors")
     p.add_argument("--seconds", type=float, default=None,
                    help="headless: session length incl. calibration (default 20); window: clip length (default 60)")
+    p.add_argument("--frames", type=int, default=0,
+                   help="headless: after --seconds, run on until this many poses were made (a busy machine makes "
+                        "fewer a second), for at most 20x --seconds; exit 1 if they were not reached")
     p.add_argument("--record", default=None, help="record the session to FILE.h5")
     p.add_argument("--model", default="diffusion", help="diffusion | regressor | floor | PATH.pt")
     p.add_argument("--steps", default=None, help="diffusion steps (default: the model's own)")
@@ -91,13 +104,17 @@ def config_from_args(args: argparse.Namespace) -> DemoConfig:
         motion=args.motion, file=args.file, sensors=tuple(parse_sites(args.sensors)), insoles=args.insoles,
         protocol=args.protocol, seconds=seconds, model=args.model, steps=args.steps, seed=args.seed,
         record=args.record, noise=not args.no_noise, headless=args.headless, threads=args.threads,
-        latency=args.latency, confidence=args.confidence, suit=args.suit,
+        latency=args.latency, confidence=args.confidence, suit=args.suit, frames=args.frames,
     )
 
 
 def run(args: argparse.Namespace) -> int:
     if args.json and not args.headless:
         raise ValueError("--json needs --headless")
+    if args.frames and not args.headless:
+        raise ValueError("--frames needs --headless")
+    if args.frames < 0:
+        raise ValueError("--frames must be positive")
     cfg = config_from_args(args)
     if not cfg.headless:
         if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY") or os.environ.get("QT_QPA_PLATFORM")):
@@ -124,10 +141,13 @@ def run(args: argparse.Namespace) -> int:
               f"{cfg.seconds:g} s", file=sys.stderr)
     try:
         session.start()
-        session.run_for(cfg.seconds)
+        reached = session.run_for(cfg.seconds, cfg.frames)
     finally:
         session.stop()
     res = session.result()
+    if not reached:
+        print(f"imucap demo: {res['frames']} of the {cfg.frames} poses asked were made in "
+              f"{FRAMES_PATIENCE * cfg.seconds:g} s: the machine is too busy", file=sys.stderr)
     if args.json:
         print(json.dumps(res))
     else:
@@ -139,7 +159,7 @@ def run(args: argparse.Namespace) -> int:
         if session.warning:
             print(session.warning)
     sys.stdout.flush()
-    return 0
+    return 0 if reached else 1
 
 
 __all__ = ["register", "run"]

@@ -29,8 +29,8 @@ def tiny_model(tmp_path_factory):
 
 
 def test_the_suit_can_run_inside_the_demo_process_too(tiny_model, capsys):
-    rc = main(["demo", "--headless", "--json", "--seconds", "5", "--model", str(tiny_model), "--threads", "1",
-               "--sensors", "pelvis,r_shank", "--protocol", "mixed", "--suit", "thread"])
+    rc = main(["demo", "--headless", "--json", "--seconds", "5", "--frames", "11", "--model", str(tiny_model),
+               "--threads", "1", "--sensors", "pelvis,r_shank", "--protocol", "mixed", "--suit", "thread"])
     out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert rc == 0 and out["suit"] == "thread" and out["calibration_status"] == "calibrated"
     assert out["frames"] > 10 and all(st["packets"] > 100 for st in out["sites"].values())
@@ -38,14 +38,15 @@ def test_the_suit_can_run_inside_the_demo_process_too(tiny_model, capsys):
 
 def test_headless_json_contract(tiny_model, tmp_path, capsys):
     rec = tmp_path / "demo.h5"
-    rc = main(["demo", "--headless", "--json", "--seconds", "6", "--model", str(tiny_model), "--threads", "1",
-               "--sensors", "pelvis,l_wrist,r_shank", "--protocol", "mixed", "--record", str(rec)])
+    # a frame budget, not the clock: a busy machine makes fewer poses in the 6 s, and the demo runs on for them
+    rc = main(["demo", "--headless", "--json", "--seconds", "6", "--frames", "30", "--model", str(tiny_model),
+               "--threads", "1", "--sensors", "pelvis,l_wrist,r_shank", "--protocol", "mixed", "--record", str(rec)])
     assert rc == 0
     out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     for key in ("frames", "fps", "latency_p50_ms", "latency_p99_ms", "sites", "calibration_residual_deg", "ga_deg",
                 "model", "steps"):
         assert key in out, key
-    assert out["frames"] > 10 and out["steps"] == 3 and out["model"].startswith("diffusion 1/32/64")
+    assert out["frames"] >= 30 and out["steps"] == 3 and out["model"].startswith("diffusion 1/32/64")
     assert out["calibration_status"] == "calibrated"
     assert out["suit"] == "process"  # the simulated devices in a child process, as real ones are outside
     assert out["calibration_residual_deg"] < 2.0
@@ -64,7 +65,7 @@ def test_headless_json_contract(tiny_model, tmp_path, capsys):
     # one shank worn: no strides from the shanks; the pelvis odometry walks the root
     assert out["stride"] == {"enabled": True, "shanks": False, "scale": None, "strides": 0, "odometry": True}
     assert r.metadata["pelvis_odometry"] is True
-    assert len(r.calibrations) == 1 and len(r.recon["t"]) >= out["frames"] - 25
+    assert len(r.calibrations) >= 1 and len(r.recon["t"]) >= out["frames"] - 25
     assert r.n_frames > 200
 
 
@@ -102,3 +103,20 @@ def test_headless_demo_with_confidence(tiny_model, tmp_path, capsys):
     r = read_recording(rec)
     s = np.asarray(r.recon["spread_deg"])
     assert s.shape[1] == 24 and np.isfinite(s).all(axis=1).mean() > 0.9
+
+
+def test_a_frame_budget_the_machine_cannot_meet_fails_loudly(tiny_model, capsys):
+    from app.demo_session import DemoConfig, DemoSession
+
+    # the patience is a parameter of run_for, so the refusal is checked without 80 s of waiting
+    session = DemoSession(DemoConfig(seconds=4.0, headless=True, model=str(tiny_model), sensors=("pelvis",),
+                                     threads=1, suit="thread"))
+    try:
+        session.start()
+        assert session.run_for(4.0, poses=100_000, patience=1.5) is False
+        assert session.session_time() >= 4.0 and 0 < session.pipeline.stats.poses < 100_000
+    finally:
+        session.stop()
+    capsys.readouterr()
+    assert main(["demo", "--frames", "10"]) == 2
+    assert "--frames needs --headless" in capsys.readouterr().err
