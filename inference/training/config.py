@@ -125,6 +125,9 @@ class TrainConfig:
     # for models with reading tokens (ModelConfig.readings): share of windows told no
     # reading, so the model also answers untold (docs/model.md, "What the CMU runs say")
     reading_drop: float = 0.0
+    # the reading tokens' learning rate as a multiple of the schedule's: a fine-tune that adds
+    # them at a fine-tune's rate moved them to 0.1 of the height token's norm in 2500 steps
+    reading_lr_scale: float = 1.0
     seed: int = 0
     T: int = 1000
     log_every: int = 50

@@ -152,6 +152,17 @@ def training_levels(cfg: TrainConfig, batch: int, gen: torch.Generator, T: int) 
     return t
 
 
+def param_groups(model: nn.Module, cfg: TrainConfig) -> list[dict]:
+    """The optimiser's parameter groups: the reading tokens on their own learning-rate scale
+    (``reading_lr_scale``) when they have one, everything else on the schedule."""
+    emb = getattr(model, "reading_emb", None)
+    if emb is None or cfg.reading_lr_scale == 1.0:
+        return [{"params": list(model.parameters())}]
+    own = {id(p) for p in emb.parameters()}
+    return [{"params": [p for p in model.parameters() if id(p) not in own]},
+            {"params": list(emb.parameters()), "lr_scale": cfg.reading_lr_scale}]
+
+
 def with_readings(batch: dict, ds: Dataset, cfg: TrainConfig) -> dict:
     """The batch with each window's reading token (its clip's dataset), for models that
     take one and datasets whose clips are named by their files."""
@@ -413,7 +424,7 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
 
     torch.manual_seed(cfg.seed)  # identical initial weights on every rank
     model = build_model(cfg.kind, cfg.model).to(d.device)
-    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay, betas=(0.9, 0.99))
+    opt = torch.optim.AdamW(param_groups(model, cfg), lr=cfg.lr, weight_decay=cfg.weight_decay, betas=(0.9, 0.99))
     ema = EMA(model, cfg.ema_decay)
     start = 0
     if ckpt is not None:
@@ -491,7 +502,7 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
                 batch = with_readings(train_set.sample(rng, per_rank, cfg.window), train_set, cfg)
                 lr = lr_at(step, cfg)
                 for g in opt.param_groups:
-                    g["lr"] = lr
+                    g["lr"] = lr * g.get("lr_scale", 1.0)
                 loss, terms = batch_loss(net, batch, ctx, rng, gen)
                 opt.zero_grad(set_to_none=True)
                 loss.backward()

@@ -591,6 +591,12 @@ def test_reading_tokens_train_on_each_windows_dataset_from_a_model_without_them(
           progress=False, init_from=tmp_path / "base" / "last.pt")
     emb = torch.load(tmp_path / "told" / "last.pt", weights_only=False)["model"]["reading_emb.weight"]
     assert (emb.abs().sum(1) > 0).all()  # every dataset's token, and the untold one, trained
+    # the tokens on a learning rate of their own: they move further in the same steps, the rest alike
+    train(_cfg(steps=6, model=told, reading_drop=0.3, reading_lr_scale=50.0), tmp_path / "fast", train_set=ds,
+          val_set=ds, progress=False, init_from=tmp_path / "base" / "last.pt")
+    fast = torch.load(tmp_path / "fast" / "last.pt", weights_only=False)
+    assert [g.get("lr_scale", 1.0) for g in fast["optimizer"]["param_groups"]] == [1.0, 50.0]
+    assert fast["model"]["reading_emb.weight"].norm() > 5 * emb.norm()
 
     export_model(tmp_path / "told" / "last.pt", tmp_path / "cmu.pt", reading="cmu")
     retag_model(tmp_path / "cmu.pt", tmp_path / "hdm05.pt", {}, reading="hdm05")
