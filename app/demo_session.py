@@ -358,7 +358,7 @@ class DemoSession:
             "model": self.model_label, "steps": self.steps_count(),
             "sensors": list(self.cfg.sensors), "insoles": self.cfg.insoles, "protocol": self.cfg.protocol,
             "motion": self.cfg.file or self.cfg.motion, "seconds": self.cfg.seconds, "suit": self.cfg.suit,
-            "hub_frames": stats["frames_in"], "dropped": stats["dropped"],
+            "hub_frames": stats["frames_in"], "dropped": stats["dropped"], "poses_skipped": stats["poses_skipped"],
             "hub_frames_skipped": self.hub.stats.frames_skipped if self.hub else 0,
             "frames_filled": stats["frames_filled"], "resampler_restarts": stats["resampler_restarts"],
             "stride": self.pipeline.stride_status(),
