@@ -503,7 +503,9 @@ class LivePipeline:
     """Runs a Pipeline off the caller's thread.
 
     ingest thread: ``source.poll()`` every ``poll_interval`` into a bounded queue of
-    ``queue_size`` frames (oldest dropped, ``stats.dropped``); inference thread: the
+    ``queue_size`` frames (oldest dropped, ``stats.dropped``: those reach no sink, so the
+    default holds a minute, and a stalled inference thread passes the backlog over, into the
+    recording, when it comes back); inference thread: the
     Pipeline. ``latest()`` is what a GUI timer reads; ``stats()`` a snapshot of the
     counters. Exceptions on either thread stop the run and are kept in ``error``.
 
@@ -513,7 +515,7 @@ class LivePipeline:
     an ever older one (the resampler restarts across the hole; the poser continues).
     """
 
-    def __init__(self, pipeline: Pipeline, source: FrameSource, queue_size: int = 120,
+    def __init__(self, pipeline: Pipeline, source: FrameSource, queue_size: int = 3600,
                  poll_interval: float = 1.0 / 120.0, max_lag: float | None = 0.15) -> None:
         self.pipeline = pipeline
         self.source = source
