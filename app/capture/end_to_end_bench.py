@@ -50,6 +50,11 @@ SUITS = ("process", "thread")  # as app.demo_session.SUIT_PLACES (a bench's suit
 CALIBRATION_TIMEOUT_S = 120.0
 
 WARMUP_POSES = 20  # the first poses after calibration also pay for the model's first calls
+# a round runs past its seconds until this many poses after the warm-up (at most
+# POSE_PATIENCE_S more): a busy machine makes fewer poses a second, and a round with none
+# timed says nothing about latency
+MIN_TIMED_POSES = 10
+POSE_PATIENCE_S = 60.0
 
 
 @dataclass
@@ -134,7 +139,8 @@ def measure_mode(mode: str, seconds: float, model: str = "diffusion", protocol: 
         assert session.suit is not None and session.hub is not None
         for d in session.suit.devices.values():
             d.sim.log_sends()
-        session.run_for(cfg.seconds)
+        session.run_for(cfg.seconds, WARMUP_POSES + MIN_TIMED_POSES,
+                        patience=1.0 + POSE_PATIENCE_S / cfg.seconds)
     finally:
         session.stop()
     hub = session.hub
@@ -219,6 +225,9 @@ def measure_mode_process(mode: str, seconds: float, model: str = "diffusion", se
                     raise RuntimeError(f"the bench's capture did not calibrate: {session.guided.status()}")
                 time.sleep(0.1)
             time.sleep(seconds)
+            end = time.monotonic() + POSE_PATIENCE_S
+            while len(probe.records) < WARMUP_POSES + MIN_TIMED_POSES and time.monotonic() < end:
+                time.sleep(0.1)
         finally:
             if session is not None:
                 session.stop()
