@@ -278,16 +278,17 @@ class DemoSession:
     def session_time(self) -> float:
         return time.monotonic() - self.origin
 
-    def run_for(self, seconds: float, poses: int = 0, patience: float = FRAMES_PATIENCE) -> bool:
+    def run_for(self, seconds: float, poses: int = 0, timeout: float | None = None) -> bool:
         """Block for ``seconds`` of session time (the pipeline runs on its threads), and on
-        until ``poses`` poses were made, for at most ``patience`` times ``seconds`` in all:
-        a busy machine makes fewer poses a second, and a script that needs N of them gets
-        them however slow it runs. False when the poses were not reached."""
+        until ``poses`` poses were made, up to ``timeout`` s of session time in all (default
+        FRAMES_PATIENCE times ``seconds``): a busy machine makes fewer poses a second, and a
+        script that needs N of them gets them however slow it runs. False when the poses
+        were not reached."""
         assert self.live is not None
         self.live.wait_for(lambda: self.session_time() >= seconds, seconds + 5.0)
         if poses > 0:
-            self.live.wait_for(lambda: self.pipeline.stats.poses >= poses,
-                               max(seconds * patience - self.session_time(), 0.0))
+            limit = FRAMES_PATIENCE * seconds if timeout is None else timeout
+            self.live.wait_for(lambda: self.pipeline.stats.poses >= poses, max(limit - self.session_time(), 0.0))
         if self.live.error is not None:
             raise RuntimeError(f"the pipeline stopped: {self.live.error!r}") from self.live.error
         return self.pipeline.stats.poses >= poses

@@ -139,8 +139,7 @@ def measure_mode(mode: str, seconds: float, model: str = "diffusion", protocol: 
         assert session.suit is not None and session.hub is not None
         for d in session.suit.devices.values():
             d.sim.log_sends()
-        session.run_for(cfg.seconds, WARMUP_POSES + MIN_TIMED_POSES,
-                        patience=1.0 + POSE_PATIENCE_S / cfg.seconds)
+        session.run_for(cfg.seconds, WARMUP_POSES + MIN_TIMED_POSES, timeout=cfg.seconds + POSE_PATIENCE_S)
     finally:
         session.stop()
     hub = session.hub

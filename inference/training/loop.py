@@ -163,14 +163,21 @@ def param_groups(model: nn.Module, cfg: TrainConfig) -> list[dict]:
             {"params": list(emb.parameters()), "lr_scale": cfg.reading_lr_scale}]
 
 
-def with_readings(batch: dict, ds: Dataset, cfg: TrainConfig) -> dict:
-    """The batch with each window's reading token (its clip's dataset), for models that
-    take one and datasets whose clips are named by their files."""
+def clip_readings(ds: Dataset | None, cfg: TrainConfig) -> np.ndarray | None:
+    """Each clip's reading token (its dataset), for models that take one and datasets whose
+    clips are named by their files; None otherwise."""
     names = getattr(ds, "names", None)
-    if cfg.model.readings and names and "clip" in batch:
-        from inference.training.splits import readings_of
+    if not (cfg.model.readings and names):
+        return None
+    from inference.training.splits import readings_of
 
-        batch["reading"] = readings_of([names[int(i)] for i in batch["clip"]])
+    return readings_of(names)
+
+
+def with_readings(batch: dict, readings: np.ndarray | None) -> dict:
+    """The batch with each window's reading token, from ``clip_readings``."""
+    if readings is not None and "clip" in batch:
+        batch["reading"] = readings[np.asarray(batch["clip"])]
     return batch
 
 
@@ -250,9 +257,10 @@ def validate(model: nn.Module, val_set: Dataset, ctx: StepContext) -> dict[str, 
     sums: dict[str, float] = {}
     ga = []
     obs = torch.as_tensor(observation_mask(list(VAL_SITES)))
+    readings = clip_readings(val_set, cfg)
     for i in range(cfg.val_batches):
         rng, gen = step_seeds(cfg.seed + 1_000_003, 0, i)
-        batch = with_readings(val_set.sample(rng, cfg.val_batch, cfg.window), val_set, cfg)
+        batch = with_readings(val_set.sample(rng, cfg.val_batch, cfg.window), readings)
         _, terms = batch_loss(model, batch, ctx, rng, gen)
         for k, v in terms.items():
             sums[k] = sums.get(k, 0.0) + v
@@ -449,6 +457,7 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
 
         net = DDP(model, device_ids=[d.local_rank] if d.device.type == "cuda" else None)
     per_rank = max(1, cfg.batch // d.world)
+    train_readings = clip_readings(train_set, cfg)
     end = cfg.steps if stop_after is None else min(cfg.steps, stop_after)
 
     def save(step: int, val: dict | None) -> Path:
@@ -499,7 +508,7 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
             while step < end:
                 net.train()
                 rng, gen = step_seeds(cfg.seed, d.rank, step)
-                batch = with_readings(train_set.sample(rng, per_rank, cfg.window), train_set, cfg)
+                batch = with_readings(train_set.sample(rng, per_rank, cfg.window), train_readings)
                 lr = lr_at(step, cfg)
                 for g in opt.param_groups:
                     g["lr"] = lr * g.get("lr_scale", 1.0)

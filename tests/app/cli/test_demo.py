@@ -108,12 +108,12 @@ def test_headless_demo_with_confidence(tiny_model, tmp_path, capsys):
 def test_a_frame_budget_the_machine_cannot_meet_fails_loudly(tiny_model, capsys):
     from app.demo_session import DemoConfig, DemoSession
 
-    # the patience is a parameter of run_for, so the refusal is checked without 80 s of waiting
+    # the wait is a parameter of run_for, so the refusal is checked without 80 s of waiting
     session = DemoSession(DemoConfig(seconds=4.0, headless=True, model=str(tiny_model), sensors=("pelvis",),
                                      threads=1, suit="thread"))
     try:
         session.start()
-        assert session.run_for(4.0, poses=100_000, patience=1.5) is False
+        assert session.run_for(4.0, poses=100_000, timeout=6.0) is False
         assert session.session_time() >= 4.0 and 0 < session.pipeline.stats.poses < 100_000
     finally:
         session.stop()
