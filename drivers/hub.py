@@ -36,7 +36,12 @@ Why each piece exists:
   site is missing from the frame, and from the recording, which stores the frames. With
   ``max_latency`` set the grid falls further behind instead, just enough for the late
   samples seen (up to ``max_latency``), and creeps back to ``latency`` once none has
-  been late for ``LATE_QUIET_S``.
+  been late for ``LATE_QUIET_S``. It grows only when lateness lasts or comes back (late
+  samples ``LATE_PERSIST_S`` apart with no quiet spell between): a single stall of the
+  whole process (the garbage collector, the window's first draw of a view) loses its
+  samples' frames whatever the wait does afterwards, so answering it would only add that
+  stall to every frame's latency for the next minute (the window's live loop ran 220-270
+  ms behind instead of ~70 ms).
 """
 
 from __future__ import annotations
@@ -185,6 +190,7 @@ class HubStats:
 LATE_QUIET_S = 10.0  # s without a late sample before the grid's wait comes back down
 LATENCY_RELAX = 0.005  # s of wait given back per s after that
 LATE_MARGIN = 0.01  # s of wait beyond the latest sample seen late
+LATE_PERSIST_S = 1.0  # s that late samples must keep coming (or come back) before the wait grows
 
 
 class _Ring:
@@ -318,6 +324,8 @@ class Hub:
         self.base_latency = latency
         self.max_latency = max_latency if max_latency is None else max(max_latency, latency)
         self._last_late: float | None = None
+        self._late_since: float | None = None  # when the current spell of late samples began
+        self._late_worst = 0.0  # the oldest sample of that spell
         self._last_poll: float | None = None
         self.staleness = staleness
         self.max_backlog = max_backlog
@@ -507,8 +515,13 @@ class Hub:
         self.stats.late += 1
         if self.max_latency is None or age > self.max_latency + self.max_backlog:
             return  # fixed wait, or a backlog (a device's buffer after a reconnect), not a late sample
+        if self._last_late is None or now - self._last_late > LATE_QUIET_S:
+            self._late_since, self._late_worst = now, 0.0  # a new spell
         self._last_late = now
-        wanted = min(self.max_latency, age + LATE_MARGIN)
+        self._late_worst = max(self._late_worst, age)
+        if now - self._late_since < LATE_PERSIST_S:  # type: ignore[operator]
+            return  # one stall so far: counted, not waited for (module docstring)
+        wanted = min(self.max_latency, self._late_worst + LATE_MARGIN)
         if wanted > self.latency:
             self.latency = wanted
             self.stats.latency_raised += 1

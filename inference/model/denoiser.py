@@ -150,7 +150,14 @@ def freeze_for_cpu(model: nn.Module, batch: int = 1, window: int | None = None) 
         # ~40 s and then runs no faster than eager (docs/model.md, "Speed"); keep the lever that works
         warnings.simplefilter("ignore", DeprecationWarning)
         traced = torch.jit.trace(model, example, check_trace=False)
-        return torch.jit.freeze(traced)
+        frozen = torch.jit.freeze(traced)
+    # TorchScript profiles the first call and optimises on the second; each is 5-20x a
+    # later call. Made here, at load time, they do not stall the first live frames (the
+    # live loop's first pose held the process for ~150 ms and its hub fell behind)
+    with torch.inference_mode():
+        for _ in range(2):
+            frozen(*example)
+    return frozen
 
 
 def deepened_state_dict(state: dict[str, Tensor], model: nn.Module) -> dict[str, Tensor]:

@@ -13,7 +13,7 @@ import pytest
 
 import drivers
 from drivers.base import Sample
-from drivers.hub import LATE_QUIET_S, Hub, resampler_from_to_grid
+from drivers.hub import LATE_PERSIST_S, LATE_QUIET_S, Hub, resampler_from_to_grid
 
 resample = pytest.importorskip("inference.signals.resample")
 
@@ -23,7 +23,9 @@ def _sample(t: float) -> Sample:
     return Sample(t, None, "x", int(t * 100) & 0xFF, q, np.zeros(3), np.array([0, 0, 9.81]), np.zeros(3))
 
 
-def _run(max_latency: float | None, burst_until: float = 12.0, seconds: float = 40.0):
+def _run(max_latency: float | None, burst_until: float = 12.0, seconds: float = 40.0, stalls=None):
+    """``stalls``: (start, seconds) spans in which b's samples are held, instead of the
+    bursts every 150 ms until ``burst_until``."""
     now = [0.0]
     devs = {n: drivers.make_device(f"bno08x-rvc:///dev/null-late-{n}") for n in ("a", "b")}
     hub = Hub(devs, latency=0.05, max_backlog=2.0, queue_size=4096, clock=lambda: now[0],
@@ -38,7 +40,11 @@ def _run(max_latency: float | None, burst_until: float = 12.0, seconds: float = 
             hub.push("a", _sample(t))
             held.append(_sample(t))
             k += 1
-        if now[0] >= burst_until or step % 90 == 0:  # b's samples wait up to 150 ms for a burst
+        if stalls is not None:
+            release = not any(a <= now[0] < a + d for a, d in stalls)
+        else:
+            release = now[0] >= burst_until or step % 90 == 0  # b's samples wait up to 150 ms for a burst
+        if release:
             for s in held:
                 hub.push("b", s)
             held.clear()
@@ -76,3 +82,24 @@ def test_the_wait_is_capped():
     hub, t, present_b, _ = _run(0.1)
     assert hub.stats.latency_max == pytest.approx(0.1)
     assert LATE_QUIET_S > 0
+
+
+def test_one_stall_is_not_waited_for():
+    """A single 200 ms stall (the whole process missed its core once) loses b from the
+    frames it covers whatever the hub does next; growing the wait for it would only put
+    200 ms on every later frame."""
+    hub, t, present_b, waits = _run(0.25, seconds=20.0, stalls=[(5.0, 0.2)])
+    assert hub.stats.late > 0 and hub.stats.latency_raised == 0
+    assert np.all(waits[:, 1] == pytest.approx(0.05))
+    assert present_b[t > 6.0].all()
+
+
+def test_stalls_that_come_back_are_waited_for():
+    """The same stall again 3 s later is a machine that keeps missing its core: the wait
+    grows to cover it, and the third stall's samples reach their frames."""
+    hub, t, present_b, waits = _run(0.25, seconds=30.0, stalls=[(5.0, 0.2), (8.0, 0.2), (11.0, 0.2)])
+    assert 3.0 > LATE_PERSIST_S
+    assert hub.stats.latency_raised >= 1 and 0.2 <= hub.stats.latency_max <= 0.25
+    third = (t > 10.9) & (t < 11.3)
+    assert present_b[third].all()
+    assert not present_b[(t > 7.9) & (t < 8.2)].all()  # the second came before the wait grew
