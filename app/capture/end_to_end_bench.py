@@ -33,9 +33,6 @@ pays.
 from __future__ import annotations
 
 import os
-import signal
-import subprocess
-import sys
 import tempfile
 import time
 from collections import deque
@@ -193,25 +190,17 @@ def measure_mode_process(mode: str, seconds: float, model: str = "diffusion", se
     calibrate (walk protocol, untimed), then ``seconds`` timed."""
     from app.capture.session import CaptureOptions, CaptureSession
     from app.capture.setup_file import load_setup
+    from app.capture.simulator_process import SimulatorProcess
     from app.demo_session import DEFAULT_SENSORS
 
     sites = tuple(sensors or DEFAULT_SENSORS)
     with tempfile.TemporaryDirectory(prefix="imucap-bench-") as folder:
         setup_path = _bench_setup(folder, sites, model)
         log_path = os.path.join(folder, "sends.npz")
-        cmd = [sys.executable, "-m", "app.cli.main", "devices", "simulate", "--setup", setup_path,
-               "--motion", "walk", "--activity-seconds", f"{seconds + CALIBRATION_TIMEOUT_S:.0f}", "--lead-in", "2",
-               "--seed", str(seed), "--log-sends", log_path]
-        sim = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        sim = SimulatorProcess(setup_path, "walk", seconds=seconds + CALIBRATION_TIMEOUT_S, seed=seed, lead_in=2.0,
+                               args=["--log-sends", log_path]).start()
         session = None
         try:
-            assert sim.stdout is not None
-            for line in sim.stdout:
-                if line.startswith("simulating"):
-                    break
-            else:
-                raise RuntimeError(f"the simulated suit did not start: {sim.stderr.read() if sim.stderr else ''}")
             session = CaptureSession(load_setup(setup_path), CaptureOptions(countdown=1.0, threads=threads,
                                                                              latency=mode))
             probe = LatencyProbe(sites)
@@ -230,11 +219,7 @@ def measure_mode_process(mode: str, seconds: float, model: str = "diffusion", se
         finally:
             if session is not None:
                 session.stop()
-            sim.send_signal(signal.SIGINT)
-            try:
-                sim.wait(30)
-            except subprocess.TimeoutExpired:
-                sim.kill()
+            sim.stop()  # the child writes its send log on the way out
         logs = _read_send_logs(log_path, sites)
     assert session.hub is not None
     return _summarise(mode, probe, logs, session.hub, session.pipeline.stats, session.pipeline.causal,

@@ -12,6 +12,7 @@ scored against it (``imucap replay REC --truth TRUTH``).
 
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -164,9 +165,14 @@ class SimulatedSetup:
         tmp.replace(path)
         return path
 
-    def run(self, seconds: float | None = None) -> None:
+    def run(self, seconds: float | None = None, stop: threading.Event | None = None) -> None:
+        """For ``seconds`` (None: the simulation's length, or with ``stop`` until it is set;
+        the devices loop their signals meanwhile)."""
+        if stop is not None and seconds is None:
+            stop.wait()
+            return
         end = time.monotonic() + (self.duration if seconds is None else seconds)
-        while time.monotonic() < end:
+        while time.monotonic() < end and not (stop is not None and stop.is_set()):
             time.sleep(0.1)
 
 

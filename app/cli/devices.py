@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import threading
 import time
 from typing import Any
 
@@ -118,7 +119,7 @@ def cmd_simulate_setup(args: argparse.Namespace) -> int:
         for name, d in sim.devices.items():
             print(f"{name} {d.url}", flush=True)
         print(f"simulating {sim.duration:.1f} s ({setup.calibration} calibration, then {args.motion})", flush=True)
-        sim.run(args.seconds or None)
+        sim.run(args.seconds or None, stop=_stdin_closed() if args.while_stdin_open else None)
     except KeyboardInterrupt:
         pass
     finally:
@@ -127,6 +128,21 @@ def cmd_simulate_setup(args: argparse.Namespace) -> int:
             sim.write_send_logs(args.log_sends)
     print(json.dumps(sim.stats()), file=sys.stderr)
     return 0
+
+
+def _stdin_closed() -> threading.Event:
+    """Set when standard input closes: the parent that started this simulator ended it, or died."""
+    closed = threading.Event()
+
+    def watch() -> None:
+        try:
+            while sys.stdin.read(4096):
+                pass
+        finally:
+            closed.set()
+
+    threading.Thread(target=watch, name="stdin-watch", daemon=True).start()
+    return closed
 
 
 def _activity(motion: str, seconds: float, seed: int, height: float):
@@ -223,6 +239,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ps.add_argument("--motion", default="walk", help="procedural motion kind, or 'spin' (analytic)")
     ps.add_argument("--noise", choices=["none", "typical"], default="typical")
     ps.add_argument("--seconds", type=float, default=0.0, help="stop after this long (0 = until Ctrl-C)")
+    ps.add_argument("--while-stdin-open", action="store_true",
+                    help="with --setup: run, looping the motion, until standard input closes (a parent process "
+                         "that started the simulator ends it so, and its death does too)")
     ps.add_argument("--loss", type=float, default=0.0, help="probability per packet of a loss burst")
     ps.add_argument("--burst", type=float, default=3.0, help="mean loss burst length, packets")
     ps.add_argument("--corrupt", type=float, default=0.0, help="probability per packet of a flipped byte")

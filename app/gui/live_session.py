@@ -3,7 +3,7 @@ rate, events, recording, with the simulated devices it may have started.
 
 Why an adapter: ``CaptureSession`` speaks to a terminal and to tests; the window wants
 per-device rates and "last seen", new events since it last looked, and a place to keep
-the in-process simulation it started for the demo, stopped with the session.
+the simulated devices' process it started for the demo, stopped with the session.
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ class DeviceRow:
 
 
 class LiveSession:
-    """Owns a CaptureSession (and an in-process simulation, if the window made one)."""
+    """Owns a CaptureSession (and the simulated devices' process, if the window started one)."""
 
     def __init__(self, session: CaptureSession, simulation: Any = None) -> None:
         self.session = session
@@ -78,6 +78,9 @@ class LiveSession:
             self.stop()
             raise
         self.started = True
+        rec = self.session.recorder
+        if rec is not None:  # asked for when the session was made (``--record``)
+            self.record_path, self.record_started = rec.path, time.monotonic()
         live = self.session.live
         self._live_max_lag = live.max_lag if live is not None else None
         self._keep_frames_while_calibrating()

@@ -49,7 +49,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.jobs = Jobs(self)
         self.model = SetupModel(self)
         self.session: LiveSession | None = None
-        self.simulation: Any = None  # in-process simulated devices ("Simulate devices", the demo)
+        self.simulation: Any = None  # the simulated devices' process ("Simulate devices", the demo)
         self.sim_urls: set[str] = set()
         self.down: dict[str, str] = {}  # device -> why, while it is lost or silent
         self.alarm_log: list[tuple[float, str]] = []  # when each alarm was shown (monotonic)
@@ -234,10 +234,7 @@ class MainWindow(QtWidgets.QMainWindow):
                 if make_simulation is not None:
                     sim = make_simulation()
                 elif sim is not None and restart_simulation:
-                    from app.capture.simulate import SimulatedSetup
-
-                    sim.stop()
-                    sim = SimulatedSetup(sim.subject).start()
+                    sim.restart()
             except BaseException:
                 s.stop()
                 raise
@@ -253,6 +250,8 @@ class MainWindow(QtWidgets.QMainWindow):
         live.add_sink(tap)
         self.live_panel.attach(tap, live.sites, insoles=live.setup.insoles is not None)
         self.live_panel.record_button.setEnabled(True)
+        if live.recording and live.record_path is not None:
+            self.live_panel.set_recording(True, f"recording {live.record_path.name}")
         self.calibration_panel.set_protocol(live.setup.calibration, live.session.guided.still_dps,
                                             live.session.guided.moved_dps)
         self.devices_panel.set_session_running(True)

@@ -1,7 +1,7 @@
 """`imucap demo` with a window: the main window on a simulated suit.
 
-The suit is the same simulated subject ``imucap devices simulate --setup`` plays (the
-chosen sites over the chosen wire protocol, in this process), so the demo walks through
+The suit is ``imucap devices simulate --setup`` in a process of its own (the chosen sites
+over the chosen wire protocol, worn by a simulated subject), so the demo walks through
 what a real capture does: the calibration wizard, the live view, recording, replay.
 """
 
@@ -27,10 +27,9 @@ def start_demo(win: MainWindow, cfg: DemoConfig) -> None:
                              threads=cfg.threads)
 
     def make_simulation():
-        from app.demo_session import load_activity
         from app.gui.simulated import start_simulation
 
-        return start_simulation(setup, load_activity(cfg, cfg.seconds), seed=cfg.seed, noise=cfg.noise)
+        return start_simulation(setup, cfg.file or cfg.motion, seconds=cfg.seconds, seed=cfg.seed, noise=cfg.noise)
 
     win.tabs.setCurrentIndex(2)  # the calibration wizard first, then the live view by itself
     win._start(setup, None, None, options=options, make_simulation=make_simulation)

@@ -1,21 +1,21 @@
 """Simulated devices made from inside the window: the demo's suit, and "Simulate devices"
 for someone trying the window with no sensors at hand.
 
-Why the same simulated subject as ``imucap devices simulate --setup``: the window then
-goes through exactly what it does with real sensors (open URLs, calibrate with the guided
-steps, reconstruct, record); only the devices live in this process instead of another.
+Why ``imucap devices simulate --setup`` in a process of its own
+(``app/capture/simulator_process.py``): the window then goes through exactly what it does
+with real sensors (open URLs, calibrate with the guided steps, reconstruct, record), and the
+devices' threads do not share the window's interpreter, as real sensors do not.
 """
 
 from __future__ import annotations
 
-import os
 import socket
 import tempfile
 from pathlib import Path
 
 from app.capture.setup_file import SensorEntry, Setup, Subject
-from app.capture.simulate import SimulatedSetup, SimulatedSubject
-from inference.body.motion import Motion
+from app.capture.simulator_process import SimulatorProcess
+from sim_devices.suit_process import random_can_group
 
 WIRE_PROTOCOLS = ("xbus", "bno08x-rvc", "xsens-can", "dualsense")
 
@@ -26,14 +26,16 @@ def _free_udp_port() -> int:
         return int(s.getsockname()[1])
 
 
-def simulated_url(site: str, protocol: str, folder: Path, k: int) -> str:
-    """Where a simulated device of ``protocol`` for ``site`` appears (the k-th of the suit)."""
+def simulated_url(site: str, protocol: str, folder: Path, k: int, can_group: str | None = None) -> str:
+    """Where a simulated device of ``protocol`` for ``site`` appears (the k-th of the suit);
+    CAN devices on the UDP multicast group ``can_group`` (one bus across processes)."""
     if protocol == "xbus":
         return f"xbus://{folder}/{site}-tty?baud=115200"
     if protocol == "bno08x-rvc":
         return f"bno08x-rvc://{folder}/{site}-tty"
-    if protocol == "xsens-can":  # python-can's virtual bus: devices and drivers share this process
-        return f"xsens-can://virtual/imucap-{os.getpid()}-{folder.name}?id_offset=0x{0x100 * (k + 1):x}"
+    if protocol == "xsens-can":
+        group = can_group or random_can_group()
+        return f"xsens-can://udp_multicast/{group}?id_offset=0x{0x100 * (k + 1):x}"
     if protocol == "dualsense":
         return f"dualsense://unix/{folder}/{site}.sock"
     raise ValueError(f"no simulated device for protocol {protocol!r}; choose {', '.join(WIRE_PROTOCOLS)} or mixed")
@@ -44,10 +46,11 @@ def simulated_setup(sites: tuple[str, ...], protocol: str = "xbus", insoles: boo
                     steps: str | None = None, recordings: Path | None = None) -> Setup:
     """A setup whose devices are simulated: ``protocol`` for all, or ``mixed`` (in turn)."""
     folder = Path(folder or tempfile.mkdtemp(prefix="imucap-sim-"))
+    group = random_can_group()
     sensors = {}
     for k, site in enumerate(sites):
         proto = WIRE_PROTOCOLS[k % len(WIRE_PROTOCOLS)] if protocol == "mixed" else protocol
-        sensors[site] = SensorEntry(site, simulated_url(site, proto, folder, k), label="simulated")
+        sensors[site] = SensorEntry(site, simulated_url(site, proto, folder, k, group), label="simulated")
     setup = Setup(subject=subject or Subject("sim-01", 1.75, "simulated subject"), sensors=sensors,
                   insoles=f"moticon-udp://127.0.0.1:{_free_udp_port()}" if insoles else None, model=model,
                   steps=steps, calibration="walk")
@@ -56,14 +59,9 @@ def simulated_setup(sites: tuple[str, ...], protocol: str = "xbus", insoles: boo
     return setup
 
 
-def start_simulation(setup: Setup, activity: Motion | None = None, seed: int = 0, noise: bool = True,
-                     lead_in: float = 4.0, seconds: float = 60.0) -> SimulatedSetup:
-    """Start the devices (synthesis takes seconds: call it off the GUI thread)."""
-    from inference.signals.synthesis import NoiseModel
-    from sim_devices.motions import generate
-
-    act = activity if activity is not None else generate("walk", seconds=seconds, seed=seed,
-                                                            height=setup.subject.height_m)
-    subject = SimulatedSubject(setup, act, lead_in=lead_in, seed=seed,
-                               noise=NoiseModel.typical() if noise else NoiseModel())
-    return SimulatedSetup(subject).start()
+def start_simulation(setup: Setup, motion: str = "walk", seconds: float = 60.0, seed: int = 0,
+                     noise: bool = True, lead_in: float = 4.0) -> SimulatorProcess:
+    """Start the devices in their own process, the subject at the start of the protocol,
+    then ``motion`` (a kind or a motion file) for ``seconds``, looped (synthesis takes
+    seconds: call it off the GUI thread)."""
+    return SimulatorProcess(setup, motion, seconds=seconds, seed=seed, noise=noise, lead_in=lead_in).start()

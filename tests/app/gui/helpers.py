@@ -4,15 +4,14 @@ pixels of a grabbed view."""
 
 from __future__ import annotations
 
-import os
 import random
 import socket
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
+
+from app.capture.simulator_process import SimulatorProcess
 
 CLI = [sys.executable, "-m", "app.cli.main"]
 SKELETON_RGB = ((77, 179, 255), (219, 224, 235))  # colours.MEASURED and colours.INFERRED
@@ -58,43 +57,20 @@ def write_setup(path: Path, urls: dict[str, str], insoles: str | None = None, su
     return path
 
 
-class Simulator:
-    """``imucap devices simulate --setup`` in its own process, as a user runs it."""
+class Simulator(SimulatorProcess):
+    """``imucap devices simulate --setup`` in its own process, as a user runs it (walk after
+    the protocol; started by ``wait_ready``)."""
 
     def __init__(self, setup: Path, lead_in: float = 20.0, truth: Path | None = None, unplug: str | None = None,
                  seed: int = 1) -> None:
-        cmd = [*CLI, "devices", "simulate", "--setup", str(setup), "--motion", "walk", "--lead-in", str(lead_in),
-               "--activity-seconds", "40", "--seed", str(seed)]
-        if truth is not None:
-            cmd += ["--truth", str(truth)]
-        if unplug:
-            cmd += ["--unplug", unplug]
-        env = {**os.environ, "PYTHONUNBUFFERED": "1", "OMP_NUM_THREADS": "1"}
-        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-        self.lines: list[str] = []
+        args = (["--truth", str(truth)] if truth is not None else []) + (["--unplug", unplug] if unplug else [])
+        super().__init__(setup, "walk", seconds=40.0, seed=seed, lead_in=lead_in, args=args)
 
     def wait_ready(self, timeout: float = 180.0) -> float:
         """Until the devices are up; returns the simulation's length (s)."""
-        end = time.monotonic() + timeout
-        assert self.proc.stdout is not None
-        for line in self.proc.stdout:
-            self.lines.append(line)
-            if line.startswith("simulating"):
-                return float(line.split()[1])
-            if time.monotonic() > end:
-                break
-        self.stop()
-        raise AssertionError("the simulator did not start: " + "".join(self.lines) + (self.proc.stderr.read()
-                                                                                         if self.proc.stderr else ""))
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(5)
+        self.start(timeout)
+        assert self.duration is not None
+        return self.duration
 
 
 def wait(qtbot, cond, timeout_s: float, what: str, state=None) -> None:
