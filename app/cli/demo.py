@@ -82,7 +82,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_stream_arguments(p)
     p.add_argument("--suit", default="process", choices=SUIT_PLACES,
                    help="where the simulated suit runs: its own process, as real sensors are outside imucap "
-                        "(default), or threads of this one")
+                        "(default), or threads of this one (--headless only)")
     p.add_argument("--headless", action="store_true", help="no window")
     p.add_argument("--json", action="store_true", help="headless: print one JSON object")
     p.add_argument("--screenshot", help="with the window: save it to this PNG after --quit-after seconds")
@@ -113,6 +113,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--json needs --headless")
     if args.frames and not args.headless:
         raise ValueError("--frames needs --headless")
+    if args.suit != "process" and not args.headless:
+        raise ValueError("--suit thread needs --headless: the window's simulated devices run in a process of their own")
     if args.frames < 0:
         raise ValueError("--frames must be positive")
     cfg = config_from_args(args)

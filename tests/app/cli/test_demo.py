@@ -86,6 +86,9 @@ def test_assignment_and_bad_arguments(capsys):
     assert main(["demo", "--headless", "--json", "--sensors", "pelvis,elbow"]) == 2
     assert "unknown sensor site" in capsys.readouterr().err
     assert main(["demo", "--headless", "--motion", "moonwalk"]) == 2
+    capsys.readouterr()
+    assert main(["demo", "--suit", "thread"]) == 2  # the window's devices always run in their own process
+    assert "--suit thread needs --headless" in capsys.readouterr().err
 
 
 def test_headless_demo_with_confidence(tiny_model, tmp_path, capsys):
