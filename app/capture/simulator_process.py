@@ -140,10 +140,6 @@ class SimulatorProcess:
     def running(self) -> bool:
         return self.proc is not None and self.proc.poll() is None
 
-    @property
-    def devices(self) -> dict[str, str]:
-        return self.urls
-
     def last_error(self) -> str:
         lines = [ln.strip() for ln in self._stderr if ln.strip()]
         return lines[-1] if lines else f"exit code {self.proc.returncode if self.proc else '?'}"

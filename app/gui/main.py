@@ -185,7 +185,7 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _simulation_started(self, sim: Any) -> None:
         self.simulation = sim
-        self.report(f"{len(sim.devices)} simulated devices running: start the capture when ready", "ok")
+        self.report(f"{len(sim.urls)} simulated devices running: start the capture when ready", "ok")
 
     def _stop_simulation(self) -> None:
         sim, self.simulation = self.simulation, None
