@@ -44,6 +44,7 @@ REALTIME_MODULES = {"sim_devices/test_suit.py", "sim_devices/test_suit_process.p
                     "app/gui/test_main_window.py", "app/cli/test_demo.py", "app/capture/test_identify.py",
                     "app/cli/test_setup.py", "app/capture/test_capture_e2e.py",
                     "app/gui/test_window_unplug.py", "app/gui/test_window_workflow.py",
+                    "app/gui/test_window_simulate.py",
                     "app/cli/test_bench_latency.py"}
 
 
