@@ -12,6 +12,8 @@ The config is a JSON object with the fields of ``inference.training.TrainConfig`
 With ``--resume`` and no ``--config`` the run continues with the configuration stored in
 its checkpoint. ``--export FILE`` trains nothing: it writes OUT/last.pt's EMA weights as an
 inference model file (``--fp16`` to halve it, ``--default-steps`` for the live poser).
+``--blend A B --blend-weight W --export FILE`` mixes two model files' weights, B a fine-tune
+of A: ``imucap train --blend shipped.pt tuned.pt --blend-weight 0.35 --export mix.pt``.
 
 ``--contact-detector`` trains the shank contact detector instead (inference/poser/contact_detector.py)
 on the issue's training split (or ``--data PATH...``), reports its accuracy on the held-out
@@ -57,6 +59,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="with --export: take MODEL_PT, a model file, instead of OUT/last.pt and only change the "
                         "poser defaults given (weights untouched), e.g. to ship --mirror with a baseline whose run "
                         "is gone")
+    p.add_argument("--blend", type=Path, nargs=2, metavar=("MODEL_A", "MODEL_B"),
+                   help="with --export: write a mix of two model files' weights, (1 - W) * A + W * B "
+                        "(W: --blend-weight), with A's config and poser defaults; B must be a fine-tune of A "
+                        "(imucap train --init), so both share the network and the feature normaliser")
+    p.add_argument("--blend-weight", type=float, default=0.5, metavar="W",
+                   help="with --blend: B's share of the weights (0..1, default 0.5)")
     p.add_argument("--fp16", action="store_true", help="with --export: store half-precision weights")
     p.add_argument("--default-steps", help="with --export: step list the poser uses (e.g. 10, paper, 1000,500,0)")
     p.add_argument("--inpaint-mode", choices=INPAINT_MODES,
@@ -94,7 +102,9 @@ def run(args: argparse.Namespace) -> int:
 
     if args.retag is not None and args.export is None:
         raise ValueError("--retag needs --export DEST")
-    if args.out is None and args.retag is None:
+    if args.blend is not None and (args.export is None or args.retag is not None):
+        raise ValueError("--blend needs --export DEST (and no --retag)")
+    if args.out is None and args.retag is None and args.blend is None:
         raise ValueError("--out is required")
     if args.contact_detector and args.pelvis_odometry:
         raise ValueError("--contact-detector and --pelvis-odometry train different files: pick one")
@@ -109,6 +119,15 @@ def run(args: argparse.Namespace) -> int:
                                    ("noise", args.noise), ("contact_threshold", args.contact_threshold),
                                    ("mirror", args.mirror))
                  if v is not None}
+        if args.blend is not None:
+            from inference.model.files import blend_models
+
+            if args.default_steps is not None:
+                poser["default_steps"] = args.default_steps
+            blend_models(args.blend[0], args.blend[1], args.blend_weight, args.export, meta=poser)
+            print(json.dumps({"exported": str(args.export), "blend": [str(p) for p in args.blend],
+                              "weight": args.blend_weight, **poser}))
+            return 0
         if args.retag is not None:
             from inference.model.files import retag_model
 

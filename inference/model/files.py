@@ -138,12 +138,48 @@ def retag_model(path: str | os.PathLike, dest: str | os.PathLike, meta: dict, re
     """Write model file ``path`` to ``dest`` with ``meta`` merged into its metadata (the
     poser defaults it carries), and answering in ``reading`` if given, with every tensor as
     it was, bit for bit: a shipped file's defaults can change without its training run at hand."""
-    obj = _read_file(path)
-    if not isinstance(obj, dict) or obj.get("format") != MODEL_FORMAT or "state_dict" not in obj:
-        raise ModelFileError(path, "not an imucap model file (a training checkpoint exports with --out RUN)")
+    obj = _model_file(path)
     obj["model_config"] = with_reading(ModelConfig.from_dict(obj["model_config"]), reading).to_dict()
     obj["meta"] = {**(obj.get("meta") or {}), **meta}
     atomic_torch_save(obj, dest)
+
+
+def _model_file(path: str | os.PathLike) -> dict:
+    obj = _read_file(path)
+    if not isinstance(obj, dict) or obj.get("format") != MODEL_FORMAT or "state_dict" not in obj:
+        raise ModelFileError(path, "not an imucap model file (a training checkpoint exports with --out RUN)")
+    return obj
+
+
+def blend_models(path_a: str | os.PathLike, path_b: str | os.PathLike, weight: float,
+                 dest: str | os.PathLike, meta: dict | None = None) -> None:
+    """Write ``(1 - weight) * A + weight * B``, weight by weight, as a model file with A's
+    config, normaliser and metadata (``meta`` merged in).
+
+    Why: a fine-tune of A on new data (B) gains there and loses some of what A knew; the
+    mix of the two networks keeps more of A than B does, and gains more than its share
+    of B's new ground (weight-space ensembling, as WiSE-FT does for fine-tuned image
+    models). That holds only for two files of one network fine-tuned from one start,
+    so both must share the network and the feature normaliser; anything else is refused."""
+    if not 0.0 <= weight <= 1.0:
+        raise ValueError(f"blend weight {weight:g} outside 0..1 (0 is {os.fspath(path_a)}, 1 is {os.fspath(path_b)})")
+    a, b = _model_file(path_a), _model_file(path_b)
+    if a["kind"] != b["kind"]:
+        raise ModelFileError(path_b, f"a {b['kind']} model; {os.fspath(path_a)} is a {a['kind']} model")
+    sa, sb = a["state_dict"], b["state_dict"]
+    if set(sa) != set(sb) or any(sa[k].shape != sb[k].shape for k in sa):
+        raise ModelFileError(path_b, f"a different network from {os.fspath(path_a)}'s (layers or sizes differ)")
+    if not (np.array_equal(a["norm_mean"], b["norm_mean"]) and np.array_equal(a["norm_std"], b["norm_std"])):
+        raise ModelFileError(path_b, f"normalises features differently from {os.fspath(path_a)}: blend only a "
+                                     "file with its own fine-tune (imucap train --init)")
+    out = {}
+    for k, va in sa.items():
+        vb = sb[k]
+        out[k] = ((1.0 - weight) * va.float() + weight * vb.float()).to(va.dtype) if va.is_floating_point() else va
+    a["state_dict"] = out
+    a["meta"] = {**(a.get("meta") or {}), **(meta or {}),
+                 "blend": {"a": os.fspath(path_a), "b": os.fspath(path_b), "weight": float(weight)}}
+    atomic_torch_save(a, dest)
 
 
 def load_model(path: str | os.PathLike, use_ema: bool = True) -> LoadedModel:

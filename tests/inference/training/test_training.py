@@ -559,6 +559,46 @@ def test_retag_changes_a_model_files_poser_defaults_and_not_its_weights(tmp_path
     assert "--out is required" in capsys.readouterr().err
 
 
+def test_blend_mixes_a_file_with_its_fine_tune_and_refuses_strangers(tmp_path, capsys):
+    """The blend is each weight's mix, answers between its two files, keeps A's poser
+    defaults and normaliser; files of another network or normaliser are refused in one line."""
+    from app.cli.main import main
+    from inference.model.files import save_model
+
+    torch.manual_seed(0)
+    a, b = build_model("diffusion", ModelConfig.tiny()), build_model("diffusion", ModelConfig.tiny())
+    mean, std = np.linspace(-1, 1, 190), np.linspace(0.5, 2, 190)
+    save_model(tmp_path / "a.pt", a, "diffusion", mean, std, step=9, meta={"mirror": True})
+    save_model(tmp_path / "b.pt", b, "diffusion", mean, std, step=12, meta={"mirror": False})
+    assert main(["train", "--blend", str(tmp_path / "a.pt"), str(tmp_path / "b.pt"), "--blend-weight", "0.25",
+                 "--export", str(tmp_path / "mix.pt"), "--noise", "mean"]) == 0
+    mix = torch.load(tmp_path / "mix.pt", weights_only=False)
+    sa, sb = a.state_dict(), b.state_dict()
+    assert all(torch.allclose(v, 0.75 * sa[k] + 0.25 * sb[k], atol=1e-6) for k, v in mix["state_dict"].items())
+    assert mix["meta"]["mirror"] is True and mix["meta"]["noise"] == "mean" and mix["step"] == 9
+    assert mix["meta"]["blend"]["weight"] == 0.25
+    loaded = load_model(tmp_path / "mix.pt")
+    assert np.allclose(loaded.norm_mean, mean) and np.allclose(loaded.norm_std, std)
+    for w, ref in ((0.0, a), (1.0, b)):
+        main(["train", "--blend", str(tmp_path / "a.pt"), str(tmp_path / "b.pt"), "--blend-weight", str(w),
+              "--export", str(tmp_path / "end.pt")])
+        end = load_model(tmp_path / "end.pt").model
+        assert all(torch.allclose(v, ref.state_dict()[k], atol=1e-6) for k, v in end.state_dict().items())
+    capsys.readouterr()
+
+    save_model(tmp_path / "other_norm.pt", b, "diffusion", mean + 1, std)
+    bigger = build_model("diffusion", ModelConfig.from_dict({**ModelConfig.tiny().to_dict(), "layers": 3}))
+    save_model(tmp_path / "bigger.pt", bigger, "diffusion", mean, std)
+    for other, said in (("other_norm.pt", "normalises features differently"), ("bigger.pt", "a different network")):
+        assert main(["train", "--blend", str(tmp_path / "a.pt"), str(tmp_path / other),
+                     "--export", str(tmp_path / "bad.pt")]) != 0
+        err = capsys.readouterr().err
+        assert said in err and len(err.strip().splitlines()) == 1 and not (tmp_path / "bad.pt").exists()
+    assert main(["train", "--blend", str(tmp_path / "a.pt"), str(tmp_path / "b.pt"), "--blend-weight", "1.5",
+                 "--export", str(tmp_path / "bad.pt")]) != 0
+    assert "outside 0..1" in capsys.readouterr().err
+
+
 def _named_dataset(names: list[str]):
     """A synthetic FeatureDataset whose clips are named as the three datasets' files are."""
     from inference.training.dataset import FeatureDataset
