@@ -1,6 +1,12 @@
 """Sony DualSense as an IMU: calibrated gyro and accelerometer from USB HID report
 0x01, orientation fused with imufusion (x-io's Fusion AHRS, a maintained library,
-rather than a filter of our own)."""
+rather than a filter of our own).
+
+The controller has no magnetometer, so its heading is the integral of the gyro's
+vertical rate and drifts with whatever bias the factory calibration leaves (a few
+tenths of a deg/s on MEMS gyros). Fusion's run-time bias correction learns that bias
+whenever the controller is still (every axis under ``STILL_DPS`` for ``STILL_S``), so a
+subject who stands, sits or holds a calibration pose stops the drift."""
 
 from __future__ import annotations
 
@@ -17,6 +23,9 @@ from . import protocol as ds
 from .hid_seam import HidapiHandle, HidHandle, SocketHidHandle
 
 _RAD2DEG = 180.0 / math.pi
+REPORT_HZ = 250.0  # USB input reports a second (the bias filter's time constant is set in samples)
+STILL_DPS = 3.0  # Fusion's defaults: a still controller turns slower than this on every axis ...
+STILL_S = 3.0  # ... for this long before its gyro readings count as bias
 
 
 class DualSenseDevice(Device):
@@ -25,16 +34,21 @@ class DualSenseDevice(Device):
 
     The AHRS runs in the NWU convention (Z up) with a sample period taken from
     the controller's own timestamps, so a USB polling hiccup does not bend the
-    integration."""
+    integration. ``track_bias`` (URL ``?gyro_bias=off`` to turn it off) removes the
+    gyro bias learnt while still from the gyro the AHRS integrates and the samples
+    report; ``gyro_offset_dps`` is the current estimate."""
 
     scheme = "dualsense"
     counter_modulus = 256
 
     def __init__(
-        self, opener: Callable[[], HidHandle], device_id: str = "dualsense", *, gain: float = 0.5, **kw: Any
+        self, opener: Callable[[], HidHandle], device_id: str = "dualsense", *, gain: float = 0.5,
+        track_bias: bool = True, **kw: Any
     ) -> None:
         super().__init__(device_id, **kw)
         self._opener = opener
+        self.track_bias = track_bias
+        self._bias: imufusion.Bias | None = None
         self._hid: HidHandle | None = None
         self.calibration: ds.DsCalibration | None = None
         self.gain = gain
@@ -44,12 +58,21 @@ class DualSenseDevice(Device):
 
     @classmethod
     def from_url(cls, netloc: str, path: str, params: dict[str, str], **kw: Any) -> DualSenseDevice:
+        track = params.get("gyro_bias", "track")
+        if track not in ("track", "off"):
+            raise ValueError(f"dualsense gyro_bias={track!r}: track (learn the bias while still) or off")
+        kw.setdefault("track_bias", track == "track")
         if netloc == "unix":
             dev_id = kw.pop("device_id", None) or path
             return cls(lambda: SocketHidHandle(path), device_id=dev_id, **kw)
         serial = params.get("serial")
         dev_id = kw.pop("device_id", None) or serial or "dualsense"
         return cls(lambda: HidapiHandle(ds.VENDOR_ID, ds.PRODUCT_IDS, serial), device_id=dev_id, **kw)
+
+    @property
+    def gyro_offset_dps(self) -> np.ndarray:
+        """The gyro bias learnt so far (deg/s, sensor axes); zero until the controller has been still."""
+        return np.zeros(3) if self._bias is None else np.asarray(self._bias.get_offset(), dtype=float)
 
     def _open(self) -> None:
         self._hid = self._opener()
@@ -70,6 +93,14 @@ class DualSenseDevice(Device):
         settings.gyroscope_range = 2000.0  # deg/s, the controller's full scale (0 would mean "always saturated")
         self._ahrs.set_settings(settings)
         self._ahrs_started = False
+        self._bias = None
+        if self.track_bias:
+            self._bias = imufusion.Bias()
+            bias = imufusion.BiasSettings()
+            bias.sample_rate = REPORT_HZ
+            bias.stationary_threshold = STILL_DPS
+            bias.stationary_period = STILL_S
+            self._bias.set_settings(bias)
         self._unwrap.reset()
         self._last_dev_t = None
 
@@ -93,6 +124,8 @@ class DualSenseDevice(Device):
 
     def _to_sample(self, rep: ds.DsInput) -> Sample:
         gyro = (np.array(rep.gyro_raw, dtype=float) - self._gbias) * self._gscale
+        if self._bias is not None:
+            gyro = np.asarray(self._bias.update(gyro * _RAD2DEG), dtype=float) / _RAD2DEG
         acc = (np.array(rep.accel_raw, dtype=float) - self._abias) * self._ascale
         dev_t = self._unwrap.update(rep.timestamp)
         dt = 0.004 if self._last_dev_t is None else dev_t - self._last_dev_t
