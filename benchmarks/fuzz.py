@@ -393,6 +393,29 @@ def _xsens_export(tmp: Path) -> tuple[Run, list[bytes], Errors]:
 
 
 # ------------------------------------------------------------------------------------------ setup file
+def _mvnx(tmp: Path) -> tuple[Run, list[bytes], Errors]:
+    from drivers.xsens_export.mvnx import MvnxError, is_mvnx, read_mvnx
+
+    path = tmp / "take.mvnx"
+
+    def run(data: bytes) -> None:
+        path.write_bytes(data)
+        is_mvnx(path)
+        for log in read_mvnx(path).logs:
+            _check_log(log)
+
+    frames = "".join(
+        f'<frame time="{17 * k}" index="{k}" type="normal"><orientation>1 0 0 0 1 0 0 0</orientation>'
+        f"<sensorFreeAcceleration>0.1 0 -0.2 0 0.3 0.1</sensorFreeAcceleration>"
+        f"<sensorOrientation>0.99 0.01 0.1 0 1 0 0 0</sensorOrientation></frame>" for k in range(4))
+    take = ('<?xml version="1.0" encoding="UTF-8"?>\n<mvnx xmlns="http://www.xsens.com/mvn/mvnx" version="4">'
+            '<mvn version="2022.0.0"/><subject label="s" frameRate="60" segmentCount="2"><segments>'
+            '<segment label="Pelvis" id="1"/></segments><sensors><sensor label="Pelvis"/><sensor label="T8"/>'
+            '</sensors><frames segmentCount="2" sensorCount="2"><frame time="0" type="tpose">'
+            f"<orientation>1 0 0 0 1 0 0 0</orientation></frame>{frames}</frames></subject></mvnx>\n")
+    return run, [take.encode(), take[: len(take) * 2 // 3].encode()], (MvnxError, OSError)
+
+
 def _setup(tmp: Path) -> tuple[Run, list[bytes], Errors]:
     from app.capture.setup_file import SetupError, load_setup
 
@@ -584,6 +607,8 @@ TARGETS: dict[str, Target] = {t.name: t for t in (
     Target("xsens-export", "Xsens MT Manager / DOT export: detect_layout + read_export", _xsens_export,
            max_len=8192,
            surface=("drivers.xsens_export.reader", "drivers.xsens_export.table", "drivers.xsens_export.samples")),
+    Target("mvnx", "Xsens MVN take (MVNX XML): is_mvnx + read_mvnx", _mvnx, max_len=8192,
+           surface=("drivers.xsens_export.mvnx",)),
     Target("setup", "setup TOML: app.capture.setup_file.load_setup (parse_setup)", _setup,
            surface=("app.capture.setup_file",)),
     Target("bvh", "BVH via inference.loaders.load_motion", _bvh, max_len=16384, timeout=20,

@@ -161,4 +161,67 @@ def write_dot_exports(sig: SiteSignals, folder: str | os.PathLike, tags: Mapping
     return paths
 
 
-__all__ = ["DOT_GROUPS", "MT_GROUPS", "write_dot_exports", "write_mtmanager_exports"]
+def _mvnx_numbers(rows: np.ndarray) -> str:
+    return " ".join(f"{v:.6f}" for v in rows.ravel())
+
+
+def write_mvnx(sig: SiteSignals, path: str | os.PathLike, labels: Mapping[str, str],
+               extra: Mapping[str, str] | None = None, drop: Sequence[int] = (), bad: Sequence[int] = (),
+               cut_at: int | None = None) -> Path:
+    """A take of ``sig`` as MVN writes it to MVNX (``drivers.xsens_export.mvnx`` for the
+    layout): labels: site -> MVN sensor label; extra: more sensors, label -> the site whose
+    signals they carry (a hand sensor beside the forearm's), which imucap has no site for.
+    The calibration frames (identity, T-pose) come first; drop: samples missing (MVN skips
+    a frame it could not solve); bad: frames written with a short sensor list; cut_at: the
+    file ends mid-frame there, unclosed, as a copy that stopped would."""
+    path = Path(path)
+    sensors = [(label, sig.sites.index(site)) for site, label in labels.items()]
+    sensors += [(label, sig.sites.index(site)) for label, site in (extra or {}).items()]
+    idx = [k for _, k in sensors]
+    free = np.stack([_free_acc(sig, k) for k in idx], axis=1)  # (T, S, 3)
+    quat = sig.quat[:, idx]
+    ms0 = 1_714_640_400_000
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
+             '<mvnx xmlns="http://www.xsens.com/mvn/mvnx" version="4">',
+             '\t<mvn version="2022.0.0" build="simulated"/>', "\t<comment></comment>",
+             f'\t<subject label="sim subject" torsoColor="#ea6852" frameRate="{sig.fps:g}" '
+             f'segmentCount="{len(sensors)}" recDate="Thu May 02 10:00:00.000 2024" configuration="FullBody" '
+             'userScenario="singleLevel">',
+             "\t\t<comment></comment>", "\t\t<segments>"]
+    for n, (label, _k) in enumerate(sensors, 1):
+        lines += [f'\t\t\t<segment label="{label}" id="{n}">', "\t\t\t\t<points>",
+                  f'\t\t\t\t\t<point label="p{label}Origin">', "\t\t\t\t\t\t<pos_b>0.000000 0.000000 0.000000</pos_b>",
+                  "\t\t\t\t\t</point>", "\t\t\t\t</points>", "\t\t\t</segment>"]
+    lines += ["\t\t</segments>", "\t\t<sensors>"] + [f'\t\t\t<sensor label="{label}"/>' for label, _ in sensors]
+    lines += ["\t\t</sensors>",
+              f'\t\t<frames segmentCount="{len(sensors)}" sensorCount="{len(sensors)}" jointCount="0">']
+    unit = np.tile([1.0, 0.0, 0.0, 0.0], len(sensors))
+    for kind in ("identity", "tpose", "tpose-isb"):
+        lines += [f'\t\t\t<frame time="0" tc="00:00:00:00" ms="{ms0}" type="{kind}">',
+                  f"\t\t\t\t<orientation>{_mvnx_numbers(unit)}</orientation>",
+                  f"\t\t\t\t<position>{_mvnx_numbers(np.zeros(3 * len(sensors)))}</position>", "\t\t\t</frame>"]
+    dropped = set(int(i) for i in drop)
+    for i in range(len(sig.t)):
+        if i in dropped:
+            continue
+        ms = int(round(sig.t[i] * 1000.0))
+        q, a = quat[i], free[i]
+        if i in bad:
+            q = q[:-1]
+        frame = [f'\t\t\t<frame time="{ms}" index="{i}" tc="00:00:{ms // 1000:02d}:{i % 60:02d}" ms="{ms0 + ms}" '
+                 'type="normal">',
+                 f"\t\t\t\t<orientation>{_mvnx_numbers(q)}</orientation>",
+                 f"\t\t\t\t<sensorFreeAcceleration>{_mvnx_numbers(a)}</sensorFreeAcceleration>",
+                 f"\t\t\t\t<sensorOrientation>{_mvnx_numbers(q)}</sensorOrientation>", "\t\t\t</frame>"]
+        if cut_at is not None and i == cut_at:
+            lines += frame[:2]
+            lines.append(frame[2][: len(frame[2]) // 2])
+            path.write_text("\n".join(lines), encoding="utf-8")
+            return path
+        lines += frame
+    lines += ["\t\t</frames>", "\t</subject>", '\t<securityCode code="0"/>', "</mvnx>"]
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+__all__ = ["DOT_GROUPS", "MT_GROUPS", "write_dot_exports", "write_mtmanager_exports", "write_mvnx"]

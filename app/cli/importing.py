@@ -1,6 +1,6 @@
 """`imucap import`: another system's logged session -> an imucap session recording.
 
-    imucap import FOLDER_OR_FILES... --out SESSION.h5 [--format auto|ximu3|mtmanager|dot]
+    imucap import FOLDER_OR_FILES... --out SESSION.h5 [--format auto|ximu3|mtmanager|dot|mvnx]
                   [--map ID=SITE ...] [--height M] [--json]
 
 Why: a researcher's sessions are often logged with the sensor maker's own software. Once
@@ -17,6 +17,11 @@ Formats (``--format auto``, the default, tells them apart):
 - ``dot``: Xsens DOT app CSV exports, one file per sensor (``drivers.xsens_export``).
   Give the folder holding them (its .txt/.csv files that are exports are read, others
   are listed as ignored) or the files themselves.
+- ``mvnx``: an Xsens MVN take exported as MVNX (``drivers.xsens_export.mvnx``), one file
+  for the whole suit. Its sensors map to sites by their MVN labels (``RightLowerLeg`` ->
+  r_shank, ``T8`` -> torso, ``RightForeArm`` -> r_wrist); the hands and shoulders have
+  no site and are listed as not used. MVNX holds no sensor rate, so the calibration
+  takes it from orientation.
 
 Sensors map to sites by ``--map ID=SITE``, where ID is any name the sensor goes by: its
 device name or tag (x-IMU3 device name, DOT tag), its id (x-IMU3 serial, MT Manager
@@ -54,13 +59,15 @@ from drivers.device_log import DeviceLog
 from drivers.hub import HubFrame
 from drivers.ximu3 import read_log
 from drivers.xsens_export import LAYOUTS, detect_layout, read_exports
+from drivers.xsens_export.mvnx import MVN_SITES, is_mvnx, read_mvnx
+from drivers.xsens_export.mvnx import TITLE as MVNX_TITLE
 from inference.body.rotations import quat_conjugate, quat_multiply, quat_to_axis_angle
 from inference.body.skeleton import N_CONTACTS, SITES, parse_sites
 from inference.signals.resample import to_grid
 
 RATE = 60.0
-FORMATS = ("auto", "ximu3", *LAYOUTS)
-SOURCE_TITLES = {"ximu3": "x-IMU3 log", **{k: v.title for k, v in LAYOUTS.items()}}
+FORMATS = ("auto", "ximu3", *LAYOUTS, "mvnx")
+SOURCE_TITLES = {"ximu3": "x-IMU3 log", **{k: v.title for k, v in LAYOUTS.items()}, "mvnx": MVNX_TITLE}
 EXPORT_SUFFIXES = (".txt", ".csv", ".tsv")
 GYRO_WINDOW_S = 0.2  # wide enough that orientation jitter does not read as motion, short against a step
 # normalised device name -> site (words as suits and their GUIs name the segments)
@@ -315,6 +322,34 @@ def import_xsens(files: Sequence[str | Path], out: str | Path, layout: str | Non
     return import_sources(sources, out, fmt, ", ".join(map(str, files)), mapping, height)
 
 
+def import_mvnx(file: str | Path, out: str | Path, mapping: dict[str, str] | None = None,
+                height: float | None = None) -> Imported:
+    """An MVN take's MVNX export as a session recording at ``out`` (``import_sources``):
+    the sensors at imucap's sites (by MVN label, or ``--map LABEL=SITE``); the others are
+    listed in ``ignored``."""
+    take = read_mvnx(file)
+    mapping = mapping or {}
+    labels = {d.name for d in take.logs}
+    for name in mapping:
+        if name not in labels:
+            raise ValueError(f"--map {name}=...: no sensor {name!r} in {file} "
+                             f"(its sensors: {', '.join(sorted(labels))})")
+    chosen = {site: name for name, site in mapping.items()}
+    sources, unused = [], []
+    for d in take.logs:
+        site = mapping.get(d.name) or MVN_SITES.get(d.name)
+        if site is None:
+            unused.append(f"{d.name} (no imucap site; --map {d.name}=SITE to use it)")
+            continue
+        if chosen.get(site, d.name) != d.name:
+            unused.append(f"{d.name} ({site} is {chosen[site]} by --map)")
+            continue
+        sources.append(Source(d, (d.name, site), str(file)))
+    res = import_sources(sources, out, "mvnx", str(file), {s.ids[0]: s.ids[1] for s in sources}, height)
+    res.ignored = unused
+    return res
+
+
 def _is_ximu3_log(path: Path) -> bool:
     return path.is_dir() and any(d.is_dir() and (d / "Inertial.csv").is_file() and (d / "Quaternion.csv").is_file()
                                  for d in path.iterdir())
@@ -351,6 +386,11 @@ def import_paths(paths: Sequence[str | Path], out: str | Path, fmt: str = "auto"
     for p in paths:
         if not p.exists():
             raise FileNotFoundError(f"{p}: no such file or folder")
+    if fmt == "mvnx" or (fmt == "auto" and len(paths) == 1 and paths[0].is_file()
+                         and (paths[0].suffix.lower() == ".mvnx" or is_mvnx(paths[0]))):
+        if len(paths) != 1 or paths[0].is_dir():
+            raise ValueError("an MVNX export is one file for the whole suit; give just that file")
+        return import_mvnx(paths[0], out, mapping, height)
     if fmt == "ximu3" or (fmt == "auto" and len(paths) == 1 and _is_ximu3_log(paths[0])):
         if len(paths) != 1:
             raise ValueError("an x-IMU3 log is one folder; give just that folder")
@@ -382,7 +422,8 @@ def run_import(args: argparse.Namespace) -> int:
         print(f"imported {len(res.sites)} sensors ({', '.join(res.sites)}) from an {SOURCE_TITLES[res.format]}, "
               f"{res.duration_s} s, calibrated on the first {res.still_s} s standing -> {res.path}")
         if res.ignored:
-            print(f"ignored (not Xsens exports): {', '.join(res.ignored)}")
+            what = "not used" if res.format == "mvnx" else "ignored (not Xsens exports)"
+            print(f"{what}: {', '.join(res.ignored)}")
     sys.stdout.flush()
     return 0
 
@@ -391,7 +432,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("import", help="turn another system's logged session into a session recording",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("logs", type=Path, nargs="+", metavar="FOLDER_OR_FILES",
-                   help="an x-IMU3 log folder, or Xsens export folders/files (one file per sensor)")
+                   help="an x-IMU3 log folder, Xsens export folders/files (one file per sensor), or an MVN "
+                        "take's .mvnx file")
     p.add_argument("--out", type=Path, required=True, help="the session recording to write (.h5)")
     p.add_argument("--format", default="auto", choices=FORMATS, help="the log's format (default: told from the files)")
     p.add_argument("--map", action="append", default=[], metavar="ID=SITE",
@@ -401,5 +443,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_import)
 
 
-__all__ = ["BONES", "DEVICE_SITES", "FORMATS", "Imported", "Source", "gyro_from_orientation", "import_paths",
-           "import_sources", "import_xsens", "import_ximu3", "register", "site_for"]
+__all__ = ["BONES", "DEVICE_SITES", "FORMATS", "Imported", "Source", "gyro_from_orientation", "import_mvnx",
+           "import_paths", "import_sources", "import_xsens", "import_ximu3", "register", "site_for"]

@@ -24,7 +24,7 @@ from inference.body.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX
 from inference.metrics.errors import global_angle_error
 from inference.signals.synthesis import NoiseModel, synthesize
 from sim_devices.motions import generate
-from sim_devices.xsens_export import write_dot_exports, write_mtmanager_exports
+from sim_devices.xsens_export import write_dot_exports, write_mtmanager_exports, write_mvnx
 
 HEADING = 70.0
 NOISE = NoiseModel(mounting_deg=40.0, ori_white_deg=0.3, acc_white=0.05, gyro_white=0.01)
@@ -134,6 +134,43 @@ def test_a_dot_session_maps_by_tag_and_calibrates_without_gyro(dot_folder, motio
     assert _bone_error_deg(tmp_path / "dot.h5", motion) < 4.0
     rep, ga, worn = _replay(capsys, tmp_path / "dot.h5", tmp_path, motion)
     assert rep["frames"] > 100 and worn < 6.0 and ga < 20.0
+
+
+MVN_LABELS = {"pelvis": "Pelvis", "torso": "T8", "head": "Head", "l_wrist": "LeftForeArm", "r_wrist": "RightForeArm",
+              "l_thigh": "LeftUpperLeg", "r_thigh": "RightUpperLeg", "l_shank": "LeftLowerLeg",
+              "r_shank": "RightLowerLeg"}
+
+
+@pytest.fixture(scope="module")
+def mvnx_file(motion, tmp_path_factory):
+    sig = synthesize(motion, NOISE, rng=7, sites=tuple(MVN_LABELS))
+    return write_mvnx(sig, tmp_path_factory.mktemp("mvn") / "take-007.mvnx", MVN_LABELS,
+                      extra={"RightHand": "r_wrist", "LeftShoulder": "torso"}, drop=[200, 201])
+
+
+def test_an_mvn_take_imports_its_sensors_at_their_sites_and_replays(mvnx_file, motion, tmp_path, capsys):
+    """One MVNX file for the whole suit: the sensors at imucap's sites by their MVN labels,
+    the hand and shoulder listed as not used; calibrated from the standing start on the
+    rate from orientation (MVNX holds none), and re-run with three of its nine sensors."""
+    out = _import(capsys, mvnx_file, "--out", tmp_path / "mvn.h5")
+    assert out["format"] == "mvnx" and out["sites"] == list(MVN_LABELS)
+    assert [u.split()[0] for u in out["ignored"]] == ["RightHand", "LeftShoulder"]
+    assert out["still_start_s"] == pytest.approx(1.5, abs=0.2) and out["forward_from"] == "knees"
+    assert _heading_deg(out) == pytest.approx(HEADING, abs=4.0)
+    dev = out["devices"]["r_shank"]
+    assert dev["name"] == "RightLowerLeg" and dev["rate_hz"] == pytest.approx(60.0, abs=0.5)
+    assert dev["acc_from"] == "sensorFreeAcceleration" and "from orientation" in dev["gyro_from"]
+    rec = read_recording(tmp_path / "mvn.h5")
+    assert rec.metadata["source"] == "Xsens MVN export (MVNX)" and np.isnan(rec.raw["pelvis"]["gyro"]).all()
+    assert _bone_error_deg(tmp_path / "mvn.h5", motion) < 4.0
+    rep, ga, worn = _replay(capsys, tmp_path / "mvn.h5", tmp_path, motion)
+    assert rep["frames"] > 100 and worn < 5.0 and ga < 20.0
+    # the hand's sensor instead of the forearm's, by --map: the forearm is then not used
+    out = _import(capsys, mvnx_file, "--out", tmp_path / "hand.h5", "--map", "RightHand=r_wrist")
+    assert out["devices"]["r_wrist"]["name"] == "RightHand"
+    assert any(u.startswith("RightForeArm (r_wrist is RightHand") for u in out["ignored"])
+    assert main(["import", str(mvnx_file), "--out", str(tmp_path / "x.h5"), "--map", "RightPinky=r_wrist"]) != 0
+    assert "no sensor 'RightPinky'" in capsys.readouterr().err
 
 
 def test_sensors_without_a_site_are_refused_with_the_way_out(mt_folder, dot_folder, tmp_path, capsys):
