@@ -23,6 +23,25 @@ def settings(tmp: Path):
     return QtCore.QSettings(str(tmp / "imucap-settings.ini"), QtCore.QSettings.Format.IniFormat)
 
 
+def shown_window(qtbot, tmp: Path):
+    """The main window with its settings in ``tmp``, shown and exposed, closed with the test."""
+    from app.gui.main import MainWindow
+
+    win = MainWindow(settings(tmp))
+    qtbot.addWidget(win)
+    win.show()
+    qtbot.waitExposed(win)
+    return win
+
+
+def choose_preset(win, name: str) -> None:
+    """Pick the Setup tab's sensor preset whose name starts with ``name``, as a click does."""
+    sp = win.setup_panel
+    i = next(k for k in range(sp.preset.count()) if (sp.preset.itemData(k) or "").startswith(name))
+    sp.preset.setCurrentIndex(i)
+    sp.preset.activated.emit(i)
+
+
 def free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))

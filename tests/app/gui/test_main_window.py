@@ -28,19 +28,15 @@ from PySide6 import QtCore  # noqa: E402
 
 from app.demo_session import DemoConfig  # noqa: E402
 from app.recording import read_recording  # noqa: E402
-from tests.app.gui.helpers import grab_view, settings, skeleton_pixels, wait, window_state  # noqa: E402
+from tests.app.gui.helpers import grab_view, shown_window, skeleton_pixels, wait, window_state  # noqa: E402
 
 
 def test_demo_window(qtbot, tmp_path, monkeypatch):
-    from app.gui.main import MainWindow
     from app.gui.main_window import start_demo
 
     shot = Path(os.environ.get("IMUCAP_SCREENSHOT", tmp_path / "demo.png")).resolve()
     monkeypatch.chdir(tmp_path)  # the demo records into ./recordings
-    win = MainWindow(settings(tmp_path))
-    qtbot.addWidget(win)
-    win.show()
-    qtbot.waitExposed(win)
+    win = shown_window(qtbot, tmp_path)
     try:
         start_demo(win, DemoConfig(motion="walk", protocol="xbus", seconds=40.0, headless=False, threads=1))
         state = lambda: window_state(win)  # noqa: E731

@@ -23,17 +23,20 @@ pytest.importorskip("pytestqt")
 from PySide6 import QtCore  # noqa: E402
 
 from app.capture.setup_file import load_setup  # noqa: E402
-from tests.app.gui.helpers import CLI, grab_view, settings, skeleton_pixels, suit_urls, write_setup  # noqa: E402
+from tests.app.gui.helpers import (  # noqa: E402
+    CLI,
+    grab_view,
+    settings,
+    shown_window,
+    skeleton_pixels,
+    suit_urls,
+    write_setup,
+)
 
 
 @pytest.fixture
 def window(qtbot, tmp_path):
-    from app.gui.main import MainWindow
-
-    win = MainWindow(settings(tmp_path))
-    qtbot.addWidget(win)
-    win.show()
-    qtbot.waitExposed(win)
+    win = shown_window(qtbot, tmp_path)
     yield win
     win.close()
 

@@ -22,7 +22,7 @@ pytest.importorskip("OpenGL")
 
 from PySide6 import QtCore  # noqa: E402
 
-from tests.app.gui.helpers import settings, wait, window_state  # noqa: E402
+from tests.app.gui.helpers import choose_preset, shown_window, wait, window_state  # noqa: E402
 
 SITES = ("pelvis", "head", "l_wrist", "r_wrist", "l_shank", "r_shank")
 
@@ -37,12 +37,8 @@ def _ended(proc, timeout_s: float) -> bool:
 
 
 def test_simulate_devices_then_capture(qtbot, tmp_path):
-    from app.gui.main import MainWindow
 
-    win = MainWindow(settings(tmp_path))
-    qtbot.addWidget(win)
-    win.show()
-    qtbot.waitExposed(win)
+    win = shown_window(qtbot, tmp_path)
     state = lambda: window_state(win)  # noqa: E731
     children = []
     try:
@@ -54,10 +50,7 @@ def test_simulate_devices_then_capture(qtbot, tmp_path):
         assert "choose the sites first" in win.messages.label.text()
         assert win.simulation is None and not win.jobs.busy("simulate")
 
-        sp = win.setup_panel
-        i = next(k for k in range(sp.preset.count()) if (sp.preset.itemData(k) or "").startswith("classic 6"))
-        sp.preset.setCurrentIndex(i)
-        sp.preset.activated.emit(i)
+        choose_preset(win, "classic 6")
         assert win.model.draft.sites == SITES
         dp.sim_protocol.setCurrentText("mixed")
         qtbot.mouseClick(dp.sim_button, QtCore.Qt.MouseButton.LeftButton)

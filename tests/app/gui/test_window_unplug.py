@@ -31,7 +31,7 @@ from app.capture.simulate import read_truth  # noqa: E402
 from tests.app.gui.helpers import (  # noqa: E402
     Simulator,
     grab_view,
-    settings,
+    shown_window,
     skeleton_pixels,
     suit_urls,
     wait,
@@ -47,7 +47,6 @@ MAX_GAP_S = 0.5
 
 
 def test_an_unplugged_device_is_shown_within_a_second_and_the_window_never_freezes(qtbot, tmp_path, capsys):
-    from app.gui.main import MainWindow
 
     # the floor model and serial devices only: this test is about a device dropping out and the
     # event loop; the CAN-over-multicast wrists are in the workflow test
@@ -59,10 +58,7 @@ def test_an_unplugged_device_is_shown_within_a_second_and_the_window_never_freez
         sim.wait_ready()
         truth = read_truth(truth_path)
         t_unplug = truth.t0 + truth.activity_start + AT
-        win = MainWindow(settings(tmp_path))
-        qtbot.addWidget(win)
-        win.show()
-        qtbot.waitExposed(win)
+        win = shown_window(qtbot, tmp_path)
         state = lambda: window_state(win)  # noqa: E731
         assert win.setup_panel.open(setup)
         win.start_action.trigger()

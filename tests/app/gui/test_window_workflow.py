@@ -41,8 +41,9 @@ from app.capture.setup_file import load_setup  # noqa: E402
 from app.recording import read_recording  # noqa: E402
 from tests.app.gui.helpers import (  # noqa: E402
     Simulator,
+    choose_preset,
     free_udp_port,
-    settings,
+    shown_window,
     suit_urls,
     wait,
     window_state,
@@ -69,7 +70,6 @@ def _click(qtbot, widget) -> None:
 
 def test_clinician_workflow(qtbot, tmp_path, capsys):
     from app.export.opensim import read_mot
-    from app.gui.main import MainWindow
     from inference.loaders import load_motion
     from sim_devices.devices import make_sim_device, spinning_signals
 
@@ -83,18 +83,13 @@ def test_clinician_workflow(qtbot, tmp_path, capsys):
     try:
         sim.wait_ready()
         spinner.start()
-        win = MainWindow(settings(tmp_path))
-        qtbot.addWidget(win)
-        win.show()
-        qtbot.waitExposed(win)
+        win = shown_window(qtbot, tmp_path)
         state = lambda: window_state(win)  # noqa: E731
         shots = []
 
         # 1. setup
         sp = win.setup_panel
-        i = next(k for k in range(sp.preset.count()) if (sp.preset.itemData(k) or "").startswith("classic 6"))
-        sp.preset.setCurrentIndex(i)
-        sp.preset.activated.emit(i)
+        choose_preset(win, "classic 6")
         sp.subject_id.clear()
         qtbot.keyClicks(sp.subject_id, "P01")
         sp.subject_id.editingFinished.emit()
