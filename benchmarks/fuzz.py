@@ -395,12 +395,18 @@ def _xsens_export(tmp: Path) -> tuple[Run, list[bytes], Errors]:
 # ------------------------------------------------------------------------------------------ setup file
 def _mvnx(tmp: Path) -> tuple[Run, list[bytes], Errors]:
     from drivers.xsens_export.mvnx import MvnxError, is_mvnx, read_mvnx
+    from inference.body.motion import MotionFormatError
+    from inference.loaders.mvnx import parse_mvnx
 
     path = tmp / "take.mvnx"
 
     def run(data: bytes) -> None:
         path.write_bytes(data)
         is_mvnx(path)
+        try:
+            parse_mvnx(path)  # the segments, as motion (a take without the full body is refused)
+        except MotionFormatError:
+            pass
         for log in read_mvnx(path).logs:
             _check_log(log)
 
@@ -607,8 +613,8 @@ TARGETS: dict[str, Target] = {t.name: t for t in (
     Target("xsens-export", "Xsens MT Manager / DOT export: detect_layout + read_export", _xsens_export,
            max_len=8192,
            surface=("drivers.xsens_export.reader", "drivers.xsens_export.table", "drivers.xsens_export.samples")),
-    Target("mvnx", "Xsens MVN take (MVNX XML): is_mvnx + read_mvnx", _mvnx, max_len=8192,
-           surface=("drivers.xsens_export.mvnx",)),
+    Target("mvnx", "Xsens MVN take (MVNX XML): is_mvnx + read_mvnx, and its segments by parse_mvnx", _mvnx,
+           max_len=8192, surface=("drivers.xsens_export.mvnx", "inference.loaders.mvnx")),
     Target("setup", "setup TOML: app.capture.setup_file.load_setup (parse_setup)", _setup,
            surface=("app.capture.setup_file",)),
     Target("bvh", "BVH via inference.loaders.load_motion", _bvh, max_len=16384, timeout=20,

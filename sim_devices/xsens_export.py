@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from drivers.xsens_export import DOT, MTMANAGER, G
+from inference.body.motion import Motion
 from inference.body.rotations import quat_conjugate, quat_rotate, quat_to_euler, quat_to_matrix
 from inference.signals.site_signals import SiteSignals
 
@@ -165,41 +166,105 @@ def _mvnx_numbers(rows: np.ndarray) -> str:
     return " ".join(f"{v:.6f}" for v in rows.ravel())
 
 
+# MVN's segments as written here: label -> (our segment its orientation and origin come
+# from, the joint point MVN names at its origin). L3 sits halfway between spine1 and spine2.
+MVN_SEGMENTS: dict[str, tuple[str, str]] = {
+    "Pelvis": ("pelvis", ""), "L5": ("spine1", "jL5S1"), "L3": ("spine1", "jL4L3"), "T12": ("spine2", "jL1T12"),
+    "T8": ("spine3", "jT9T8"), "Neck": ("neck", "jT1C7"), "Head": ("head", "jC1Head"),
+    **{k: v for side, s in (("Right", "r"), ("Left", "l")) for k, v in (
+        (f"{side}Shoulder", (f"{s}_collar", f"j{side}T4Shoulder")),
+        (f"{side}UpperArm", (f"{s}_upperarm", f"j{side}Shoulder")),
+        (f"{side}ForeArm", (f"{s}_forearm", f"j{side}Elbow")), (f"{side}Hand", (f"{s}_hand", f"j{side}Wrist")))},
+    **{k: v for side, s in (("Right", "r"), ("Left", "l")) for k, v in (
+        (f"{side}UpperLeg", (f"{s}_thigh", f"j{side}Hip")), (f"{side}LowerLeg", (f"{s}_shank", f"j{side}Knee")),
+        (f"{side}Foot", (f"{s}_foot", f"j{side}Ankle")), (f"{side}Toe", (f"{s}_toes", f"j{side}BallFoot")))},
+}
+MVN_TREE: dict[str, str] = {
+    "L5": "Pelvis", "L3": "L5", "T12": "L3", "T8": "T12", "Neck": "T8", "Head": "Neck",
+    **{k: v for side in ("Right", "Left") for k, v in (
+        (f"{side}Shoulder", "T8"), (f"{side}UpperArm", f"{side}Shoulder"), (f"{side}ForeArm", f"{side}UpperArm"),
+        (f"{side}Hand", f"{side}ForeArm"), (f"{side}UpperLeg", "Pelvis"), (f"{side}LowerLeg", f"{side}UpperLeg"),
+        (f"{side}Foot", f"{side}LowerLeg"), (f"{side}Toe", f"{side}Foot"))},
+}
+
+
+def _mvn_body(motion: Motion) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    """(segment -> its points {label: pos_b}, orientations (T, 23, 4), origins (T, 23, 3))
+    of ``motion`` as MVN would store them: at zero rotation a T-pose in our axes."""
+    from inference.body.rotations import matrix_to_quat
+    from inference.body.skeleton import SEGMENT_INDEX
+
+    rest, joints = motion.body.rest_joints(), motion.joints()
+    labels = list(MVN_SEGMENTS)
+    spine1, spine2 = SEGMENT_INDEX["spine1"], SEGMENT_INDEX["spine2"]
+
+    def origin(label: str, at: np.ndarray) -> np.ndarray:
+        if label == "L3":
+            return (at[..., spine1, :] + at[..., spine2, :]) / 2
+        return at[..., SEGMENT_INDEX[MVN_SEGMENTS[label][0]], :]
+
+    points: dict[str, dict[str, np.ndarray]] = {label: {} for label in labels}
+    for label in labels:
+        joint = MVN_SEGMENTS[label][1]
+        if joint:
+            points[label][joint] = np.zeros(3)
+            parent = MVN_TREE[label]
+            points[parent][joint] = origin(label, rest) - origin(parent, rest)
+    for label, point, tip in (("Head", "pTopOfHead", (0.0, 0.0, 0.2)), ("RightToe", "pRightToe", (0.05, 0.0, 0.0)),
+                              ("LeftToe", "pLeftToe", (0.05, 0.0, 0.0))):
+        points[label][point] = np.array(tip)
+    for side, s in (("Right", "r"), ("Left", "l")):
+        hand, fingers = SEGMENT_INDEX[f"{s}_hand"], SEGMENT_INDEX[f"{s}_fingers"]
+        points[f"{side}Hand"][f"p{side}TopOfHand"] = rest[fingers] - rest[hand]
+    quat = np.stack([matrix_to_quat(motion.rot[:, SEGMENT_INDEX[MVN_SEGMENTS[label][0]]]) for label in labels], 1)
+    pos = np.stack([origin(label, joints) for label in labels], axis=1)
+    return points, quat, pos
+
+
 def write_mvnx(sig: SiteSignals, path: str | os.PathLike, labels: Mapping[str, str],
                extra: Mapping[str, str] | None = None, drop: Sequence[int] = (), bad: Sequence[int] = (),
-               cut_at: int | None = None) -> Path:
+               cut_at: int | None = None, motion: Motion | None = None) -> Path:
     """A take of ``sig`` as MVN writes it to MVNX (``drivers.xsens_export.mvnx`` for the
     layout): labels: site -> MVN sensor label; extra: more sensors, label -> the site whose
     signals they carry (a hand sensor beside the forearm's), which imucap has no site for.
-    The calibration frames (identity, T-pose) come first; drop: samples missing (MVN skips
-    a frame it could not solve); bad: frames written with a short sensor list; cut_at: the
-    file ends mid-frame there, unclosed, as a copy that stopped would."""
+    With ``motion`` (the one ``sig`` was synthesized from), MVN's 23 segments carry its
+    body and posture (``inference.loaders.mvnx`` reads them); else each sensor's segment
+    stands alone. The calibration frames (identity, T-pose) come first; drop: samples
+    missing (MVN skips a frame it could not solve); bad: frames written with a short sensor
+    list; cut_at: the file ends mid-frame there, unclosed, as a copy that stopped would."""
     path = Path(path)
     sensors = [(label, sig.sites.index(site)) for site, label in labels.items()]
     sensors += [(label, sig.sites.index(site)) for label, site in (extra or {}).items()]
     idx = [k for _, k in sensors]
     free = np.stack([_free_acc(sig, k) for k in idx], axis=1)  # (T, S, 3)
     quat = sig.quat[:, idx]
+    if motion is not None:
+        points, seg_quat, seg_pos = _mvn_body(motion)
+    else:
+        points = {label: {f"p{label}Origin": np.zeros(3)} for label, _ in sensors}
+        seg_quat, seg_pos = quat, np.zeros((len(sig.t), len(sensors), 3))
     ms0 = 1_714_640_400_000
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              '<mvnx xmlns="http://www.xsens.com/mvn/mvnx" version="4">',
              '\t<mvn version="2022.0.0" build="simulated"/>', "\t<comment></comment>",
              f'\t<subject label="sim subject" torsoColor="#ea6852" frameRate="{sig.fps:g}" '
-             f'segmentCount="{len(sensors)}" recDate="Thu May 02 10:00:00.000 2024" configuration="FullBody" '
+             f'segmentCount="{len(points)}" recDate="Thu May 02 10:00:00.000 2024" configuration="FullBody" '
              'userScenario="singleLevel">',
              "\t\t<comment></comment>", "\t\t<segments>"]
-    for n, (label, _k) in enumerate(sensors, 1):
-        lines += [f'\t\t\t<segment label="{label}" id="{n}">', "\t\t\t\t<points>",
-                  f'\t\t\t\t\t<point label="p{label}Origin">', "\t\t\t\t\t\t<pos_b>0.000000 0.000000 0.000000</pos_b>",
-                  "\t\t\t\t\t</point>", "\t\t\t\t</points>", "\t\t\t</segment>"]
+    for n, (label, pts) in enumerate(points.items(), 1):
+        lines += [f'\t\t\t<segment label="{label}" id="{n}">', "\t\t\t\t<points>"]
+        for name, v in pts.items():
+            lines += [f'\t\t\t\t\t<point label="{name}">', f"\t\t\t\t\t\t<pos_b>{_mvnx_numbers(v)}</pos_b>",
+                      "\t\t\t\t\t</point>"]
+        lines += ["\t\t\t\t</points>", "\t\t\t</segment>"]
     lines += ["\t\t</segments>", "\t\t<sensors>"] + [f'\t\t\t<sensor label="{label}"/>' for label, _ in sensors]
     lines += ["\t\t</sensors>",
-              f'\t\t<frames segmentCount="{len(sensors)}" sensorCount="{len(sensors)}" jointCount="0">']
-    unit = np.tile([1.0, 0.0, 0.0, 0.0], len(sensors))
+              f'\t\t<frames segmentCount="{len(points)}" sensorCount="{len(sensors)}" jointCount="0">']
+    unit = np.tile([1.0, 0.0, 0.0, 0.0], len(points))
     for kind in ("identity", "tpose", "tpose-isb"):
         lines += [f'\t\t\t<frame time="0" tc="00:00:00:00" ms="{ms0}" type="{kind}">',
                   f"\t\t\t\t<orientation>{_mvnx_numbers(unit)}</orientation>",
-                  f"\t\t\t\t<position>{_mvnx_numbers(np.zeros(3 * len(sensors)))}</position>", "\t\t\t</frame>"]
+                  f"\t\t\t\t<position>{_mvnx_numbers(np.zeros(3 * len(points)))}</position>", "\t\t\t</frame>"]
     dropped = set(int(i) for i in drop)
     for i in range(len(sig.t)):
         if i in dropped:
@@ -210,12 +275,13 @@ def write_mvnx(sig: SiteSignals, path: str | os.PathLike, labels: Mapping[str, s
             q = q[:-1]
         frame = [f'\t\t\t<frame time="{ms}" index="{i}" tc="00:00:{ms // 1000:02d}:{i % 60:02d}" ms="{ms0 + ms}" '
                  'type="normal">',
-                 f"\t\t\t\t<orientation>{_mvnx_numbers(q)}</orientation>",
+                 f"\t\t\t\t<orientation>{_mvnx_numbers(seg_quat[i])}</orientation>",
+                 f"\t\t\t\t<position>{_mvnx_numbers(seg_pos[i])}</position>",
                  f"\t\t\t\t<sensorFreeAcceleration>{_mvnx_numbers(a)}</sensorFreeAcceleration>",
                  f"\t\t\t\t<sensorOrientation>{_mvnx_numbers(q)}</sensorOrientation>", "\t\t\t</frame>"]
         if cut_at is not None and i == cut_at:
-            lines += frame[:2]
-            lines.append(frame[2][: len(frame[2]) // 2])
+            lines += frame[:3]
+            lines.append(frame[3][: len(frame[3]) // 2])
             path.write_text("\n".join(lines), encoding="utf-8")
             return path
         lines += frame

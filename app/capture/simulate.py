@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -138,17 +139,10 @@ class SimulatedSetup:
     def write_truth(self, path: str | Path) -> Path:
         """The motion played, with the monotonic time of its first frame and the activity's
         start: what ``imucap replay --truth`` scores a recording against."""
-        path = Path(path)
         tr = self.truth
-        tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez_compressed(
-            tmp, format=TRUTH_FORMAT, rot=tr.rot.astype(np.float32), root=tr.root.astype(np.float32),
-            fps=float(tr.fps), t0=float(self.t0 if self.t0 is not None else 0.0),
-            activity_start=float(self.signals.meta["activity_start"]), height=float(tr.body.height),
-            offsets=tr.body.offsets, sites=np.array(self.subject.setup.sites()),
-            protocol=self.subject.setup.calibration)
-        tmp.replace(path)
-        return path
+        return save_truth(path, tr.rot, tr.root, tr.fps, self.t0 if self.t0 is not None else 0.0,
+                          float(self.signals.meta["activity_start"]), tr.body.height, tr.body.offsets,
+                          self.subject.setup.sites(), self.subject.setup.calibration)
 
     def write_send_logs(self, path: str | Path) -> Path:
         """Per device, the wire counter and the monotonic time of every packet sent since
@@ -174,6 +168,20 @@ class SimulatedSetup:
         end = time.monotonic() + (self.duration if seconds is None else seconds)
         while time.monotonic() < end and not (stop is not None and stop.is_set()):
             time.sleep(0.1)
+
+
+def save_truth(path: str | Path, rot: np.ndarray, root: np.ndarray, fps: float, t0: float, activity_start: float,
+               height: float, offsets: np.ndarray, sites: Sequence[str], protocol: str) -> Path:
+    """Write a truth file (``read_truth``), atomically: segment orientations (T, 24, 3, 3) in
+    the recording's world, the root, the session time of frame 0 (``t0``) and the time after
+    it from which the motion counts (``activity_start``: the calibration before it does not)."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp.npz")
+    np.savez_compressed(tmp, format=TRUTH_FORMAT, rot=np.asarray(rot, np.float32), root=np.asarray(root, np.float32),
+                        fps=float(fps), t0=float(t0), activity_start=float(activity_start), height=float(height),
+                        offsets=np.asarray(offsets), sites=np.array(list(sites)), protocol=protocol)
+    tmp.replace(path)
+    return path
 
 
 @dataclass

@@ -1,6 +1,6 @@
 """`imucap import`: another system's logged session -> an imucap session recording.
 
-    imucap import FOLDER_OR_FILES... --out SESSION.h5 [--format auto|ximu3|mtmanager|dot|mvnx]
+    imucap import FOLDER_OR_FILES... --out SESSION.h5 [--format auto|ximu3|mtmanager|dot|mvnx] [--truth T.npz]
                   [--map ID=SITE ...] [--height M] [--json]
 
 Why: a researcher's sessions are often logged with the sensor maker's own software. Once
@@ -21,7 +21,10 @@ Formats (``--format auto``, the default, tells them apart):
   for the whole suit. Its sensors map to sites by their MVN labels (``RightLowerLeg`` ->
   r_shank, ``T8`` -> torso, ``RightForeArm`` -> r_wrist); the hands and shoulders have
   no site and are listed as not used. MVNX holds no sensor rate, so the calibration
-  takes it from orientation.
+  takes it from orientation; the subject's height is MVN's body's unless ``--height`` says
+  otherwise. ``--truth TRUTH.npz`` also writes MVN's own solution of the
+  take (all 23 segments), so ``imucap replay SESSION.h5 --sensors ... --truth TRUTH.npz``
+  scores a re-run with a few of the suit's sensors against the whole suit's answer.
 
 Sensors map to sites by ``--map ID=SITE``, where ID is any name the sensor goes by: its
 device name or tag (x-IMU3 device name, DOT tag), its id (x-IMU3 serial, MT Manager
@@ -61,6 +64,7 @@ from drivers.ximu3 import read_log
 from drivers.xsens_export import LAYOUTS, detect_layout, read_exports
 from drivers.xsens_export.mvnx import MVN_SITES, is_mvnx, read_mvnx
 from drivers.xsens_export.mvnx import TITLE as MVNX_TITLE
+from inference.body.motion import Motion
 from inference.body.rotations import quat_conjugate, quat_multiply, quat_to_axis_angle
 from inference.body.skeleton import N_CONTACTS, SITES, parse_sites
 from inference.signals.resample import to_grid
@@ -148,6 +152,8 @@ class Imported:
     format: str = "ximu3"
     clock: str = "shared"
     ignored: list[str] = field(default_factory=list)
+    grid_t0: float = 0.0  # the log's time (s, its own clock) of the recording's frame 0
+    truth: str = ""
 
 
 def _unique(names: Sequence[str]) -> tuple[str, ...]:
@@ -231,9 +237,10 @@ def _align_clocks(by_site: dict[str, Source]) -> str:
     return "aligned at each device's first sample (clocks not shared)"
 
 
-def _on_grid(by_site: dict[str, Source], sites: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+def _on_grid(by_site: dict[str, Source], sites: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, float]:
     """(quat (n,S,4), vectors (n,S,3,3): specific force, gyro as logged and the rate for
-    calibration) of every device on one RATE grid, NaN where a device did not deliver."""
+    calibration, the grid's first time on the logs' clock) of every device on one RATE
+    grid, NaN where a device did not deliver."""
     logs = [by_site[s].log for s in sites]
     t0 = math.ceil(min(float(d.t[0]) for d in logs) * RATE) / RATE
     n = int(math.floor((max(float(d.t[-1]) for d in logs) - t0) * RATE)) + 1
@@ -246,7 +253,7 @@ def _on_grid(by_site: dict[str, Source], sites: tuple[str, ...]) -> tuple[np.nda
         keep = (idx >= 0) & (idx < n) & ok
         quat[idx[keep], k] = q[keep]
         vec[idx[keep], k] = v[keep]
-    return quat, vec
+    return quat, vec, t0
 
 
 def _record(out: str | Path, sites: tuple[str, ...], meta: dict[str, Any], quat: np.ndarray, acc: np.ndarray,
@@ -284,7 +291,7 @@ def import_sources(sources: Sequence[Source], out: str | Path, fmt: str, log: st
     by_site = {s: _check_acc(src) for s, src in _assign_sites(sources, mapping or {}).items()}
     sites = tuple(s for s in SITES if s in by_site)  # canonical order
     clock = _align_clocks(by_site)
-    quat, vec = _on_grid(by_site, sites)
+    quat, vec, t0 = _on_grid(by_site, sites)
     acc, gyro, cal_rate = vec[:, :, 0], vec[:, :, 1], vec[:, :, 2]
     present = np.all(np.isfinite(quat), axis=-1)
     cal = calibrate_standing(sites, quat, acc=acc, gyro=cal_rate, present=present, rate=RATE)
@@ -301,7 +308,7 @@ def import_sources(sources: Sequence[Source], out: str | Path, fmt: str, log: st
     devices = {s: _device_summary(by_site[s], present[:, k]) for k, s in enumerate(sites)}
     return Imported(Path(out), sites, n, round(n / RATE, 3), round(still / RATE, 3),
                     [round(float(x), 4) for x in cal.meta["forward_G"]], str(cal.meta["forward_from"]), devices,
-                    format=fmt, clock=clock)
+                    format=fmt, clock=clock, grid_t0=t0)
 
 
 def import_ximu3(log_dir: str | Path, out: str | Path, mapping: dict[str, str] | None = None,
@@ -323,10 +330,11 @@ def import_xsens(files: Sequence[str | Path], out: str | Path, layout: str | Non
 
 
 def import_mvnx(file: str | Path, out: str | Path, mapping: dict[str, str] | None = None,
-                height: float | None = None) -> Imported:
+                height: float | None = None, truth: str | Path | None = None) -> Imported:
     """An MVN take's MVNX export as a session recording at ``out`` (``import_sources``):
     the sensors at imucap's sites (by MVN label, or ``--map LABEL=SITE``); the others are
-    listed in ``ignored``."""
+    listed in ``ignored``. ``truth``: also write MVN's full-suit solution there
+    (``write_mvn_truth``)."""
     take = read_mvnx(file)
     mapping = mapping or {}
     labels = {d.name for d in take.logs}
@@ -345,9 +353,40 @@ def import_mvnx(file: str | Path, out: str | Path, mapping: dict[str, str] | Non
             unused.append(f"{d.name} ({site} is {chosen[site]} by --map)")
             continue
         sources.append(Source(d, (d.name, site), str(file)))
+    motion = None
+    if truth is not None or height is None:
+        from inference.body.motion import MotionFormatError
+        from inference.loaders.mvnx import load_mvnx
+
+        try:
+            motion = load_mvnx(file)
+        except MotionFormatError:
+            if truth is not None:
+                raise
+    if height is None and motion is not None:
+        height = round(float(motion.body.height), 3)  # MVN's body, as the subject was measured for the suit
     res = import_sources(sources, out, "mvnx", str(file), {s.ids[0]: s.ids[1] for s in sources}, height)
     res.ignored = unused
+    if truth is not None and motion is not None:
+        write_mvn_truth(motion, res, truth)
     return res
+
+
+def write_mvn_truth(motion: Motion, res: Imported, dest: str | Path) -> Path:
+    """MVN's own solution of the take (its 23 segments, ``inference.loaders.mvnx.load_mvnx``) as the
+    truth ``imucap replay --truth`` scores the imported recording against: turned from MVN's
+    world into the recording's (X the subject's forward at the standing start), on the
+    recording's clock, counted from the end of the standing start."""
+    from app.capture.simulate import save_truth
+    from inference.body.rotations import matrix_about_axis
+
+    fx, fy = res.forward_G[0], res.forward_G[1]
+    R = matrix_about_axis(np.array([0.0, 0.0, 1.0]), -math.atan2(fy, fx))
+    t0 = motion.meta["first_index"] / motion.fps - res.grid_t0
+    out = save_truth(dest, R @ motion.rot, motion.root @ R.T, motion.fps, t0, res.still_s - t0, motion.body.height,
+                     motion.body.offsets, res.sites, "standing start")
+    res.truth = str(out)
+    return out
 
 
 def _is_ximu3_log(path: Path) -> bool:
@@ -378,7 +417,8 @@ def _export_files(paths: Sequence[Path], fmt: str) -> tuple[list[Path], list[Pat
 
 
 def import_paths(paths: Sequence[str | Path], out: str | Path, fmt: str = "auto",
-                 mapping: dict[str, str] | None = None, height: float | None = None) -> Imported:
+                 mapping: dict[str, str] | None = None, height: float | None = None,
+                 truth: str | Path | None = None) -> Imported:
     """The CLI's import: an x-IMU3 log folder, or Xsens export folders and files (module docstring)."""
     paths = [Path(p) for p in paths]
     if fmt not in FORMATS:
@@ -390,7 +430,9 @@ def import_paths(paths: Sequence[str | Path], out: str | Path, fmt: str = "auto"
                          and (paths[0].suffix.lower() == ".mvnx" or is_mvnx(paths[0]))):
         if len(paths) != 1 or paths[0].is_dir():
             raise ValueError("an MVNX export is one file for the whole suit; give just that file")
-        return import_mvnx(paths[0], out, mapping, height)
+        return import_mvnx(paths[0], out, mapping, height, truth)
+    if truth is not None:
+        raise ValueError("--truth: only an MVN take (.mvnx) holds a full-body solution to score against")
     if fmt == "ximu3" or (fmt == "auto" and len(paths) == 1 and _is_ximu3_log(paths[0])):
         if len(paths) != 1:
             raise ValueError("an x-IMU3 log is one folder; give just that folder")
@@ -412,10 +454,11 @@ def _mapping(items: list[str]) -> dict[str, str]:
 
 
 def run_import(args: argparse.Namespace) -> int:
-    res = import_paths(args.logs, args.out, args.format, _mapping(args.map), args.height)
+    res = import_paths(args.logs, args.out, args.format, _mapping(args.map), args.height, args.truth)
     summary = {"recording": str(res.path), "format": res.format, "sites": list(res.sites), "frames": res.frames,
                "duration_s": res.duration_s, "still_start_s": res.still_s, "forward_G": res.forward_G,
-               "forward_from": res.forward_from, "clock": res.clock, "devices": res.devices, "ignored": res.ignored}
+               "forward_from": res.forward_from, "clock": res.clock, "devices": res.devices, "ignored": res.ignored,
+               **({"truth": res.truth} if res.truth else {})}
     if args.json:
         print(json.dumps(summary))
     else:
@@ -439,6 +482,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--map", action="append", default=[], metavar="ID=SITE",
                    help="sensor name, id or file stem -> site, where the name does not say it (repeatable)")
     p.add_argument("--height", type=float, default=None, help="the subject's height in m (stored for replay)")
+    p.add_argument("--truth", type=Path, default=None, metavar="TRUTH.npz",
+                   help="with an MVN take: also write MVN's own full-suit solution, for imucap replay --truth")
     p.add_argument("--json", action="store_true", help="print one JSON summary on stdout")
     p.set_defaults(func=run_import)
 

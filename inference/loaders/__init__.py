@@ -1,4 +1,4 @@
-"""Motion files -> `Motion`: BVH, ASF/AMC and AMASS .npz, plain or gzipped.
+"""Motion files -> `Motion`: BVH, ASF/AMC, AMASS .npz (plain or gzipped) and Xsens MVN takes (.mvnx).
 
 `load_motion` picks the reader from the file name; `find_motion_files` walks folders the
 way `--data PATH...` on the CLI means them."""
@@ -9,7 +9,7 @@ from pathlib import Path
 
 from inference.body.motion import Motion, MotionFormatError
 
-MOTION_SUFFIXES = (".bvh", ".bvh.gz", ".amc", ".amc.gz", ".npz")
+MOTION_SUFFIXES = (".bvh", ".bvh.gz", ".amc", ".amc.gz", ".npz", ".mvnx")
 
 
 def _kind(path: Path) -> str | None:
@@ -51,6 +51,10 @@ def load_motion(path: str | Path) -> Motion:
             from inference.loaders.amass import load_amass
 
             motion = load_amass(path)
+        elif kind == "mvnx":
+            from inference.loaders.mvnx import load_mvnx
+
+            motion = load_mvnx(path)
         else:
             raise MotionFormatError(str(path), f"unknown motion format; supported: {', '.join(MOTION_SUFFIXES)}")
     except MotionFormatError:

@@ -130,6 +130,18 @@ MIXAMO = JointMap(
     }),
 )
 
+# Xsens MVN's 23 segments (inference/loaders/mvnx.py): zero pose a T-pose in our axes, so
+# the T-pose rotations are nearly identities. L3 lies between our spine1 and spine2 and
+# drives none (the chest, where MVN's T8 sensor sits, is our spine3).
+MVN = JointMap(
+    name="mvn23",
+    segments=_sides({
+        "pelvis": "Pelvis", "spine1": "L5", "spine2": "T12", "spine3": "T8", "neck": "Neck", "head": "Head",
+        "collar": "{Side}Shoulder", "upperarm": "{Side}UpperArm", "forearm": "{Side}ForeArm", "hand": "{Side}Hand",
+        "thigh": "{Side}UpperLeg", "shank": "{Side}LowerLeg", "foot": "{Side}Foot", "toes": "{Side}Toe",
+    }),
+)
+
 # Acclaim ASF (HDM05, CMU): bone names; each bone's rotation acts at its start joint.
 # The forearm is two bones on one line: ``radius`` (the elbow, a hinge: dof rx) and
 # ``wrist`` (pronation, a twist about the forearm: dof ry). A sensor strapped near the

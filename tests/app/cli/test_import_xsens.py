@@ -145,7 +145,7 @@ MVN_LABELS = {"pelvis": "Pelvis", "torso": "T8", "head": "Head", "l_wrist": "Lef
 def mvnx_file(motion, tmp_path_factory):
     sig = synthesize(motion, NOISE, rng=7, sites=tuple(MVN_LABELS))
     return write_mvnx(sig, tmp_path_factory.mktemp("mvn") / "take-007.mvnx", MVN_LABELS,
-                      extra={"RightHand": "r_wrist", "LeftShoulder": "torso"}, drop=[200, 201])
+                      extra={"RightHand": "r_wrist", "LeftShoulder": "torso"}, drop=[200, 201], motion=motion)
 
 
 def test_an_mvn_take_imports_its_sensors_at_their_sites_and_replays(mvnx_file, motion, tmp_path, capsys):
@@ -171,6 +171,33 @@ def test_an_mvn_take_imports_its_sensors_at_their_sites_and_replays(mvnx_file, m
     assert any(u.startswith("RightForeArm (r_wrist is RightHand") for u in out["ignored"])
     assert main(["import", str(mvnx_file), "--out", str(tmp_path / "x.h5"), "--map", "RightPinky=r_wrist"]) != 0
     assert "no sensor 'RightPinky'" in capsys.readouterr().err
+
+
+def test_an_mvn_takes_own_solution_is_the_truth_for_a_sparse_rerun(mvnx_file, mt_folder, motion, tmp_path, capsys):
+    """``--truth``: MVN's 23 segments, turned into the recording's world and clock, score a
+    re-run with three of the take's sensors; the file's body gives the height."""
+    from app.capture.simulate import read_truth
+
+    out = _import(capsys, mvnx_file, "--out", tmp_path / "mvn.h5", "--truth", tmp_path / "truth.npz")
+    assert out["truth"] == str(tmp_path / "truth.npz")
+    assert read_recording(tmp_path / "mvn.h5").metadata["body_height_m"] == pytest.approx(1.75, abs=0.05)
+    truth = read_truth(tmp_path / "truth.npz")
+    t = np.arange(0.0, 7.0, 0.5)  # recording seconds: MVN's frame k is at k / 60 s of the take
+    played = TO_FORWARD @ motion.rot[np.rint(t * 60).astype(int)]
+    apart = np.degrees(matrix_angle_between(truth.rot[truth.frame_at(t)], played))
+    assert apart.max() < 4.0  # the standing start's forward, within the calibration's error
+    assert truth.activity_start + truth.t0 == pytest.approx(out["still_start_s"])
+    reps = {}
+    for sensors in ("pelvis,l_wrist,r_wrist", ",".join(MVN_LABELS)):
+        assert main(["replay", str(tmp_path / "mvn.h5"), "--truth", str(tmp_path / "truth.npz"), "--sensors", sensors,
+                     "--json", "--no-progress", "--steps", "1"]) == 0
+        reps[sensors] = json.loads(capsys.readouterr().out)
+    three, nine = reps.values()
+    assert three["truth_frames"] > 100 and abs(three["truth_lag_s"]) < 0.1
+    assert nine["ga_deg"] < three["ga_deg"] < 25.0 and nine["ga_deg"] < 10.0
+    assert main(["import", str(mt_folder), "--out", str(tmp_path / "x.h5"), "--truth", str(tmp_path / "t.npz"),
+                 *_mt_maps()]) != 0
+    assert "only an MVN take" in capsys.readouterr().err
 
 
 def test_sensors_without_a_site_are_refused_with_the_way_out(mt_folder, dot_folder, tmp_path, capsys):
