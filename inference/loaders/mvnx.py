@@ -13,6 +13,10 @@ the zero pose follows from the points alone. At zero rotation MVN's body stands 
 T-pose, X forward, Y left, Z up (the file's ``identity`` frame), the world is Z up, and
 each ``type="normal"`` frame gives every segment's ``orientation`` (w, x, y, z) and
 ``position`` (its origin, metres) in that world.
+
+``drivers.xsens_export.mvnx`` streams the same files for their sensors. The two readers
+share their few lines of XML plumbing (local tag names, a list of numbers) by copy, not
+import: drivers and inference depend on nothing of ours (DESIGN.md).
 """
 
 from __future__ import annotations
