@@ -358,8 +358,8 @@ def import_mvnx(file: str | Path, out: str | Path, mapping: dict[str, str] | Non
         from inference.body.motion import MotionFormatError
         from inference.loaders.mvnx import load_mvnx
 
-        try:
-            motion = load_mvnx(file)
+        try:  # the whole take for the truth; for the height, the body is in its first frames
+            motion = load_mvnx(file, max_frames=None if truth is not None else 2)
         except MotionFormatError:
             if truth is not None:
                 raise

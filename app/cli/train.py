@@ -119,11 +119,11 @@ def run(args: argparse.Namespace) -> int:
                                    ("noise", args.noise), ("contact_threshold", args.contact_threshold),
                                    ("mirror", args.mirror))
                  if v is not None}
+        if args.default_steps is not None and (args.blend is not None or args.retag is not None):
+            poser["default_steps"] = args.default_steps  # a model file's defaults (export_model takes it apart)
         if args.blend is not None:
             from inference.model.files import blend_models
 
-            if args.default_steps is not None:
-                poser["default_steps"] = args.default_steps
             blend_models(args.blend[0], args.blend[1], args.blend_weight, args.export, meta=poser)
             print(json.dumps({"exported": str(args.export), "blend": [str(p) for p in args.blend],
                               "weight": args.blend_weight, **poser}))
@@ -131,8 +131,6 @@ def run(args: argparse.Namespace) -> int:
         if args.retag is not None:
             from inference.model.files import retag_model
 
-            if args.default_steps is not None:
-                poser["default_steps"] = args.default_steps
             retag_model(args.retag, args.export, poser, reading=args.reading)
             print(json.dumps({"exported": str(args.export), "retagged": str(args.retag), **poser}))
             return 0

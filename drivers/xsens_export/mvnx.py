@@ -89,8 +89,8 @@ def is_mvnx(path: str | os.PathLike) -> bool:
 
 
 def read_mvnx(path: str | os.PathLike) -> MvnxTake:
-    """Every sensor of an MVNX take as a DeviceLog: times from the normal frames' ``time``
-    (s from the take's start), orientation as stored, specific force in the sensor's frame
+    """Every sensor of an MVNX take as a DeviceLog: times from the normal frames
+    (``_frame_time``, s from the take's start), orientation as stored, specific force in the sensor's frame
     (the free acceleration with gravity put back, turned by the sensor's orientation), no
     gyro. Streams the file (a take of minutes is hundreds of MB of XML)."""
     labels: list[str] = []
@@ -197,12 +197,11 @@ def _take(path: str | os.PathLike, labels: list[str], rate: float, t: list[float
     logs = []
     for k, label in enumerate(labels):
         q, ok = normalise(Q[:, k])
-        acc = rotate(conjugate(q), F[:, k] + np.array([0.0, 0.0, G]))
-        keep = ok
-        log_skipped = {**{key: v for key, v in skipped.items() if v}, "no_orientation": int((~ok).sum())}
-        log_skipped = {key: v for key, v in log_skipped.items() if v}
-        logs.append(DeviceLog(label, label, tt[keep], q[keep], acc[keep], np.full((int(keep.sum()), 3), np.nan),
-                              skipped=log_skipped, info={**info, "site": MVN_SITES.get(label, "")}))
+        acc = rotate(conjugate(q[ok]), F[ok, k] + np.array([0.0, 0.0, G]))
+        counts = {**skipped, "no_orientation": int((~ok).sum())}
+        logs.append(DeviceLog(label, label, tt[ok], q[ok], acc, np.full((len(acc), 3), np.nan),
+                              skipped={key: v for key, v in counts.items() if v},
+                              info={**info, "site": MVN_SITES.get(label, "")}))
     return MvnxTake(logs, rate, info, {key: v for key, v in skipped.items() if v})
 
 

@@ -61,10 +61,11 @@ def _vec(elem: ET.Element | None, n: int) -> np.ndarray | None:
     return v if v.size == n and np.all(np.isfinite(v)) else None
 
 
-def parse_mvnx(path: str | os.PathLike) -> tuple[SourceSkeleton, int, int]:
+def parse_mvnx(path: str | os.PathLike, max_frames: int | None = None) -> tuple[SourceSkeleton, int, int]:
     """(the take's segments as a source skeleton, the first normal frame's index, frames
     held over a skipped index): zero pose from the segments' joint points, global
-    rotations and positions from the normal frames (streamed)."""
+    rotations and positions from the normal frames (streamed; ``max_frames``: stop reading
+    after that many, when only the body is wanted)."""
     spath = os.fspath(path)
     labels: list[str] = []
     points: dict[str, dict[str, np.ndarray]] = {}
@@ -115,6 +116,8 @@ def parse_mvnx(path: str | os.PathLike) -> tuple[SourceSkeleton, int, int]:
                         index.append(k)
                 if open_elems:
                     open_elems[-1].remove(elem)
+                if max_frames is not None and len(quats) >= max_frames:
+                    break
     except MotionFormatError:
         raise
     except (ET.ParseError, LookupError, ValueError) as exc:
@@ -143,6 +146,9 @@ def parse_mvnx(path: str | os.PathLike) -> tuple[SourceSkeleton, int, int]:
         rest[j] = rest[parents[-1]] + points[parent][joint]
     end_sites = {names.index(s): rest[names.index(s)] + points[s][p] for s, p in END_POINTS.items() if p in points[s]}
     # a frame MVN left out (its index skipped) holds the one before, so frame k stays at k / fps
+    if index[-1] - index[0] + 1 > 2 * len(index):
+        raise MotionFormatError(spath, f"frame indices {index[0]}..{index[-1]} for {len(index)} frames: more than "
+                                       "half the take is missing")
     at = np.searchsorted(index, np.arange(index[0], index[-1] + 1), side="right") - 1
     Q = np.stack(quats)[at][:, order]
     glob = quat_to_matrix(Q / np.linalg.norm(Q, axis=-1, keepdims=True))
@@ -151,11 +157,12 @@ def parse_mvnx(path: str | os.PathLike) -> tuple[SourceSkeleton, int, int]:
     return src, index[0], len(at) - len(index)
 
 
-def load_mvnx(path: str | os.PathLike) -> Motion:
+def load_mvnx(path: str | os.PathLike, max_frames: int | None = None) -> Motion:
     """The take as our Motion, in MVN's world (Z up, MVN's heading); ``meta`` keeps the
     first frame's index (``first_index``: frame 0 is at ``first_index / fps`` s of the take,
-    as the sensors' times are) and how many frames were held over gaps (``held``)."""
-    src, first, held = parse_mvnx(path)
+    as the sensors' times are) and how many frames were held over gaps (``held``).
+    ``max_frames``: only the take's first frames, for its body."""
+    src, first, held = parse_mvnx(path, max_frames)
     name = Path(path).name.removesuffix(".mvnx")
     return retarget(src, MVN, 1.0, world_map(np.array([0.0, 0.0, 1.0])), name=name, source=os.fspath(path),
                     meta={"format": "mvnx", "skeleton": MVN.name, "layout": MVN.name, "first_index": first,

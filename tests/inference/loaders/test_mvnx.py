@@ -49,3 +49,10 @@ def test_a_take_without_the_whole_body_is_named(walk, tmp_path):
     path = write_mvnx(sig, tmp_path / "sensors_only.mvnx", LABELS)  # no segments but the sensors'
     with pytest.raises(MotionFormatError, match="not a full-body MVN take: no segment"):
         load_motion(path)
+
+
+def test_a_take_missing_most_of_its_frames_is_refused(walk, tmp_path):
+    """Holding frames over a gap keeps the clock; a take whose indices span far more frames
+    than it holds (a damaged index) is named instead of filled."""
+    with pytest.raises(MotionFormatError, match="more than half the take is missing"):
+        load_motion(_take(walk, tmp_path / "holes.mvnx", drop=range(10, 170)))
