@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import random
 import socket
 import subprocess
 import sys
@@ -28,6 +27,7 @@ sys.path.insert(0, str(REPO))
 
 from app.capture.simulate import read_truth  # noqa: E402
 from app.recording import read_recording  # noqa: E402
+from sim_devices.devices.can_loopback import loopback_channel  # noqa: E402
 
 CLI = [sys.executable, "-m", "app.cli.main"]
 
@@ -36,7 +36,7 @@ def setup_text(tmp: Path) -> str:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    group = f"239.{random.randint(1, 254)}.{random.randint(1, 254)}.{random.randint(1, 254)}"
+    can_bus = loopback_channel()
     return f"""[subject]
 id = "bench"
 height = 1.75
@@ -44,8 +44,8 @@ height = 1.75
 [sensors]
 pelvis  = "xbus://{tmp}/pelvis?baud=115200"
 head    = "bno08x-rvc://{tmp}/head"
-l_wrist = "xsens-can://udp_multicast/{group}?id_offset=0x100"
-r_wrist = "xsens-can://udp_multicast/{group}?id_offset=0x200"
+l_wrist = "xsens-can://remote/{can_bus}?id_offset=0x100"
+r_wrist = "xsens-can://remote/{can_bus}?id_offset=0x200"
 l_shank = "bno08x-rvc://{tmp}/l_shank"
 r_shank = "xbus://{tmp}/r_shank?baud=115200"
 

@@ -4,14 +4,15 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
-if ! command -v xvfb-run >/dev/null; then
-  # Xvfb and the libraries Qt's xcb platform plugin needs
+if ! command -v xvfb-run >/dev/null || ! command -v strace >/dev/null; then
+  # Xvfb and the libraries Qt's xcb platform plugin needs; strace for the tests that watch
+  # where the simulator and a capture send (tests/socket_watch.py)
   export DEBIAN_FRONTEND=noninteractive
   SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
   $SUDO apt-get update -qq
   $SUDO apt-get install -y -qq xvfb xauth libgl1-mesa-dri libegl1 libxkbcommon-x11-0 libxcb-cursor0 \
     libxcb-icccm4 libxcb-keysyms1 libxcb-image0 libxcb-render-util0 libxcb-xinerama0 libxcb-randr0 \
-    libxcb-shape0 libxcb-xkb1 libdbus-1-3 libfontconfig1 >/dev/null
+    libxcb-shape0 libxcb-xkb1 libdbus-1-3 libfontconfig1 strace >/dev/null
 fi
 .venv/bin/ruff check .
 XVFB=(xvfb-run -a -s "-screen 0 1280x1024x24")

@@ -16,6 +16,7 @@ from typing import Any
 from inference.signals.site_signals import SiteSignals
 
 from .devices import INSOLE_PROTOCOLS, DeviceFaults, SimDevice, make_sim_device
+from .devices.can_loopback import REMOTE_INTERFACE, loopback_channel
 
 INSOLES = "insoles"
 
@@ -35,7 +36,9 @@ class SimulatedSuit:
     """``assignment`` maps site -> protocol (``{"pelvis": "xbus", "insoles": "moticon-udp"}``).
 
     CAN devices share one bus, each moved to its own identifier block (0x100 per
-    sensor), as several MTi-600 on one real bus are configured. Every device gets
+    sensor), as several MTi-600 on one real bus are configured. The bus is python-can's
+    in-process ``virtual`` one, or with ``can_interface="remote"`` one served on loopback
+    for another process (``can_channel`` HOST:PORT; a free port when left out). Every device gets
     a different clock offset and drift, so the hub's clock fit is exercised.
     """
 
@@ -50,7 +53,10 @@ class SimulatedSuit:
     ) -> None:
         self.signals = signals
         self.devices: dict[str, SuitDevice] = {}
-        channel = can_channel or f"imucap-suit-{uuid.uuid4().hex[:8]}"
+        if can_interface == REMOTE_INTERFACE:
+            channel = loopback_channel(can_channel)  # one server, one port, for the suit's MTis
+        else:
+            channel = can_channel or f"imucap-suit-{uuid.uuid4().hex[:8]}"
         n_can = 0
         for k, (site, protocol) in enumerate(assignment.items()):
             f = faults.get(site) if isinstance(faults, dict) else faults

@@ -7,12 +7,13 @@ has with hardware: the devices on one side of their wires, imucap on the other.
 
 The parent hands over the synthesized signals (a private temporary file: the child must
 replay exactly what the demo scores against), the child starts the suit and answers with
-one JSON line: each device's URL and clock start. CAN devices go on a UDP multicast group
-(python-can's ``virtual`` bus is per process). The child runs until its standard input
+one JSON line: each device's URL and clock start. CAN devices go on a bus the child serves
+on 127.0.0.1 (``sim_devices.devices.can_loopback``: python-can's ``virtual`` bus is per
+process, and multicast would leave the machine). The child runs until its standard input
 closes, which also happens when the parent dies, so no suit outlives its demo; on the way
 out it prints each device's packet counts.
 
-    python -m sim_devices.suit_process SIGNALS.pkl ASSIGNMENT_JSON SEED [CAN_GROUP]
+    python -m sim_devices.suit_process SIGNALS.pkl ASSIGNMENT_JSON SEED [CAN_HOST:PORT]
 """
 
 from __future__ import annotations
@@ -20,7 +21,6 @@ from __future__ import annotations
 import json
 import os
 import pickle
-import random
 import selectors
 import subprocess
 import sys
@@ -33,22 +33,17 @@ from inference.signals.site_signals import SiteSignals
 START_TIMEOUT_S = 30.0
 
 
-def random_can_group() -> str:
-    """An organisation-local multicast group (239/8) of its own, so two demos do not hear each other."""
-    return f"239.{random.randint(1, 254)}.{random.randint(1, 254)}.{random.randint(1, 254)}"
-
-
 class SuitProcess:
     """A ``SimulatedSuit`` of ``assignment`` (site -> protocol) replaying ``signals`` in a child
     process. ``start()`` returns once every device is up; ``urls()`` and ``t0s`` are then the
     child's; ``stop()`` ends the child and keeps its last packet counts in ``stats``."""
 
     def __init__(self, signals: SiteSignals, assignment: dict[str, str], seed: int = 0,
-                 can_group: str | None = None) -> None:
+                 can_channel: str = "127.0.0.1:0") -> None:
         self.signals = signals
         self.assignment = dict(assignment)
         self.seed = seed
-        self.can_group = can_group or random_can_group()
+        self.can_channel = can_channel  # port 0: the child takes a free one
         self.proc: subprocess.Popen[str] | None = None
         self._urls: dict[str, str] = {}
         self.t0s: dict[str, float] = {}
@@ -62,7 +57,7 @@ class SuitProcess:
             with os.fdopen(fd, "wb") as f:
                 pickle.dump(self.signals, f, protocol=pickle.HIGHEST_PROTOCOL)
             cmd = [sys.executable, "-m", "sim_devices.suit_process", path, json.dumps(self.assignment),
-                   str(self.seed), self.can_group]
+                   str(self.seed), self.can_channel]
             self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                          text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
             self._stderr_thread = threading.Thread(target=self._drain_stderr, name="suit-stderr", daemon=True)
@@ -131,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
 
     args = sys.argv[1:] if argv is None else argv
     if len(args) not in (3, 4):
-        print("usage: python -m sim_devices.suit_process SIGNALS.pkl ASSIGNMENT_JSON SEED [CAN_GROUP]",
+        print("usage: python -m sim_devices.suit_process SIGNALS.pkl ASSIGNMENT_JSON SEED [CAN_HOST:PORT]",
               file=sys.stderr)
         return 2
     with open(args[0], "rb") as f:
@@ -139,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
     assignment = json.loads(args[1])
     kw: dict[str, Any] = {}
     if len(args) == 4:
-        kw.update(can_interface="udp_multicast", can_channel=args[3])
+        kw.update(can_interface="remote", can_channel=args[3])
     suit = SimulatedSuit(signals, assignment, seed=int(args[2]), **kw).start()
     try:
         t0 = {s: d.sim.started_at for s, d in suit.devices.items()}

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from app.capture.setup_file import Setup
+from app.capture.twins import simulation_problem
 from calibration.protocol import Protocol, WalkProtocol, synthesize_session, synthesize_walk_session
 from drivers.urls import parse_url
 from inference.body.motion import Motion
@@ -80,16 +81,20 @@ class SimulatedSubject:
 
 
 def sim_device_for(url: str, name: str, signals: SiteSignals, faults: DeviceFaults) -> SimDevice:
-    """The simulated device that answers at ``url`` (its scheme decides the protocol)."""
+    """The simulated device that answers at ``url`` (its scheme decides the protocol);
+    ``ValueError`` naming the URL when no simulator can serve it (``twins.simulation_problem``)."""
+    problem = simulation_problem(url)
+    if problem is not None:
+        raise ValueError(f"{name} = {url}: {problem}")
     u = parse_url(url)
     kw: dict[str, Any] = {}
     if u.scheme in ("xbus", "bno08x-rvc"):
+        Path(u.path).parent.mkdir(parents=True, exist_ok=True)  # e.g. /tmp/imucap-sim of the example setup
         kw["link_path"] = u.path
     elif u.scheme == "xsens-can":
         kw.update(interface=u.netloc, channel=u.path.lstrip("/"), id_offset=u.get_int("id_offset", 0))
     elif u.scheme == "dualsense":
-        if u.netloc != "unix":
-            raise ValueError(f"{url}: a simulated DualSense needs the HID seam's socket: dualsense://unix/PATH")
+        Path(u.path).parent.mkdir(parents=True, exist_ok=True)
         kw["socket_path"] = u.path
     elif u.scheme == "moticon-udp":
         host, _, port = u.netloc.rpartition(":")
@@ -120,8 +125,15 @@ class SimulatedSetup:
         self.t0: float | None = None
 
     def start(self) -> SimulatedSetup:
-        for d in self.devices.values():
-            d.start()
+        started: list[SimDevice] = []
+        try:
+            for d in self.devices.values():
+                d.start()
+                started.append(d)
+        except BaseException:
+            for d in started:  # a port already taken: leave nothing half up
+                d.stop()
+            raise
         self.t0 = float(np.mean([d.started_at for d in self.devices.values()]))
         return self
 

@@ -124,6 +124,14 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"imucap capture: {exc}", file=sys.stderr)
         return 2
+    if args.wait:
+        from app.capture.waiting import wait_for_devices
+
+        try:
+            wait_for_devices(setup.urls(), args.wait, say=lambda m: print(f"imucap capture: {m}", file=sys.stderr))
+        except (OSError, ValueError) as exc:
+            print(f"imucap capture: {exc}", file=sys.stderr)
+            return 2
     headless = args.headless or not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
     term = _Terminal()
     options = CaptureOptions(record=record, calibration=cal, countdown=args.countdown, timeout=args.timeout,
@@ -185,6 +193,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seconds", type=float, default=0.0, help="stop after this long (0: until Ctrl-C)")
     p.add_argument("--json", action="store_true", help="print one JSON object at the end")
     p.add_argument("--calibration", help="reuse the calibration of an earlier recording (or a calibration JSON)")
+    p.add_argument("--wait", type=float, default=0.0, metavar="S",
+                   help="wait up to S seconds for devices that are not there yet (switched on, or a simulator "
+                        "starting); default: a missing device is an error at once")
     p.add_argument("--countdown", type=float, default=3.0, help="seconds counted down before the first step")
     p.add_argument("--timeout", type=float, default=30.0, help="seconds a calibration step may wait")
     p.add_argument("--latency", default="centred", choices=("centred", "low"),

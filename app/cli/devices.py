@@ -7,6 +7,7 @@ import json
 import sys
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 from app.capture.discovery import KNOWN_USB, discover  # noqa: F401 (the CLI's names)
@@ -101,6 +102,10 @@ def cmd_simulate_setup(args: argparse.Namespace) -> int:
 
     try:
         setup = load_setup(args.setup)
+        if args.twin_setup:
+            setup = _write_twin_setup(setup, Path(args.twin_setup))
+        else:
+            _check_simulatable(setup)
         unplug = [Unplug.parse(u) for u in args.unplug]
         activity = _activity(args.motion, args.activity_seconds, args.seed, setup.subject.height_m)
         noise = NoiseModel.typical() if args.noise == "typical" else NoiseModel()
@@ -128,6 +133,31 @@ def cmd_simulate_setup(args: argparse.Namespace) -> int:
             sim.write_send_logs(args.log_sends)
     print(json.dumps(sim.stats()), file=sys.stderr)
     return 0
+
+
+def _check_simulatable(setup) -> None:
+    from app.capture.twins import EXAMPLE, simulation_problem
+
+    for name, url in setup.urls().items():
+        problem = simulation_problem(url)
+        if problem is not None:
+            raise ValueError(f"{name} = {url}: {problem}; to simulate this setup add --twin-setup SIM.toml "
+                             f"(the same setup over simulated devices, for imucap capture --setup SIM.toml), "
+                             f"or start from {EXAMPLE}")
+
+
+def _write_twin_setup(setup, path: Path):
+    """Write ``setup`` over simulated devices to ``path`` and return it as loaded from there."""
+    import tempfile
+
+    from app.capture.setup_file import load_setup, save_setup
+    from app.capture.twins import twin_setup
+
+    twin = twin_setup(setup, Path(tempfile.mkdtemp(prefix="imucap-sim-")))
+    save_setup(twin, path)
+    print(f"wrote {path}: this setup over simulated devices; capture with imucap capture --setup {path}",
+          flush=True)
+    return load_setup(path)
 
 
 def _stdin_closed() -> threading.Event:
@@ -186,8 +216,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     print(sim.url, flush=True)
     if args.protocol == "xsens-can" and args.can_interface == "virtual":
         print(
-            "note: python-can's virtual bus is per process; use --can-interface udp_multicast "
-            "(or socketcan with a vcan device) to reach another process",
+            "note: python-can's virtual bus is per process; to reach another process use "
+            "--can-interface remote --can-channel 127.0.0.1:PORT (served here on loopback), "
+            "or socketcan with a vcan device",
             file=sys.stderr,
         )
     try:
@@ -226,6 +257,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ps.add_argument("--setup", help="make every device of this setup file appear at its URL, worn by a simulated "
                                     "subject who follows the setup's calibration protocol, then --motion")
     ps.add_argument("--truth", help="with --setup: write the motion played here (.npz), for imucap replay --truth")
+    ps.add_argument("--twin-setup", metavar="SIM.toml",
+                    help="with --setup: write the same setup over simulated devices (for a setup of real "
+                         "devices' URLs) and serve that; capture with imucap capture --setup SIM.toml")
     ps.add_argument("--log-sends", metavar="FILE.npz",
                     help="with --setup: on exit, write when each device sent each packet (for imucap bench "
                          "--end-to-end, which runs the suit in its own process)")
@@ -250,7 +284,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     ps.add_argument("--link", help="path of the serial port link to create (xbus, bno08x-rvc)")
     ps.add_argument("--port", type=int, help="UDP port to send to (moticon-udp)")
-    ps.add_argument("--can-interface", default="virtual")
+    ps.add_argument("--can-interface", default="virtual",
+                    help="virtual (this process only), remote (served on --can-channel HOST:PORT, loopback), "
+                         "or a python-can interface")
     ps.add_argument("--can-channel", default="imucap")
     ps.add_argument("--seed", type=int, default=0)
     ps.set_defaults(func=cmd_simulate)

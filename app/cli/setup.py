@@ -1,8 +1,10 @@
-"""`imucap setup new|check FILE`: write a setup file by moving each sensor when asked;
-check that every device a setup file names answers, fast enough, before a capture.
+"""`imucap setup new|check|example FILE`: write a setup file by moving each sensor when asked;
+check that every device a setup file names answers, fast enough, before a capture; or
+write the simulated suit's setup, for trying imucap without sensors.
 
     imucap setup new FILE [--url URL ...] [--sites SITE,...] [--seconds-per-site S] [--force]
     imucap setup check FILE [--seconds S] [--json]
+    imucap setup example FILE [--force]
 
 `setup new` asks for the subject, then names each site in turn ("move the sensor for
 l_wrist now"): the device that moves is put at that site, never twice; Enter skips a
@@ -228,6 +230,22 @@ def cmd_new(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_example(args: argparse.Namespace) -> int:
+    """The setup of examples/simulated_suit.toml (shipped with the package), which
+    ``imucap devices simulate --setup`` serves and ``imucap capture --setup`` reads as it is."""
+    from importlib.resources import files
+
+    path = Path(args.file)
+    refuse = _target_problem(path, args.force)
+    if refuse:
+        print(f"imucap setup example: {refuse}", file=sys.stderr)
+        return 2
+    path.write_text((files("app.capture") / "simulated_suit.toml").read_text(encoding="utf-8"), encoding="utf-8")
+    print(f"wrote {path}: a simulated suit (6 sensors over 4 protocols, insoles); "
+          f"imucap devices simulate --setup {path} serves its devices")
+    return 0
+
+
 def _target_problem(path: Path, force: bool) -> str | None:
     folder = path.parent if str(path.parent) else Path(".")
     if path.exists() and not force:
@@ -303,7 +321,8 @@ def print_report(report) -> None:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("setup", help="write a setup file by moving each sensor (new); check one (check)")
+    p = subparsers.add_parser("setup", help="write a setup file by moving each sensor (new); check one (check); "
+                                            "the simulated suit's (example)")
     sub = p.add_subparsers(dest="setup_command", required=True)
 
     pn = sub.add_parser("new", help="interactive: subject, then move each site's sensor when asked")
@@ -320,3 +339,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     pc.add_argument("--seconds", type=float, default=3.0, help="read each device this long")
     pc.add_argument("--json", action="store_true", help="one JSON object")
     pc.set_defaults(func=cmd_check)
+
+    pe = sub.add_parser("example", help="write the simulated suit's setup (every device can be simulated: no "
+                                        "hardware needed)")
+    pe.add_argument("file", help="the setup file to write (TOML)")
+    pe.add_argument("--force", action="store_true", help="replace FILE when it exists")
+    pe.set_defaults(func=cmd_example)

@@ -164,7 +164,8 @@ class MainWindow(QtWidgets.QMainWindow):
     def simulate_devices(self, protocol: str) -> None:
         """Simulated sensors at the chosen sites, started now so they can be checked and
         identified; the capture restarts them so the subject begins with the protocol."""
-        from app.gui.simulated import simulated_setup, start_simulation
+        from app.capture.twins import simulated_setup
+        from app.gui.simulated import start_simulation
 
         d = self.model.draft
         if not d.sites:

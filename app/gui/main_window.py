@@ -16,7 +16,7 @@ from app.gui.main import MainWindow, run_window
 
 def start_demo(win: MainWindow, cfg: DemoConfig) -> None:
     """Show the demo suit's setup and start it: model, simulated devices, capture."""
-    from app.gui.simulated import simulated_setup
+    from app.capture.twins import simulated_setup
 
     setup = simulated_setup(tuple(cfg.sensors), cfg.protocol, cfg.insoles, model=cfg.model, steps=cfg.steps,
                             recordings=Path("recordings").resolve())

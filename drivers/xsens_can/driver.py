@@ -60,8 +60,8 @@ class XsensCanDevice(Device):
             kwargs["bitrate"] = self.bitrate
         try:
             self._bus = BUSES.attach(self.interface, self.channel, kwargs, owned_ids(self.id_offset))
-        except (can.CanError, ImportError) as exc:
-            raise DeviceGone(f"cannot open CAN {self.interface}/{self.channel}: {exc}") from exc
+        except Exception as exc:  # interfaces raise their own types (refused, no such channel)
+            raise DeviceGone(f"cannot open CAN {self.interface}/{self.channel}: {exc or type(exc).__name__}") from exc
         self._asm = xcan.GroupAssembler()
         self._unwrap.reset()
 

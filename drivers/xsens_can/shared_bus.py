@@ -148,8 +148,10 @@ class SharedBus:
         self._shut = True
         try:
             self.bus.shutdown()
-        except (can.CanError, OSError):
-            pass  # a broken bus may fail to close; it is gone either way
+        except Exception:  # a broken bus may fail to close, with its interface's own error; it is gone either way
+            # python-can's finaliser would call the failing shutdown again, from the garbage collector
+            # (python-can-remote's does once its server has gone): mark it shut down as BusABC does
+            can.BusABC.shutdown(self.bus)
 
     # --- receiving ------------------------------------------------------------------------------------
     def recv(self, tap: Tap, timeout: float | None) -> can.Message | None:
@@ -201,7 +203,7 @@ class SharedBus:
         self.lock.release()
         try:
             msgs, exc = self._pull(timeout), None
-        except (can.CanError, OSError) as e:
+        except Exception as e:  # a bus that raises, whatever its interface's type, is broken
             msgs, exc = [], e
             self.registry.forget(self)  # outside our lock: the registry's lock comes first
         finally:
@@ -253,7 +255,7 @@ class SharedBus:
         try:
             with self._send_lock:
                 self.bus.send(msg)
-        except can.CanError as exc:
+        except Exception as exc:  # as in _read_as_leader: any interface's failure
             raise DeviceGone(f"CAN send on {self.key[0]}/{self.key[1]}: {exc}") from exc
 
 

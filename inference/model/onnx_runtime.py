@@ -27,6 +27,12 @@ from torch import Tensor, nn
 RUNTIMES = ("torch", "onnx", "auto")
 OPSET = 17
 
+# ONNX Runtime's Linux build carries Microsoft's 1DS telemetry, which resolves its event
+# host from a thread of its own some seconds after the first session (two DNS queries per
+# live run, seen with strace). imucap sends nothing off the machine that its user did not
+# ask for. Read once, when onnxruntime is first imported: every import of it is below.
+os.environ.setdefault("ORT_DISABLE_TELEMETRY", "1")
+
 
 def onnxruntime_available() -> bool:
     """Whether the ONNX path can run here: torch exports the model with ``onnx`` and

@@ -17,6 +17,7 @@ from drivers.xsens_can import protocol as xcan
 from drivers.xsens_can.shared_bus import BusRegistry, Tap
 
 from .base import DeviceFaults, InsoleSource, SignalSource, SimDevice
+from .can_loopback import REMOTE_INTERFACE, SERVERS
 
 G = 9.80665
 
@@ -33,7 +34,12 @@ class SimXsensCan(SimDevice):
     python-can message path). A corrupted packet becomes a frame with a wrong
     length, which is what a CAN receiver can see (the CRC catches bit flips).
     The MTis on one channel share one sending bus (``SIM_CAN_BUSES``); an MTi
-    receives nothing, so its tap routes no identifiers to it."""
+    receives nothing, so its tap routes no identifiers to it.
+
+    On ``interface="remote"`` with ``channel="127.0.0.1:PORT"`` the twin is for another
+    process: it sends on an in-process virtual channel that a loopback server
+    (``can_loopback``) carries to python-can's ``remote`` clients at that address, and its
+    URL is the one those clients open."""
 
     protocol = "xsens-can"
 
@@ -50,13 +56,36 @@ class SimXsensCan(SimDevice):
         super().__init__(source, rate, faults, name)
         self.interface, self.channel, self.id_offset = interface, channel, id_offset
         self._bus: Tap | None = None
+        self._served: str | None = None  # the virtual channel a loopback server carries (remote only)
 
     @property
     def url(self) -> str:
         return build_url("xsens-can", self.interface, f"/{self.channel}", id_offset=hex(self.id_offset), id=self.name)
 
+    def start(self) -> SimXsensCan:
+        if self.interface == REMOTE_INTERFACE and self._served is None:
+            self._served = SERVERS.acquire(self.channel)
+        try:
+            super().start()
+        except BaseException:
+            self._release_server()
+            raise
+        return self
+
+    def stop(self) -> None:
+        super().stop()
+        self._release_server()
+
+    def _release_server(self) -> None:
+        if self._served is not None:
+            self._served = None
+            SERVERS.release(self.channel)
+
     def _open_transport(self) -> None:
-        self._bus = SIM_CAN_BUSES.attach(self.interface, self.channel, {"receive_own_messages": False})
+        if self._served is not None:
+            self._bus = SIM_CAN_BUSES.attach("virtual", self._served, {"receive_own_messages": False})
+        else:
+            self._bus = SIM_CAN_BUSES.attach(self.interface, self.channel, {"receive_own_messages": False})
 
     def _close_transport(self) -> None:
         bus, self._bus = self._bus, None

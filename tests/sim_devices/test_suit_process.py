@@ -1,5 +1,5 @@
 """The simulated suit in its own process: the devices a demo opens are the child's, over
-their real transports (pty, CAN on a UDP multicast group, UDP), and the child ends with
+their real transports (pty, CAN on a bus served on 127.0.0.1, UDP), and the child ends with
 its parent."""
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ def test_a_suit_in_a_child_process_reaches_the_hub_over_every_transport():
         assert suit.alive() and suit.proc is not None and suit.proc.pid != os.getpid()
         urls = suit.urls()
         assert set(urls) == set(assignment)
-        assert urls["l_wrist"].startswith("xsens-can://udp_multicast/239.")  # a per-process virtual bus cannot cross
+        assert urls["l_wrist"].startswith("xsens-can://remote/127.0.0.1:")  # a per-process virtual bus cannot cross
         # every twin started its clock in the child, on the machine's one monotonic clock
         assert all(abs(t - time.monotonic()) < 60 for t in suit.t0s.values())
         devs = {site: drivers.make_device(url) for site, url in urls.items()}
@@ -40,7 +40,7 @@ def test_a_suit_in_a_child_process_reaches_the_hub_over_every_transport():
     assert len(frames) > 60
     assert np.array([f.present for f in late]).mean(axis=0).min() > 0.9
     assert np.mean([f.insole_present for f in late]) > 0.9
-    assert not np.allclose(late[-1].gyro[1], late[-1].gyro[2])  # two MTi on one CAN group stay apart
+    assert not np.allclose(late[-1].gyro[1], late[-1].gyro[2])  # two MTi on one CAN bus stay apart
     # the child's own packet counts come back when it stops
     assert set(suit.stats) == set(assignment)
     assert all(st["sent"] > 100 for st in suit.stats.values()), suit.stats

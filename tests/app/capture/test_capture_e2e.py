@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import json
 import os
-import random
 import socket
 import subprocess
 import sys
@@ -28,6 +27,7 @@ from app.capture.simulate import read_truth
 from app.recording import read_recording
 from inference.body.rotations import matrix_angle_between, quat_to_matrix
 from inference.body.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX
+from sim_devices.devices.can_loopback import loopback_channel
 
 pytestmark = pytest.mark.slow
 SITES = ("pelvis", "head", "l_wrist", "r_wrist", "l_shank", "r_shank")
@@ -42,7 +42,7 @@ def free_udp_port() -> int:
 
 
 def write_setup(tmp: Path) -> Path:
-    group = f"239.{random.randint(1, 254)}.{random.randint(1, 254)}.{random.randint(1, 254)}"
+    can_bus = loopback_channel()  # the simulator serves the CAN bus there
     text = f"""# a six-sensor suit over three protocols, with insoles
 [subject]
 id = "sim-01"
@@ -51,8 +51,8 @@ height = 1.75
 [sensors]
 pelvis  = "xbus://{tmp}/pelvis-tty?baud=115200"
 head    = "bno08x-rvc://{tmp}/head-tty"
-l_wrist = "xsens-can://udp_multicast/{group}?id_offset=0x100"
-r_wrist = "xsens-can://udp_multicast/{group}?id_offset=0x200"
+l_wrist = "xsens-can://remote/{can_bus}?id_offset=0x100"
+r_wrist = "xsens-can://remote/{can_bus}?id_offset=0x200"
 l_shank = "bno08x-rvc://{tmp}/l_shank-tty"
 r_shank = "xbus://{tmp}/r_shank-tty?baud=115200"
 

@@ -15,8 +15,8 @@ import pytest
 
 from app.capture.setup_file import SetupError, load_setup
 from app.capture.simulator_process import SimulatorProcess
+from app.capture.twins import simulated_setup
 from app.cli.devices import probe
-from app.gui.simulated import simulated_setup
 
 pytestmark = pytest.mark.xdist_group("simulator_process")
 
@@ -33,7 +33,7 @@ def _alive(pid: int) -> bool:
 
 @pytest.mark.parametrize("protocol", ["xbus", "xsens-can"])
 def test_devices_are_read_from_the_other_process(tmp_path, protocol):
-    """Serial devices on pseudo-terminals, CAN ones on a UDP multicast group: both reach a
+    """Serial devices on pseudo-terminals, CAN ones on a bus served on 127.0.0.1: both reach a
     driver in this process at the URLs the setup names."""
     setup = simulated_setup(("pelvis", "head"), protocol, folder=tmp_path, model="floor")
     with SimulatorProcess(setup, "walk", seconds=6.0, lead_in=1.0) as sim:

@@ -4,7 +4,6 @@ pixels of a grabbed view."""
 
 from __future__ import annotations
 
-import random
 import socket
 import sys
 from pathlib import Path
@@ -12,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from app.capture.simulator_process import SimulatorProcess
+from sim_devices.devices.can_loopback import loopback_channel
 
 CLI = [sys.executable, "-m", "app.cli.main"]
 SKELETON_RGB = ((77, 179, 255), (219, 224, 235))  # colours.MEASURED and colours.INFERRED
@@ -51,8 +51,8 @@ def free_udp_port() -> int:
 def suit_urls(tmp: Path, can: bool = True) -> dict[str, str]:
     """The classic six over three wire protocols, as a lab might have them (``can=False``:
     serial ones only, Xbus and BNO08x on pseudo-terminals)."""
-    group = f"239.{random.randint(1, 254)}.{random.randint(1, 254)}.{random.randint(1, 254)}"
-    wrists = ((f"xsens-can://udp_multicast/{group}?id_offset=0x100", f"xsens-can://udp_multicast/{group}?id_offset=0x200")
+    can_bus = loopback_channel()  # the simulator serves the CAN bus on 127.0.0.1
+    wrists = ((f"xsens-can://remote/{can_bus}?id_offset=0x100", f"xsens-can://remote/{can_bus}?id_offset=0x200")
               if can else (f"bno08x-rvc://{tmp}/l_wrist-tty", f"xbus://{tmp}/r_wrist-tty?baud=115200"))
     return {
         "pelvis": f"xbus://{tmp}/pelvis-tty?baud=115200",

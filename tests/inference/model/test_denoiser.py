@@ -12,6 +12,7 @@ from inference.model.config import ModelConfig, count_parameters
 from inference.model.denoiser import Denoiser, timestep_embedding
 from inference.model.files import build_model, load_model, save_model
 from inference.model.regressor import MaskConfig, Regressor, random_observation_mask, regress
+from tests.conftest import F32_PATHS
 
 
 def _inputs(b=2, seed=0):
@@ -120,7 +121,7 @@ def test_lean_inference_path_matches_modules():
     ref = m(z, t, h)  # grad enabled: the nn.TransformerDecoder path
     with torch.inference_mode():
         lean = m(z, t, h)
-    assert torch.allclose(ref, lean, atol=1e-5)
+    assert torch.allclose(ref, lean, **F32_PATHS)
 
 
 def test_bfloat16_model_runs():
@@ -140,7 +141,7 @@ def test_freeze_for_cpu_same_outputs():
     f = freeze_for_cpu(m)
     z, t, h = _inputs(1)
     with torch.inference_mode():
-        assert torch.allclose(f(z, t, h), m(z, t, h), atol=1e-5)
+        assert torch.allclose(f(z, t, h), m(z, t, h), **F32_PATHS)
     mask = torch.ones_like(z, dtype=torch.bool)
     mask[:, -1] = False
     a = inpaint(m, z, mask, h, paper_steps(), generator=torch.Generator().manual_seed(0))
@@ -171,7 +172,7 @@ def test_skip_parameterisation_passes_clean_input_through_and_round_trips(tmp_pa
     back = load_model(path)
     assert back.config.skip
     with torch.no_grad():
-        assert torch.allclose(back.model(z, torch.tensor([500, 3]), h), m(z, torch.tensor([500, 3]), h), atol=1e-5)
+        assert torch.allclose(back.model(z, torch.tensor([500, 3]), h), m(z, torch.tensor([500, 3]), h), **F32_PATHS)
 
 
 def test_mask_input_model_reads_the_mask_traced_or_not():
@@ -191,7 +192,7 @@ def test_mask_input_model_reads_the_mask_traced_or_not():
         assert not torch.allclose(a, b)
         assert torch.equal(m(z, t, h), m(z, t, h, torch.zeros_like(mask)))  # None = nothing known
         f = freeze_for_cpu(m)
-        assert torch.allclose(f(z, t, h, mask), a, atol=1e-5)
+        assert torch.allclose(f(z, t, h, mask), a, **F32_PATHS)
     x = inpaint(m, z, mask, h, paper_steps(), generator=torch.Generator().manual_seed(0), mode="replace")
     y = inpaint(f, z, mask, h, paper_steps(), generator=torch.Generator().manual_seed(0), mode="replace",
                 mask_input=True)
