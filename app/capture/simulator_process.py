@@ -8,8 +8,8 @@ bench and the window tests all start the simulator this way.
 
 The child runs until its standard input closes (``--while-stdin-open``), which also happens
 when this process dies, so no simulator outlives the window that started it. CAN devices
-must then share a bus across processes: ``simulated_setup`` puts them on a UDP multicast
-group (python-can's ``udp_multicast``), not the per-process ``virtual`` bus.
+must then share a bus across processes: the child serves theirs on 127.0.0.1 (python-can's
+``remote`` interface, ``sim_devices/devices/can_loopback.py``), not the per-process ``virtual`` bus.
 """
 
 from __future__ import annotations
