@@ -118,6 +118,81 @@ class ReplayResult:
     stats: dict[str, Any] = field(default_factory=dict)
 
 
+@dataclass(frozen=True)
+class ReplaySettings:
+    """How to re-run a recording: what ``imucap replay`` and ``imucap batch`` take. ``None``
+    means "as the recording says it ran" (its metadata), else the model file's own."""
+
+    model: str = "diffusion"
+    steps: str | None = None
+    seed: int = 0
+    mirror: bool | None = None
+    stride_scale: bool | None = None
+    pelvis_odometry: bool | None = None
+    confidence: bool = False
+    latency: str | None = None
+
+
+@dataclass
+class ReplayPoser:
+    """A poser built for one recording, and what a summary says of it."""
+
+    poser: Poser
+    model: Any  # the LoadedModel (None for the floor)
+    causal: bool
+    latency: str
+    label: str
+    steps: int
+    warning: str | None = None
+
+    def fresh(self) -> Poser:
+        """Another poser of the same settings (one per replay: a poser keeps its history)."""
+        from inference.poser.poser import Poser
+
+        return Poser(self.model, body=self.poser.body, **self._setting)
+
+    _setting: dict[str, Any] = field(default_factory=dict)
+
+
+def model_label(spec: str, model: Any) -> str:
+    """``diffusion 4/128/512 (diffusionposer.pt)``: the kind, size and file of a model."""
+    from pathlib import Path
+
+    from inference.poser.models import DEFAULT_WEIGHTS
+
+    if model is None:
+        return "floor"
+    c = model.config
+    where = DEFAULT_WEIGHTS.get(spec, spec)
+    return f"{model.kind} {c.layers}/{c.d_model}/{c.ff} ({Path(str(where)).name})"
+
+
+def build_replay_poser(rec: Recording, settings: ReplaySettings, body: Any, model: Any = "resolve") -> ReplayPoser:
+    """The poser a replay of ``rec`` runs: ``settings`` where given, else what the recording
+    says the session ran with (a session recorded before a default changed replays as it
+    ran). ``model``: an already loaded model for ``settings.model`` (a batch worker loads
+    it once), or "resolve" to load it here."""
+    from app.latency import model_spec_for, resolve_filter
+    from inference.poser.models import resolve_model
+    from inference.poser.poser import Poser
+
+    meta = rec.metadata
+    latency = settings.latency or meta.get("latency") or "centred"
+    spec = model_spec_for(latency, settings.model)
+    loaded = resolve_model(spec) if isinstance(model, str) and model == "resolve" else model
+    causal, warning = resolve_filter(latency, loaded)
+    mirror = settings.mirror if settings.mirror is not None else meta.get("mirror")
+    stride = settings.stride_scale if settings.stride_scale is not None else bool(meta.get("stride_scale", False))
+    odometry = (settings.pelvis_odometry if settings.pelvis_odometry is not None
+                else bool(meta.get("pelvis_odometry", False)))
+    setting = dict(steps=settings.steps, seed=settings.seed, mirror=mirror, stride_scale=stride,
+                   pelvis_odometry="default" if odometry else None, confidence=settings.confidence or None)
+    poser = Poser(loaded, body=body, **setting)
+    steps = len(poser.steps) if poser.kind == "diffusion" else (1 if poser.kind == "regressor" else 0)
+    return ReplayPoser(poser, loaded, causal, latency, model_label(settings.model, loaded), steps, warning,
+                       _setting=setting)
+
+
 def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] | None = None,
                      insoles: bool | None = None, calibration: Calibration | None = None,
                      progress: Callable[[int, int, int], None] | None = None, sinks: Sequence[Sink] = (),
@@ -250,7 +325,8 @@ def held_out_errors(poses: Sequence[LivePose], measured: Sequence[LivePose], sit
     return {"frames": len(pairs), "deg": out, "mean_deg": round(float(np.mean(vals)), 2) if vals else None}
 
 
-__all__ = ["replay_recording", "resolve_sensors", "resolve_insoles", "recording_has_insoles", "compare_to_recorded",
+__all__ = ["replay_recording", "build_replay_poser", "ReplaySettings", "ReplayPoser", "model_label",
+           "resolve_sensors", "resolve_insoles", "recording_has_insoles", "compare_to_recorded",
            "held_out_errors", "ReplayResult", "SITES"]
 
 

@@ -115,16 +115,6 @@ def _check_outs(outs: list[Path]) -> None:
         check_export_path(o)
 
 
-def _model_label(spec: str, model: Any) -> str:
-    from inference.poser.models import DEFAULT_WEIGHTS
-
-    if model is None:
-        return "floor"
-    c = model.config
-    where = DEFAULT_WEIGHTS.get(spec, spec)
-    return f"{model.kind} {c.layers}/{c.d_model}/{c.ff} ({Path(str(where)).name})"
-
-
 def _emit(summary: dict[str, Any], as_json: bool) -> None:
     if as_json:
         print(json.dumps(summary))
@@ -166,9 +156,15 @@ def _mean_spread(poses) -> dict[str, float] | None:
 
 def run_replay(args: argparse.Namespace) -> int:
     from app.export.formats import body_for_recording, export_motion, motion_from_poses
-    from app.replay import compare_to_recorded, held_out_errors, replay_recording, resolve_insoles, resolve_sensors
-    from inference.poser.models import resolve_model
-    from inference.poser.poser import Poser
+    from app.replay import (
+        ReplaySettings,
+        build_replay_poser,
+        compare_to_recorded,
+        held_out_errors,
+        replay_recording,
+        resolve_insoles,
+        resolve_sensors,
+    )
 
     _check_outs(args.out)
     streaming = bool(parse_stream_spec(args.stream))  # a bad --stream fails before any work
@@ -188,23 +184,12 @@ def run_replay(args: argparse.Namespace) -> int:
         import torch
 
         torch.set_num_threads(args.threads)
-    from app.latency import model_spec_for, resolve_filter
-
-    latency = args.latency or rec.metadata.get("latency") or "centred"
-    model = resolve_model(model_spec_for(latency, args.model))
-    causal, latency_warning = resolve_filter(latency, model)
-    if latency_warning:
-        print(f"replay: warning: {latency_warning}", file=sys.stderr)
-    # a session recorded before the model file's defaults changed replays as it ran
-    mirror = args.mirror if args.mirror is not None else rec.metadata.get("mirror")
-    stride = args.stride_scale if args.stride_scale is not None else bool(rec.metadata.get("stride_scale", False))
-    odometry = (args.pelvis_odometry if args.pelvis_odometry is not None
-                else bool(rec.metadata.get("pelvis_odometry", False)))
-    setting = dict(steps=args.steps, seed=args.seed, mirror=mirror, stride_scale=stride,
-                   pelvis_odometry="default" if odometry else None, confidence=args.confidence or None)
-    poser = Poser(model, body=body, **setting)
-    label = _model_label(args.model, model)
-    steps = len(poser.steps) if poser.kind == "diffusion" else (1 if poser.kind == "regressor" else 0)
+    built = build_replay_poser(rec, ReplaySettings(
+        model=args.model, steps=args.steps, seed=args.seed, mirror=args.mirror, stride_scale=args.stride_scale,
+        pelvis_odometry=args.pelvis_odometry, confidence=args.confidence, latency=args.latency), body)
+    if built.warning:
+        print(f"replay: warning: {built.warning}", file=sys.stderr)
+    poser, causal, latency, label, steps = built.poser, built.causal, built.latency, built.label, built.steps
     if not args.no_progress:
         print(f"replay: {args.recording} ({rec.n_frames} hub frames, {len(rec.calibrations)} calibration(s)), "
               f"sensors {','.join(sensors)}{' + insoles' if insoles else ''}, model {label}, {steps} step(s)",
@@ -222,7 +207,7 @@ def run_replay(args: argparse.Namespace) -> int:
         if not left_out:
             raise ValueError("--held-out needs --sensors to leave out some of the recorded sensors "
                              f"({', '.join(rec.sites)})")
-        full = Poser(model, body=body, **setting)
+        full = built.fresh()
         held_out = held_out_errors(res.poses, replay_recording(rec, full, sensors=rec.sites, insoles=insoles,
                                                                causal=causal).poses, left_out)
     seconds = time.perf_counter() - t0

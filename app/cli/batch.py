@@ -1,0 +1,165 @@
+"""`imucap batch`: re-process a whole study and get one table.
+
+    imucap batch INPUTS... --out DIR [--sensors SET ...] [--model M] [--steps K] [--seed S]
+                 [--export EXT ...] [--workers N | --cluster tcp://HOST:PORT] [--json] [--no-progress]
+
+INPUTS: folders (every .h5 below), globs, recordings, or a manifest CSV with a
+``recording`` column (and any others: subject, condition; ``truth`` scores against a
+simulator's truth file). Per recording: a replay with all its sensors and with each
+``--sensors`` subset, exports of each (``--export bvh csv``), and the table's rows; in
+``DIR/<recording>/`` and ``DIR/summary.csv`` (+ ``summary.parquet``).
+
+Running it again does only what is missing or out of date (inputs or options changed);
+Ctrl-C stops handing out recordings (again: ends the running ones), and the next run
+finishes the job. The default runs one worker per core here; ``--cluster`` sends the same
+tasks to a Dask scheduler (docs/batch.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+EXPORTS = ("bvh", "csv", "h5", "mot")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("batch", help="re-process many recordings (subsets, model, exports) into one table",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("inputs", nargs="+", metavar="INPUT", help="folder, glob, recording (.h5) or manifest (.csv)")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="where outputs and summary.csv go")
+    p.add_argument("--sensors", action="append", default=[], metavar="SITE,SITE,...",
+                   help="also replay with only these recorded sites (repeatable); all sensors always run")
+    p.add_argument("--model", default="diffusion", help="diffusion | regressor | floor | PATH.pt")
+    p.add_argument("--steps", default=None, help="diffusion steps (default: the model's)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--latency", default=None, choices=("centred", "low"), help="default: as recorded")
+    p.add_argument("--export", action="append", default=[], metavar="EXT",
+                   help=f"write each replay as this format too: {', '.join(EXPORTS)} (repeatable)")
+    p.add_argument("--no-held-out", action="store_true",
+                   help="skip the held-out error of subsets (saves one full replay per recording)")
+    p.add_argument("--workers", type=int, default=0, help="local worker processes (default: one per core)")
+    p.add_argument("--cluster", default=None, metavar="tcp://HOST:PORT", help="a Dask distributed scheduler")
+    p.add_argument("--json", action="store_true", help="print one JSON object at the end")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    p.set_defaults(func=run_batch)
+
+
+def _options(args: argparse.Namespace):
+    from app.batch.plan import Options
+    from app.replay import ReplaySettings
+    from inference.body.skeleton import parse_sites
+
+    exports = []
+    for e in args.export:
+        for ext in e.split(","):
+            ext = ext.strip().lower().lstrip(".")
+            if ext not in EXPORTS:
+                raise ValueError(f"--export {ext!r}: one of {', '.join(EXPORTS)}")
+            if ext not in exports:
+                exports.append(ext)
+    subsets: list[tuple[str, ...] | None] = [None]
+    for s in args.sensors:
+        try:
+            sites = tuple(parse_sites(s))
+        except ValueError as exc:
+            raise ValueError(f"--sensors {s!r}: {exc}") from None
+        if sites not in subsets:
+            subsets.append(sites)
+    settings = ReplaySettings(model=args.model, steps=args.steps, seed=args.seed, latency=args.latency)
+    return Options(settings=settings, subsets=tuple(subsets), exports=tuple(exports), held_out=not args.no_held_out)
+
+
+class _Progress:
+    """Recordings done, hours of motion per hour of wall time, time left (tqdm, stderr)."""
+
+    def __init__(self, total: int, enabled: bool) -> None:
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=total, unit="rec", disable=not enabled, file=sys.stderr, dynamic_ncols=True)
+        self.t0 = time.perf_counter()
+        self.motion_s = 0.0
+        self.failed = 0
+
+    def update(self, result: dict[str, Any]) -> None:
+        if result["status"] == "done":
+            self.motion_s += float(result.get("motion_s") or 0.0)
+        self.failed += result["status"] == "failed"
+        wall = time.perf_counter() - self.t0
+        self.bar.set_postfix_str(f"{self.motion_s / max(wall, 1e-9):.1f} h motion/h, {self.failed} failed")
+        self.bar.update(1)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def run_batch(args: argparse.Namespace) -> int:
+    from app.batch.executors import DaskCluster, LocalPool
+    from app.batch.plan import common_root, find_inputs, output_folder
+    from app.batch.summary import write_summary
+    from app.batch.task import Task, skipped, up_to_date
+
+    options = _options(args)
+    inputs = find_inputs(args.inputs)
+    if options.settings.model not in ("diffusion", "regressor", "floor") and not Path(options.settings.model).is_file():
+        raise FileNotFoundError(f"--model {options.settings.model}: no such file")
+    args.out.mkdir(parents=True, exist_ok=True)
+    root = common_root(inputs)
+    fp = options.fingerprint()
+    tasks = [Task(str(i.recording), str(output_folder(args.out, i, root)), options, fp, dict(i.meta),
+                  str(i.truth) if i.truth else None) for i in inputs]
+    # what is already done for these options is known here, without starting a worker
+    finished = {t.recording: skipped(t, done) for t in tasks if (done := up_to_date(t)) is not None}
+    todo = [t for t in tasks if t.recording not in finished]
+    runner = DaskCluster(args.cluster).connect() if args.cluster else LocalPool(args.workers or None)
+    if not args.no_progress:
+        print(f"batch: {len(tasks)} recording(s) ({len(finished)} up to date), {len(options.subsets)} sensor "
+              f"set(s) each, on {runner.description}", file=sys.stderr, flush=True)
+    interrupts = 0
+
+    def on_sigint(signum, frame):  # noqa: ARG001
+        nonlocal interrupts
+        interrupts += 1
+        runner.stop(abandon=interrupts > 1)
+        print("\nbatch: stopping: no new recordings" + (", running ones ended" if interrupts > 1 else
+              " (Ctrl-C again to end the running ones); run the same command to finish"), file=sys.stderr)
+
+    old = signal.signal(signal.SIGINT, on_sigint)
+    progress = _Progress(len(todo), not args.no_progress)
+    results: dict[str, dict[str, Any]] = dict(finished)
+    t0 = time.perf_counter()
+    try:
+        for res in runner.run(todo) if todo else ():
+            results[res["recording"]] = res
+            progress.update(res)
+    finally:
+        signal.signal(signal.SIGINT, old)
+        progress.close()
+        runner.close()
+    wall = time.perf_counter() - t0
+    ordered = [results[t.recording] for t in tasks if t.recording in results]
+    written = write_summary(args.out, ordered)
+    done = [r for r in ordered if r["status"] == "done"]
+    motion_s = sum(float(r.get("motion_s") or 0.0) for r in done)
+    summary = {
+        "done": len(done), "skipped": sum(r["status"] == "skipped" for r in ordered),
+        "failed": [{"recording": r["recording"], "reason": r["reason"]} for r in ordered if r["status"] == "failed"],
+        "not_run": len(tasks) - len(ordered), "recordings": len(tasks),
+        "summary": [str(p) for p in written], "wall_s": round(wall, 2), "motion_s": round(motion_s, 2),
+        "motion_hours_per_hour": round(motion_s / wall, 2) if done and wall > 0 else None,
+        "cpu_s": round(sum(float(r.get("cpu_s") or 0.0) for r in done), 2),
+    }
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(f"{summary['done']} done, {summary['skipped']} up to date, {len(summary['failed'])} failed"
+              + (f", {summary['not_run']} not run (stopped)" if summary["not_run"] else "")
+              + f"; {written[0]}")
+        for f in summary["failed"]:
+            print(f"  failed: {f['recording']}: {f['reason']}")
+    return 130 if interrupts else 0
