@@ -12,7 +12,9 @@ from typing import Any
 
 import numpy as np
 
+from app import APP_VERSION
 from app.pipeline import LivePipeline, LivePose, Pipeline, Sink, SuitHub, close_sink
+from app.replay import model_label, poser_metadata
 
 FRAMES_PATIENCE = 20.0  # --frames: wait at most this many times --seconds for the poses
 
@@ -25,7 +27,6 @@ MIXED_ORDER = ("xbus", "xsens-can", "bno08x-rvc", "dualsense")
 DEFAULT_SENSORS = ("pelvis", "head", "l_wrist", "r_wrist", "l_shank", "r_shank")  # the paper's six
 
 
-APP_VERSION = "0.1.0"
 
 
 SUIT_PLACES = ("process", "thread")
@@ -102,11 +103,7 @@ def resolve_demo_model(spec: str) -> tuple[Any, str, str | None]:
         warning = (f"!!! NO TRAINED MODEL: {DEFAULT_WEIGHTS[spec]} is missing; running the FLOOR BASELINE "
                    f"(observed segments only, everything else held standing). {exc}")
         return None, "floor (fallback: weights missing)", warning
-    if model is None:
-        return None, "floor", None
-    c = model.config
-    where = DEFAULT_WEIGHTS[spec] if spec in DEFAULT_WEIGHTS else spec
-    return model, f"{model.kind} {c.layers}/{c.d_model}/{c.ff} ({Path(str(where)).name})", None
+    return model, model_label(spec, model), None
 
 
 class TruthSink(Sink):
@@ -297,11 +294,10 @@ class DemoSession:
     def metadata(self) -> dict[str, Any]:
         c = self.cfg
         return {
-            "app_version": APP_VERSION, "model": self.model_label, "steps": self.steps_count(),
-            "mirror": bool(self.poser.mirror),
-            "stride_scale": self.poser.stride is not None,
-            "pelvis_odometry": self.poser.pelvis_odometry is not None, "sensors": list(c.sensors), "insoles": c.insoles,
-            "protocol": c.protocol, "latency": c.latency,
+            "app_version": APP_VERSION, "model": self.model_label,
+            # how the poser ran, from the poser built: a replay with no options runs it so again
+            **poser_metadata(self.poser, c.latency), "sensors": list(c.sensors), "insoles": c.insoles,
+            "protocol": c.protocol,
             "assignment": self.assignment, "motion": c.file or c.motion, "seed": c.seed,
             "source": "imucap demo (simulated suit)", "body_height_m": float(self.truth.body.height),
             # the exact bones the poser used, so `imucap replay/export` rebuild the same body

@@ -125,11 +125,11 @@ class ReplaySettings:
 
     model: str = "diffusion"
     steps: str | None = None
-    seed: int = 0
+    seed: int | None = None
     mirror: bool | None = None
     stride_scale: bool | None = None
     pelvis_odometry: bool | None = None
-    confidence: bool = False
+    confidence: bool | None = None
     latency: str | None = None
 
 
@@ -152,6 +152,20 @@ class ReplayPoser:
         return Poser(self.model, body=self.poser.body, **self._setting)
 
     _setting: dict[str, Any] = field(default_factory=dict)
+
+
+def poser_metadata(poser: Poser, latency: str) -> dict[str, Any]:
+    """How a live session's poser ran, for its recording's metadata: what
+    ``build_replay_poser`` reads back, so that a replay with no options runs the poser
+    exactly as it ran live (written from the poser that was built, not from the options
+    asked for, which may have been defaults)."""
+    conf = poser.confidence
+    return {
+        "steps": len(poser.steps) if poser.kind == "diffusion" else (1 if poser.kind == "regressor" else 0),
+        "step_list": [int(k) for k in poser.steps], "seed": int(poser.seed), "mirror": bool(poser.mirror),
+        "stride_scale": poser.stride is not None, "pelvis_odometry": poser.pelvis_odometry is not None,
+        "confidence": conf is not None, "latency": latency,
+    }
 
 
 def model_label(spec: str, model: Any) -> str:
@@ -185,11 +199,17 @@ def build_replay_poser(rec: Recording, settings: ReplaySettings, body: Any, mode
     stride = settings.stride_scale if settings.stride_scale is not None else bool(meta.get("stride_scale", False))
     odometry = (settings.pelvis_odometry if settings.pelvis_odometry is not None
                 else bool(meta.get("pelvis_odometry", False)))
-    setting = dict(steps=settings.steps, seed=settings.seed, mirror=mirror, stride_scale=stride,
-                   pelvis_odometry="default" if odometry else None, confidence=settings.confidence or None)
+    # the step list the session ran (a model file's default may have changed since), unless asked otherwise
+    label = model_label(spec, loaded)
+    same_model = label == meta.get("model")
+    steps = settings.steps if settings.steps is not None else (meta.get("step_list") or None if same_model else None)
+    seed = settings.seed if settings.seed is not None else int(meta.get("seed") or 0)
+    confidence = settings.confidence if settings.confidence is not None else bool(meta.get("confidence", False))
+    setting = dict(steps=steps, seed=seed, mirror=mirror, stride_scale=stride,
+                   pelvis_odometry="default" if odometry else None, confidence=confidence or None)
     poser = Poser(loaded, body=body, **setting)
     steps = len(poser.steps) if poser.kind == "diffusion" else (1 if poser.kind == "regressor" else 0)
-    return ReplayPoser(poser, loaded, causal, latency, model_label(settings.model, loaded), steps, warning,
+    return ReplayPoser(poser, loaded, causal, latency, label, steps, warning,
                        _setting=setting)
 
 
@@ -325,7 +345,7 @@ def held_out_errors(poses: Sequence[LivePose], measured: Sequence[LivePose], sit
     return {"frames": len(pairs), "deg": out, "mean_deg": round(float(np.mean(vals)), 2) if vals else None}
 
 
-__all__ = ["replay_recording", "build_replay_poser", "ReplaySettings", "ReplayPoser", "model_label",
+__all__ = ["replay_recording", "build_replay_poser", "ReplaySettings", "ReplayPoser", "model_label", "poser_metadata",
            "resolve_sensors", "resolve_insoles", "recording_has_insoles", "compare_to_recorded",
            "held_out_errors", "ReplayResult", "SITES"]
 

@@ -24,8 +24,10 @@ from typing import Any
 
 import numpy as np
 
+from app import APP_VERSION
 from app.capture.setup_file import Setup
 from app.pipeline import LivePipeline, LivePose, Pipeline, Sink, SuitHub, close_sink
+from app.replay import poser_metadata
 from calibration import Calibration, GuidedCalibration
 from drivers.base import DeviceEvent
 
@@ -158,7 +160,9 @@ class CaptureSession:
             "setup": {"sites": {k: e.url for k, e in s.sensors.items()}, "insoles": s.insoles,
                       "calibration": s.calibration, "file": str(s.path) if s.path else None},
             "sensors": list(self.sites), "insoles": s.insoles is not None, "model": self.model_label,
-            "steps": s.steps, "latency": self.options.latency,
+            "app_version": APP_VERSION,
+            # how the poser ran, from the poser built: a replay with no options runs it so again
+            **poser_metadata(self.poser, self.options.latency),
             "body_height_m": s.subject.height_m, **self.options.metadata,
         }
 

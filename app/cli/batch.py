@@ -37,7 +37,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="also replay with only these recorded sites (repeatable); all sensors always run")
     p.add_argument("--model", default="diffusion", help="diffusion | regressor | floor | PATH.pt")
     p.add_argument("--steps", default=None, help="diffusion steps (default: the model's)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=None, help="inpainting noise seed (default: each session's)")
     p.add_argument("--latency", default=None, choices=("centred", "low"), help="default: as recorded")
     p.add_argument("--export", action="append", default=[], metavar="EXT",
                    help=f"write each replay as this format too: {', '.join(EXPORTS)} (repeatable)")

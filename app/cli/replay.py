@@ -66,7 +66,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--held-out", action="store_true",
                    help="with --sensors a subset: replay again with every recorded sensor and report, per site "
                         "left out, the mean angle between its reconstructed segment and what its sensor measured")
-    p.add_argument("--seed", type=int, default=0, help="seed of the inpainting noise (replays are reproducible)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="seed of the inpainting noise (default: the session's; replays are reproducible)")
     p.add_argument("--confidence", action="store_true",
                    help="the per-segment spread with every pose (inference/poser/confidence.py): in --out's CSV "
                         "and HDF5, and spread_mean_deg in the JSON")
@@ -186,7 +187,7 @@ def run_replay(args: argparse.Namespace) -> int:
         torch.set_num_threads(args.threads)
     built = build_replay_poser(rec, ReplaySettings(
         model=args.model, steps=args.steps, seed=args.seed, mirror=args.mirror, stride_scale=args.stride_scale,
-        pelvis_odometry=args.pelvis_odometry, confidence=args.confidence, latency=args.latency), body)
+        pelvis_odometry=args.pelvis_odometry, confidence=args.confidence or None, latency=args.latency), body)
     if built.warning:
         print(f"replay: warning: {built.warning}", file=sys.stderr)
     poser, causal, latency, label, steps = built.poser, built.causal, built.latency, built.label, built.steps
@@ -216,7 +217,7 @@ def run_replay(args: argparse.Namespace) -> int:
     if args.out:
         motion = motion_from_poses(res.poses, body, rec, meta={
             "model": label, "steps": steps, "sensors": list(res.sensors), "insoles": res.insoles,
-            "what": f"imucap replay (seed {args.seed})", "step_list": list(poser.steps), "mirror": poser.mirror,
+            "what": f"imucap replay (seed {poser.seed})", "step_list": list(poser.steps), "mirror": poser.mirror,
             "stride_scale": poser.stride is not None, "pelvis_odometry": poser.pelvis_odometry is not None})
         for o in args.out:
             outputs.append(str(export_motion(o, motion)))
@@ -227,7 +228,7 @@ def run_replay(args: argparse.Namespace) -> int:
     summary: dict[str, Any] = {
         "recording": str(args.recording), "frames": n, "duration_s": round(span, 3),
         "sensors": list(res.sensors), "insoles": res.insoles, "model": label, "kind": poser.kind,
-        "steps": steps, "step_list": list(poser.steps) if poser.kind == "diffusion" else None, "seed": args.seed,
+        "steps": steps, "step_list": list(poser.steps) if poser.kind == "diffusion" else None, "seed": poser.seed,
         "latency_mode": latency, "acc_filter": "causal" if causal else "centred",
         "mirror": poser.mirror, "stride_scale": poser.stride is not None,
         "pelvis_odometry": poser.pelvis_odometry is not None,
@@ -238,7 +239,7 @@ def run_replay(args: argparse.Namespace) -> int:
         **compare_to_recorded(rec, res.poses),
         **({"held_out": held_out} if held_out is not None else {}),
         "outputs": outputs, "seconds": round(seconds, 2),
-        **({"spread_mean_deg": _mean_spread(res.poses)} if args.confidence else {}),
+        **({"spread_mean_deg": _mean_spread(res.poses)} if poser.confidence is not None else {}),
         **({"streams": stream_summary(sinks)} if sinks else {}),
     }
     if truth is not None:

@@ -88,17 +88,21 @@ def rerun(job: Job, rec: Recording, sensors: tuple[str, ...], insoles: bool, mod
 
     from app.demo_session import resolve_demo_model
     from app.export.formats import body_for_recording
-    from app.replay import replay_recording
-    from inference.poser.poser import Poser
+    from app.latency import model_spec_for
+    from app.replay import ReplaySettings, build_replay_poser, replay_recording
 
     torch.set_num_threads(1)  # leave the other core to the window and the devices
     job.report((0, 1, "loading the model"))
-    model, label, warning = resolve_demo_model(model_spec)
+    latency = rec.metadata.get("latency") or "centred"
+    model, _label, warning = resolve_demo_model(model_spec_for(latency, model_spec))
     body, _ = body_for_recording(rec.metadata)
-    poser = Poser(model, body=body, steps=steps, confidence=confidence or None)
-    res = replay_recording(rec, poser, sensors=list(sensors), insoles=insoles,
+    # the poser as the session ran it (steps, mirror, root, filter from the recording), with
+    # what the user changed here: the same code as `imucap replay`
+    built = build_replay_poser(rec, ReplaySettings(model=model_spec, steps=steps, confidence=confidence or None),
+                               body, model=model)
+    res = replay_recording(rec, built.poser, sensors=list(sensors), insoles=insoles, causal=built.causal,
                            progress=lambda done, total, poses: job.report((done, total, f"{poses} poses")))
-    track = track_from_poses(res.poses, res.sensors, label)
+    track = track_from_poses(res.poses, res.sensors, built.label)
     if warning:
         track.label += " [floor baseline: weights missing]"
     return track
