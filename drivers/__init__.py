@@ -7,6 +7,8 @@
 - ``xsens-can://<python-can interface>/<channel>?id_offset=0x100&bitrate=1000000``
 - ``dualsense://`` (hidapi; ``?serial=``), ``dualsense://unix/<socket>`` (simulated)
 - ``moticon-udp://127.0.0.1:9999?weight_kg=75``
+- ``movella-dot://D4:22:CD:00:01:27`` (bleak; ``?ble=DIR`` a simulated DOT's socket folder)
+- ``ximu3://udp/8000?ip=...&send_port=9000``, ``ximu3://tcp/HOST:PORT``, ``ximu3://serial/PATH``
 
 Every URL accepts ``id=<name>`` (the device id samples carry) and
 ``reconnect=0`` to turn the automatic reconnect off.
@@ -19,7 +21,7 @@ from typing import Any
 from .base import CounterTracker, Device, DeviceEvent, DeviceGone, DeviceStats, Sample, Unwrapper
 from .urls import DeviceURL, build_url, parse_url
 
-SCHEMES = ("xbus", "bno08x-rvc", "xsens-can", "dualsense", "moticon-udp")
+SCHEMES = ("xbus", "bno08x-rvc", "xsens-can", "dualsense", "moticon-udp", "movella-dot", "ximu3")
 
 
 def make_device(url: str, **kw: Any) -> Device:
@@ -70,6 +72,14 @@ def make_device(url: str, **kw: Any) -> Device:
             rate=u.get_float("rate", 100.0),
             **common,
         )
+    if u.scheme == "movella-dot":
+        from .movella_dot.driver import MovellaDotDevice
+
+        return MovellaDotDevice.from_url(u.netloc, u.params, **common)
+    if u.scheme == "ximu3":
+        from .ximu3.driver import Ximu3Device
+
+        return Ximu3Device.from_url(u.netloc, u.path, u.params, **common)
     raise ValueError(f"unknown device scheme {u.scheme!r} (known: {', '.join(SCHEMES)})")
 
 

@@ -1,5 +1,5 @@
 """Simulated twins of every supported device, speaking the drivers' wire formats
-over real transports (pty, python-can bus, HID seam socket, UDP loopback)."""
+over real transports (pty, python-can bus, HID and BLE seam sockets, UDP loopback)."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from .analytic import spinning_signals
 from .base import DeviceFaults, InsoleSource, SignalSource, SimDevice
 from .other_twins import SimDualSense, SimMoticon, SimXsensCan
 from .serial_twins import SimBno08xRvc, SimXbus
+from .wireless_twins import SimMovellaDot, SimXimu3
 
 PROTOCOLS: dict[str, type[SimDevice]] = {
     "xbus": SimXbus,
@@ -18,6 +19,8 @@ PROTOCOLS: dict[str, type[SimDevice]] = {
     "xsens-can": SimXsensCan,
     "dualsense": SimDualSense,
     "moticon-udp": SimMoticon,
+    "movella-dot": SimMovellaDot,
+    "ximu3": SimXimu3,
 }
 INSOLE_PROTOCOLS = ("moticon-udp",)
 
@@ -48,6 +51,8 @@ __all__ = [
     "SimDevice",
     "SimDualSense",
     "SimMoticon",
+    "SimMovellaDot",
+    "SimXimu3",
     "SimXbus",
     "SimXsensCan",
     "make_sim_device",
