@@ -18,7 +18,7 @@ from app.replay import model_label, poser_metadata
 
 FRAMES_PATIENCE = 20.0  # --frames: wait at most this many times --seconds for the poses
 
-PROTOCOL_CHOICES = ("xbus", "bno08x-rvc", "xsens-can", "dualsense", "mixed")
+PROTOCOL_CHOICES = ("xbus", "bno08x-rvc", "xsens-can", "dualsense", "movella-dot", "ximu3", "mixed")
 
 
 MIXED_ORDER = ("xbus", "xsens-can", "bno08x-rvc", "dualsense")

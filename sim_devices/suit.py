@@ -9,6 +9,7 @@ by ``DeviceFaults`` here.
 
 from __future__ import annotations
 
+import tempfile
 import uuid
 from dataclasses import dataclass
 from typing import Any
@@ -57,6 +58,7 @@ class SimulatedSuit:
             channel = loopback_channel(can_channel)  # one server, one port, for the suit's MTis
         else:
             channel = can_channel or f"imucap-suit-{uuid.uuid4().hex[:8]}"
+        ble_folder: str | None = None  # the suit's DOTs share one 'radio range' (a scan lists them all)
         n_can = 0
         for k, (site, protocol) in enumerate(assignment.items()):
             f = faults.get(site) if isinstance(faults, dict) else faults
@@ -66,6 +68,9 @@ class SimulatedSuit:
             if protocol == "xsens-can":
                 kw.update(interface=can_interface, channel=channel, id_offset=0x100 * n_can)
                 n_can += 1
+            if protocol == "movella-dot":
+                ble_folder = ble_folder or tempfile.mkdtemp(prefix="imucap-ble-")
+                kw.update(folder=ble_folder)
             if protocol in INSOLE_PROTOCOLS and site != INSOLES:
                 raise ValueError(f"insoles are assigned as {INSOLES!r}, not {site!r}")
             name = site if protocol not in INSOLE_PROTOCOLS else INSOLES

@@ -1,5 +1,6 @@
-"""What is plugged in that imucap can open: serial ports, HID and USB devices, CAN
-interfaces, each with the URL that would open it.
+"""What is plugged in or in range that imucap can open: serial ports, HID and USB devices,
+CAN interfaces, Movella DOTs over Bluetooth LE (and simulated ones in the seam's socket
+folders), each with the URL that would open it.
 
 Why below both the CLI and the window: `imucap devices list` prints it and the window's
 devices panel lists it, and the window must not import the CLI.
@@ -7,7 +8,11 @@ devices panel lists it, and the window must not import the CLI.
 
 from __future__ import annotations
 
+import os
 from typing import Any
+
+SIM_BLE_FOLDER = "/tmp/imucap-sim/ble"  # where `imucap devices simulate --protocol movella-dot` puts its DOT
+BLE_SCAN_S = 3.0
 
 # USB ids we recognise -> (what it is, backend scheme)
 KNOWN_USB: dict[tuple[int, int | None], tuple[str, str]] = {
@@ -97,6 +102,29 @@ def discover() -> list[dict[str, Any]]:
             )
     except Exception as exc:
         found.append({"kind": "can", "error": str(exc)})
+    found += discover_dots()
+    return found
+
+
+def discover_dots(scan_s: float = BLE_SCAN_S) -> list[dict[str, Any]]:
+    """DOTs in range (bleak), then simulated ones in the seam folders of ``IMUCAP_BLE_SOCKETS``
+    (os.pathsep separated) and ``SIM_BLE_FOLDER``: name, address, battery, URL."""
+    from drivers.movella_dot.ble_seam import SocketSeam
+    from drivers.movella_dot.driver import list_dots
+
+    found: list[dict[str, Any]] = []
+    try:
+        found += list_dots(None, scan_s)
+    except Exception as exc:  # no adapter, no BlueZ/D-Bus, no permission
+        why = f"{type(exc).__name__}: {exc}"
+        found.append({"kind": "ble", "error": f"no Bluetooth LE scan (no adapter or BlueZ reachable: {why})"})
+    folders = [f for f in os.environ.get("IMUCAP_BLE_SOCKETS", "").split(os.pathsep) if f] + [SIM_BLE_FOLDER]
+    for folder in dict.fromkeys(folders):
+        if os.path.isdir(folder):
+            try:
+                found += [dict(d, what=f"{d['what']} (simulated)") for d in list_dots(SocketSeam(folder), 1.0)]
+            except Exception as exc:
+                found.append({"kind": "ble", "error": f"{folder}: {exc}"})
     return found
 
 

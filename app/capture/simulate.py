@@ -99,6 +99,13 @@ def sim_device_for(url: str, name: str, signals: SiteSignals, faults: DeviceFaul
     elif u.scheme == "moticon-udp":
         host, _, port = u.netloc.rpartition(":")
         kw.update(host=host or "127.0.0.1", port=int(port))
+    elif u.scheme == "movella-dot":
+        Path(str(u.get("ble"))).mkdir(parents=True, exist_ok=True)
+        kw.update(folder=u.get("ble"), address=u.netloc, rate=u.get_float("rate", 60.0))
+    elif u.scheme == "ximu3":
+        port = int(u.path.lstrip("/"))
+        kw.update(host=u.get("ip", "127.0.0.1"), port=port, send_port=u.get_int("send_port", port + 1000),
+                  rate=u.get_float("rate", 100.0))
     else:
         raise ValueError(f"{url}: no simulated twin for {u.scheme!r}")
     if u.scheme == "moticon-udp":

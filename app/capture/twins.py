@@ -3,8 +3,9 @@
 Why: ``imucap devices simulate --setup`` makes a setup's devices appear at the setup's own
 URLs, so the same file drives the simulator and ``imucap capture``. That works for URLs a
 process can bring into being on this machine (a pseudo-terminal linked at a path, the HID
-seam's socket, a CAN bus served on loopback, datagrams to a loopback port), not for a real
-device's (``/dev/ttyUSB0``, ``dualsense://`` through hidapi, a socketcan adapter) nor for
+seam's socket, a CAN bus served on loopback, datagrams to a loopback port, a BLE seam socket
+for a DOT), not for a real device's (``/dev/ttyUSB0``, ``dualsense://`` through hidapi, a
+socketcan adapter, a DOT over Bluetooth, an x-IMU3 over TCP or serial) nor for
 anything that would put traffic on the network. ``simulation_problem`` says which and why;
 ``twin_setup`` turns a setup of real URLs into the same setup over simulated ones, which
 ``imucap devices simulate --twin-setup`` writes for a user who has no hardware at hand.
@@ -22,6 +23,7 @@ from drivers.urls import parse_url
 from sim_devices.devices.can_loopback import REMOTE_INTERFACE, is_loopback, loopback_channel, split_host_port
 
 WIRE_PROTOCOLS = ("xbus", "bno08x-rvc", "xsens-can", "dualsense")
+WIRELESS_PROTOCOLS = ("movella-dot", "ximu3")  # not in the "mixed" rotation, which stays as it was
 EXAMPLE = "examples/simulated_suit.toml"
 
 
@@ -61,6 +63,15 @@ def simulation_problem(url: str) -> str | None:
         if not port.isdigit():
             return "a Moticon URL needs host:port"
         return None if is_loopback(host) else f"{host} is not a loopback address"
+    if u.scheme == "movella-dot":
+        return None if u.get("ble") else "a real DOT over Bluetooth (a simulated one is movella-dot://ADDRESS?ble=DIR)"
+    if u.scheme == "ximu3":
+        if u.netloc != "udp":
+            return f"an x-IMU3 over {u.netloc} (a simulated one is ximu3://udp/PORT, on loopback)"
+        if not u.path.lstrip("/").isdigit():
+            return "an x-IMU3 UDP URL needs the port: ximu3://udp/PORT"
+        ip = u.get("ip", "127.0.0.1") or "127.0.0.1"
+        return None if is_loopback(ip) else f"{ip} is not a loopback address"
     return f"no simulated twin for {u.scheme!r}"
 
 
@@ -76,7 +87,14 @@ def simulated_url(site: str, protocol: str, folder: Path, k: int, can_channel: s
         return f"xsens-can://remote/{can_channel or loopback_channel()}?id_offset=0x{0x100 * (k + 1):x}"
     if protocol == "dualsense":
         return f"dualsense://unix/{folder}/{site}.sock"
-    raise ValueError(f"no simulated device for protocol {protocol!r}; choose {', '.join(WIRE_PROTOCOLS)} or mixed")
+    if protocol == "movella-dot":
+        from sim_devices.devices.wireless_twins import dot_address
+
+        return f"movella-dot://{dot_address(site)}?ble={folder}/ble"
+    if protocol == "ximu3":
+        return f"ximu3://udp/{free_udp_port()}?ip=127.0.0.1&send_port={free_udp_port()}"
+    raise ValueError(f"no simulated device for protocol {protocol!r}; "
+                     f"choose {', '.join(WIRE_PROTOCOLS + WIRELESS_PROTOCOLS)} or mixed")
 
 
 def simulated_setup(sites: tuple[str, ...], protocol: str = "xbus", insoles: bool = False,

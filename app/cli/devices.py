@@ -25,9 +25,10 @@ def cmd_list(args: argparse.Namespace) -> int:
             print(f"[{f['kind']}] not available: {f['error']}", file=sys.stderr)
         else:
             url = f.get("url") or f.get("note") or "no backend"
-            print(f"[{f['kind']}] {f['path']}  {f.get('usb') or ''}  {f['what']}  -> {url}")
+            battery = f"  battery {f['battery']:.0f}%" if f.get("battery") is not None else ""
+            print(f"[{f['kind']}] {f['path']}  {f.get('usb') or ''}  {f['what']}{battery}  -> {url}")
     # say what was looked at and came back empty, so "nothing listed" is not ambiguous
-    for kind in ("serial", "hid", "usb", "can"):
+    for kind in ("serial", "hid", "usb", "can", "ble"):
         if not any(f["kind"] == kind for f in found):
             print(f"[{kind}] none found")
     return 0
@@ -209,8 +210,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         kw["link_path"] = args.link
     if args.protocol == "xsens-can":
         kw.update(interface=args.can_interface, channel=args.can_channel)
-    if args.protocol == "moticon-udp" and args.port:
+    if args.protocol in ("moticon-udp", "ximu3") and args.port:
         kw["port"] = args.port
+    if args.protocol == "movella-dot":
+        from app.capture.discovery import SIM_BLE_FOLDER
+
+        kw["folder"] = args.ble_folder or SIM_BLE_FOLDER  # where `imucap devices list` looks for simulated DOTs
     sim = make_sim_device(args.protocol, sig, site, faults=faults, **kw)
     sim.start()
     print(sim.url, flush=True)
@@ -252,7 +257,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_identify_parser(sub, discover)
 
     ps = sub.add_parser("simulate", help="run a simulated device; prints the URL to open")
-    ps.add_argument("--protocol", choices=["xbus", "bno08x-rvc", "xsens-can", "dualsense", "moticon-udp"],
+    ps.add_argument("--protocol", choices=["xbus", "bno08x-rvc", "xsens-can", "dualsense", "moticon-udp",
+                                           "movella-dot", "ximu3"],
                     help="one device of this protocol (or --setup for all of a setup file's devices)")
     ps.add_argument("--setup", help="make every device of this setup file appear at its URL, worn by a simulated "
                                     "subject who follows the setup's calibration protocol, then --motion")
@@ -283,7 +289,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--disconnect", action="append", default=[], metavar="AT:FOR", help="unplug at AT s for FOR s (repeatable)"
     )
     ps.add_argument("--link", help="path of the serial port link to create (xbus, bno08x-rvc)")
-    ps.add_argument("--port", type=int, help="UDP port to send to (moticon-udp)")
+    ps.add_argument("--port", type=int, help="UDP port to send to (moticon-udp, ximu3)")
+    ps.add_argument("--ble-folder", help="movella-dot: folder of the simulated DOTs' seam sockets "
+                                         "(default /tmp/imucap-sim/ble, where `imucap devices list` looks)")
     ps.add_argument("--can-interface", default="virtual",
                     help="virtual (this process only), remote (served on --can-channel HOST:PORT, loopback), "
                          "or a python-can interface")
