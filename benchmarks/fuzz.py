@@ -329,6 +329,99 @@ def _moticon(tmp: Path) -> tuple[Run, list[bytes], Errors]:
     return run, [b"\n".join(frames), frames[0] + b"\n" + frames[2]], ()
 
 
+def _movella_dot(tmp: Path) -> tuple[Run, list[bytes], Errors]:
+    from drivers.movella_dot import protocol as dot
+    from drivers.movella_dot.driver import MovellaDotDevice
+
+    class Link:
+        """The BLE seam over one input: the battery characteristic (2 bytes), then
+        notifications of the medium payload characteristic (40 bytes each)."""
+
+        def __init__(self, data: bytes) -> None:
+            self.data, self.notify = data, {}
+
+        def read(self, char: str, timeout: float = 2.0) -> bytes:
+            return self.data[:2] if char == dot.BATTERY else self.data[2:34]
+
+        def write(self, char: str, data: bytes, timeout: float = 2.0) -> None:
+            pass
+
+        def start_notify(self, char: str, callback, timeout: float = 2.0) -> None:  # type: ignore[no-untyped-def]
+            self.notify[char] = callback
+
+        def disconnect(self) -> None:
+            pass
+
+    class Seam:
+        def __init__(self, data: bytes) -> None:
+            self.link = Link(data)
+
+        def scan(self, timeout: float) -> list:
+            return []
+
+        def connect(self, address: str, on_lost, timeout: float) -> Link:  # type: ignore[no-untyped-def]
+            return self.link
+
+    def run(data: bytes) -> None:
+        for mode in dot.MODES:
+            try:
+                dot.decode(data, mode)
+            except dot.DotError:
+                pass
+        for fn in (dot.decode_control, dot.decode_battery):
+            try:
+                fn(data)
+            except dot.DotError:
+                pass
+        seam = Seam(data)
+        dev = MovellaDotDevice("D4:22:CD:00:00:01", seam, reconnect=False, clock=_Clock())  # type: ignore[arg-type]
+        dev.open()
+        body, notify = data[2:], seam.link.notify[dot.MEDIUM_PAYLOAD]
+        for i in range(0, len(body), 40):
+            notify(body[i:i + 40])
+        while dev.has_buffered():
+            for s in dev.read_many(0.0):
+                _check_sample(s)
+        dev.close()
+
+    ms = [dot.encode(dot.DotMeasurement(16_667 * k, (0.9, 0.1, -0.3, 0.2), (0.1, 0.0, -0.1 * k))) for k in range(4)]
+    battery = dot.encode_battery(dot.DotBattery(87, False))
+    return run, [battery + b"".join(ms), battery + ms[0] + ms[3]], ()
+
+
+def _ximu3_live(tmp: Path) -> tuple[Run, list[bytes], Errors]:
+    from drivers.ximu3 import protocol as x3
+    from drivers.ximu3.driver import Ximu3Device
+
+    def run(data: bytes) -> None:
+        """A UDP payload: split into messages, each decoded, the decoded ones through the
+        live device's pairing and conversion (the items x-io's parser hands it)."""
+        dev = Ximu3Device("udp", {"ip": "127.0.0.1", "receive_port": 9, "send_port": 9}, reconnect=False,
+                          clock=_Clock())
+        msgs, _rest = x3.split(data)
+        for msg in msgs:
+            try:
+                m = x3.decode(msg)
+            except x3.Ximu3Error:
+                continue
+            if m.kind == x3.INERTIAL:
+                item: tuple = ("I", m.timestamp_us, m.values[:3], m.values[3:])
+            elif m.kind == x3.QUATERNION:
+                item = ("Q", m.timestamp_us, m.values)
+            else:
+                item = ("B", m.timestamp_us, m.values[0])
+            s = dev._handle(item)
+            if s is not None:
+                _check_sample(dev._finish(s, 0.0))
+
+    seeds = []
+    for binary in (True, False):
+        seeds.append(b"".join(x3.encode(x3.Message(k, 10_000 * i, v), binary) for i in range(3) for k, v in (
+            (x3.INERTIAL, (1.0, -2.0, 3.0, 0.0, 0.1, 1.0)), (x3.QUATERNION, (0.9, 0.1, -0.3, 0.2)),
+            (x3.BATTERY, (80.0, 3.9, 0.0)))))
+    return run, seeds, ()
+
+
 # ------------------------------------------------------------------------------------------ log files
 def _ximu3(tmp: Path) -> tuple[Run, list[bytes], Errors]:
     from drivers.ximu3.log import LogError, read_log
@@ -607,6 +700,11 @@ TARGETS: dict[str, Target] = {t.name: t for t in (
            surface=("drivers.dualsense.protocol", "drivers.dualsense.driver")),
     Target("moticon", "Moticon UDP datagrams: decoder and the insole device's conversion", _moticon,
            surface=("drivers.moticon.protocol", "drivers.moticon.driver")),
+    Target("movella-dot", "Movella DOT BLE: payload, control and battery decoders, MovellaDotDevice open + "
+           "read_many through a seam fed the input", _movella_dot,
+           surface=("drivers.movella_dot.protocol", "drivers.movella_dot.driver")),
+    Target("ximu3-live", "x-IMU3 data messages (ASCII and binary): split + decode, Ximu3Device pairing",
+           _ximu3_live, surface=("drivers.ximu3.protocol", "drivers.ximu3.driver")),
     Target("ximu3", "x-IMU3 GUI log folder (Inertial.csv + Quaternion.csv): drivers.ximu3.read_log", _ximu3,
            max_len=8192,
            surface=("drivers.ximu3.log",)),
