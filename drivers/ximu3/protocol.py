@@ -71,7 +71,7 @@ def encode(m: Message, binary: bool = True) -> bytes:
     if binary:
         body = bytes((ord(m.kind) | 0x80,)) + _BIN[m.kind].pack(m.timestamp_us, *m.values)
         return _escape(body) + b"\n"
-    fields = ",".join(f"{v:.6f}" for v in m.values)
+    fields = ",".join(f"{v:.4f}" for v in m.values)  # four decimals, as the device writes them
     return f"{m.kind},{m.timestamp_us},{fields}\r\n".encode("ascii")
 
 
