@@ -33,4 +33,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="start on this tab")
     p.add_argument("--screenshot", help="save the window to this PNG after --quit-after seconds")
     p.add_argument("--quit-after", type=float, default=0.0, help="close the window after this many seconds")
+    p.add_argument("--view", choices=("desk", "outdoor"), default="desk",
+                   help="with a window: outdoor = large numbers on black for a runner glancing from a distance")
     p.set_defaults(func=run)

@@ -23,6 +23,7 @@ from app.gui.calibration_panel import CalibrationPanel
 from app.gui.devices_panel import DevicesPanel
 from app.gui.live_panel import LivePanel
 from app.gui.live_session import LiveSession
+from app.gui.outdoor_view import OutdoorView
 from app.gui.recordings_panel import RecordingsPanel
 from app.gui.replay_panel import ReplayPanel
 from app.gui.setup_model import SetupModel
@@ -30,8 +31,9 @@ from app.gui.setup_panel import SetupPanel
 from app.gui.signal_tap import SignalTap
 from app.gui.widgets import MessageBar, fmt
 from app.gui.workers import Jobs
+from app.live_gait import GaitSink
 
-TABS = ("Setup", "Devices", "Calibration", "Live", "Recordings", "Replay")
+TABS = ("Setup", "Devices", "Calibration", "Live", "Recordings", "Replay", "Outdoor")
 ALARM_KINDS = ("device_lost", "device_silent")
 MAX_DRAW_GAP_S = 0.25  # a congested window still redraws the skeleton at least 4 times a second
 
@@ -70,14 +72,18 @@ class MainWindow(QtWidgets.QMainWindow):
         self.live_panel = LivePanel()
         self.recordings_panel = RecordingsPanel(self.jobs, self.report)
         self.replay_panel = ReplayPanel(self.jobs, self.report)
+        self.outdoor = OutdoorView()  # the live view for a glance from a distance (app/gui/outdoor_view.py)
+        self.live_tab = "Live"  # where the window goes once calibrated
+        self.gait: GaitSink | None = None
         for name, panel in zip(TABS, (self.setup_panel, self.devices_panel, self.calibration_panel, self.live_panel,
-                                      self.recordings_panel, self.replay_panel)):
+                                      self.recordings_panel, self.replay_panel, self.outdoor)):
             self.tabs.addTab(panel, name)
 
         self.setup_panel.fileChanged.connect(lambda p: self.settings.setValue("setup/last_file", p))
         self.devices_panel.simulateRequested.connect(self.simulate_devices)
         self.calibration_panel.redoRequested.connect(self.redo)
         self.live_panel.recordToggled.connect(self.set_recording)
+        self.outdoor.recordToggled.connect(self.set_recording)
         self.live_panel.markerRequested.connect(self.add_marker)
         self.live_panel.noteRequested.connect(self.add_note)
         self.live_panel.activeSitesChosen.connect(self.set_active_sites)
@@ -249,10 +255,12 @@ class MainWindow(QtWidgets.QMainWindow):
         self.down = {}
         tap = SignalTap(live.sites)
         live.add_sink(tap)
+        self.gait = GaitSink()
+        live.add_sink(self.gait)
         self.live_panel.attach(tap, live.sites, insoles=live.setup.insoles is not None)
-        self.live_panel.record_button.setEnabled(True)
+        self._enable_record(True)
         if live.recording and live.record_path is not None:
-            self.live_panel.set_recording(True, f"recording {live.record_path.name}")
+            self._show_recording(True, f"recording {live.record_path.name}")
         self.calibration_panel.set_protocol(live.setup.calibration, live.session.guided.still_dps,
                                             live.session.guided.moved_dps)
         self.devices_panel.set_session_running(True)
@@ -279,7 +287,7 @@ class MainWindow(QtWidgets.QMainWindow):
             return
         self.stop_action.setEnabled(False)
         self.session_label.setText("stopping…")
-        self.live_panel.record_button.setEnabled(False)
+        self._enable_record(False)
         self.jobs.run("stop", live.stop, on_done=self._stopped,
                       on_error=lambda e: (self._stopped(None), self.report(f"stopping: {e}", "error")))
 
@@ -287,7 +295,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.start_action.setEnabled(True)
         self.session_label.setText("no capture")
         self.devices_panel.set_session_running(False)
-        self.live_panel.set_recording(False, "not recording")
+        self._show_recording(False, "not recording")
         self.messages.clear_alarm()
         self.down = {}
         self.calibration_panel.show_idle("Capture stopped")
@@ -306,14 +314,29 @@ class MainWindow(QtWidgets.QMainWindow):
         self.tabs.setCurrentIndex(TABS.index("Calibration"))
 
     # ------------------------------------------------------------------ recording
+    def _show_recording(self, on: bool, text: str) -> None:
+        self.live_panel.set_recording(on, text)
+        self.outdoor.set_recording(on, text)
+
+    def _enable_record(self, on: bool) -> None:
+        self.live_panel.record_button.setEnabled(on)
+        self.outdoor.set_record_enabled(on)
+
+    def show_outdoor(self) -> None:
+        """The outdoor view (``--view outdoor``): what a runner reads from a distance; also
+        where the window goes once calibrated."""
+        self.live_tab = "Outdoor"
+        if self.tabs.currentWidget() is not self.calibration_panel:
+            self.tabs.setCurrentIndex(TABS.index("Outdoor"))
+
     def set_recording(self, on: bool) -> None:
         live = self.session
         if live is None:
-            self.live_panel.set_recording(False, "no capture running")
+            self._show_recording(False, "no capture running")
             return
         if on == live.recording:
             return
-        self.live_panel.record_button.setEnabled(False)
+        self._enable_record(False)
         if on:
             self.jobs.run("record-start", live.start_recording, on_done=self._recording_started,
                           on_error=self._recording_failed)
@@ -322,22 +345,22 @@ class MainWindow(QtWidgets.QMainWindow):
                           on_error=self._recording_failed)
 
     def _recording_started(self, path: Path) -> None:
-        self.live_panel.record_button.setEnabled(True)
-        self.live_panel.set_recording(True, f"recording {path.name}")
+        self._enable_record(True)
+        self._show_recording(True, f"recording {path.name}")
         self.live_panel.add_event(f"{time.strftime('%H:%M:%S')} recording to {path}")
         self.report(f"recording to {path}", "ok")
 
     def _recording_stopped(self, path: Path | None) -> None:
-        self.live_panel.record_button.setEnabled(True)
-        self.live_panel.set_recording(False, f"saved {path.name}" if path else "not recording")
+        self._enable_record(True)
+        self._show_recording(False, f"saved {path.name}" if path else "not recording")
         if path:
             self.live_panel.add_event(f"{time.strftime('%H:%M:%S')} saved {path}")
             self.report(f"saved {path}", "ok")
         self.recordings_panel.refresh()
 
     def _recording_failed(self, exc: BaseException) -> None:
-        self.live_panel.record_button.setEnabled(self.session is not None)
-        self.live_panel.set_recording(False, "not recording")
+        self._enable_record(self.session is not None)
+        self._show_recording(False, "not recording")
         self.report(f"recording: {exc}", "error")
 
     def add_marker(self, label: str) -> None:
@@ -391,7 +414,8 @@ class MainWindow(QtWidgets.QMainWindow):
         if now - self._drawn_at < min(MAX_DRAW_GAP_S, 4.0 * self.loop_lag):
             return
         live = self.session
-        if live is not None and live.body is not None and self.live_panel.show_pose(live.latest(), live.body):
+        panel = self.outdoor if self.tabs.currentWidget() is self.outdoor else self.live_panel
+        if live is not None and live.body is not None and panel.show_pose(live.latest(), live.body):
             self._drawn_at = now
 
     def _status(self) -> None:
@@ -419,7 +443,11 @@ class MainWindow(QtWidgets.QMainWindow):
             return
         # hidden tabs are not redrawn: on a busy machine every millisecond of the GUI thread
         # is one the devices' and the model's threads do not get
-        self.devices_panel.show_live(live.device_rows(), redraw=self.tabs.currentWidget() is self.devices_panel)
+        rows = live.device_rows()
+        self.devices_panel.show_live(rows, redraw=self.tabs.currentWidget() is self.devices_panel)
+        if self.tabs.currentWidget() is self.outdoor and self.gait is not None:
+            self.outdoor.show_numbers(self.gait.numbers())
+            self.outdoor.show_devices(rows)
         self._slow_ticks += 1
         congested = self.loop_lag > 0.05
         if self.tabs.currentWidget() is self.live_panel and (not congested or self._slow_ticks % 4 == 0):
@@ -427,7 +455,7 @@ class MainWindow(QtWidgets.QMainWindow):
         if self._slow_ticks % 4 == 0:  # once a second: each label change repaints the window too
             self._show_perf(live.perf())
         if live.recording and live.record_started is not None:
-            self.live_panel.set_recording(True, f"recording {live.record_path.name if live.record_path else ''} "
+            self._show_recording(True, f"recording {live.record_path.name if live.record_path else ''} "
                                                 f"{time.monotonic() - live.record_started:5.1f} s")
             self.rec_label.setText("● REC")
             self.rec_label.setStyleSheet("color: #d02020; font-weight: bold")
@@ -459,7 +487,7 @@ class MainWindow(QtWidgets.QMainWindow):
             level = "ok" if ev.detail == "ok" else "warning"
             self.report("calibrated" + ("" if ev.detail == "ok" else f": {ev.detail}"), level)
             if self.tabs.currentWidget() is self.calibration_panel:
-                self.tabs.setCurrentIndex(TABS.index("Live"))
+                self.tabs.setCurrentIndex(TABS.index(self.live_tab))
         elif ev.kind == "calibration_failed":
             self.report(f"calibration failed: {ev.detail}", "error")
 
@@ -500,6 +528,8 @@ def run_window(setup_window, args: Any = None) -> int:
     win = MainWindow()
     win.show()
     setup_window(win)
+    if getattr(args, "view", None) == "outdoor":
+        win.show_outdoor()
     quit_after = float(getattr(args, "quit_after", 0) or 0)
     if quit_after:
         def finish() -> None:

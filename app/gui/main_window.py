@@ -24,7 +24,7 @@ def start_demo(win: MainWindow, cfg: DemoConfig) -> None:
     for url in setup.urls().values():
         win.model.add_device(url, f"simulated {cfg.protocol}", "simulated")
     options = CaptureOptions(record=Path(cfg.record) if cfg.record else None, sinks=list(cfg.streams),
-                             threads=cfg.threads)
+                             threads=cfg.threads, latency=cfg.latency, confidence=cfg.confidence)
 
     def make_simulation():
         from app.gui.simulated import start_simulation

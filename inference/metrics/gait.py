@@ -1,0 +1,80 @@
+"""The few gait numbers a runner reads at a glance: cadence, knee flexion range per side,
+and the left/right asymmetry of that range.
+
+Why these: they are what a coach asks first and what a glance from a few metres can take
+in; each comes from the reconstruction alone (segment orientations and foot contacts), so
+it works with any sensor set that reconstructs the legs.
+
+- Knee flexion: the angle of the shank relative to the thigh (the rotation angle of
+  R_thigh^T R_shank), 0 standing straight. Ab/adduction and rotation of the knee are a few
+  degrees in gait, so this is flexion to within them.
+- Range: 95th minus 5th percentile over the window, robust to a single bad frame.
+- Cadence: foot strikes (a foot's contact, heel or toe, switching on: runners land on the
+  forefoot) per minute over the window, both feet. A foot counts as coming down only after
+  ``MIN_SWING_S`` in the air: contact flickering off and on around heel strike and toe off
+  is not a step.
+- Asymmetry: |left - right| / mean(left, right) of the knee range, in percent.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from inference.body.rotations import matrix_angle_between
+from inference.body.skeleton import CONTACTS, SEGMENT_INDEX
+
+KNEES = (("l_thigh", "l_shank"), ("r_thigh", "r_shank"))
+FEET = ((CONTACTS.index("l_heel"), CONTACTS.index("l_toe")), (CONTACTS.index("r_heel"), CONTACTS.index("r_toe")))
+MIN_STRIKES = 3  # fewer strikes in the window: no cadence (standing, or not yet walking)
+MIN_SWING_S = 0.15  # a swing phase lasts ~0.4 s walking, longer running; a flicker a few frames
+
+
+@dataclass(frozen=True)
+class GaitNumbers:
+    cadence_spm: float | None
+    knee_range_deg: tuple[float | None, float | None]  # left, right
+    asymmetry_pct: float | None
+    seconds: float  # the span of motion the numbers come from
+
+
+def knee_flexion_deg(rot: np.ndarray) -> np.ndarray:
+    """(T, 24, 3, 3) global segment orientations -> (T, 2) knee flexion, left and right (deg)."""
+    rot = np.asarray(rot, dtype=np.float64)
+    out = [np.degrees(matrix_angle_between(rot[:, SEGMENT_INDEX[a]], rot[:, SEGMENT_INDEX[b]])) for a, b in KNEES]
+    return np.stack(out, axis=-1)
+
+
+def foot_strikes(t: np.ndarray, contacts: np.ndarray) -> np.ndarray:
+    """Times at which either foot comes down (its heel or toe contact switching on), sorted."""
+    c = np.asarray(contacts, bool)
+    t = np.asarray(t, dtype=np.float64)
+    times = []
+    for heel, toe in FEET:
+        down = (c[:, heel] | c[:, toe]).astype(np.int8)
+        edges = np.diff(down)
+        ups, downs = t[1:][edges < 0], t[1:][edges > 0]
+        for ti in downs:
+            before = ups[ups < ti]
+            lifted = before[-1] if len(before) else t[0]  # in the air since the window began
+            if ti - lifted >= MIN_SWING_S:
+                times.append(ti)
+    return np.sort(np.asarray(times, dtype=np.float64))
+
+
+def gait_numbers(t: np.ndarray, rot: np.ndarray, contacts: np.ndarray) -> GaitNumbers:
+    """The numbers over all of ``t`` (the caller keeps the window it wants)."""
+    t = np.asarray(t, dtype=np.float64)
+    if len(t) < 2:
+        return GaitNumbers(None, (None, None), None, 0.0)
+    span = float(t[-1] - t[0])
+    knee = knee_flexion_deg(rot)
+    ranges = tuple(float(np.percentile(knee[:, k], 95) - np.percentile(knee[:, k], 5)) for k in range(2))
+    strikes = foot_strikes(t, contacts)
+    cadence = None
+    if len(strikes) >= MIN_STRIKES and strikes[-1] > strikes[0]:
+        cadence = 60.0 * (len(strikes) - 1) / float(strikes[-1] - strikes[0])
+    mean = 0.5 * (ranges[0] + ranges[1])
+    asym = 100.0 * abs(ranges[0] - ranges[1]) / mean if mean > 5.0 else None  # standing: no asymmetry to speak of
+    return GaitNumbers(cadence, ranges, asym, span)
