@@ -25,7 +25,12 @@ import time
 from pathlib import Path
 from typing import Any
 
-EXPORTS = ("bvh", "csv", "h5", "mot")
+
+def export_choices() -> tuple[str, ...]:
+    """Every format `imucap export` writes, by extension without the dot (new exporters join by themselves)."""
+    from app.export.formats import WRITERS
+
+    return tuple(dict.fromkeys(ext.lstrip(".") for ext in WRITERS))
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -40,7 +45,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=None, help="inpainting noise seed (default: each session's)")
     p.add_argument("--latency", default=None, choices=("centred", "low"), help="default: as recorded")
     p.add_argument("--export", action="append", default=[], metavar="EXT",
-                   help=f"write each replay as this format too: {', '.join(EXPORTS)} (repeatable)")
+                   help="write each replay in this format too, by extension as imucap export: bvh, csv, h5, mot, ... "
+                        "(repeatable)")
     p.add_argument("--no-held-out", action="store_true",
                    help="skip the held-out error of subsets (saves one full replay per recording)")
     p.add_argument("--workers", type=int, default=0, help="local worker processes (default: one per core)")
@@ -56,11 +62,12 @@ def _options(args: argparse.Namespace):
     from inference.body.skeleton import parse_sites
 
     exports = []
+    choices = export_choices()
     for e in args.export:
         for ext in e.split(","):
             ext = ext.strip().lower().lstrip(".")
-            if ext not in EXPORTS:
-                raise ValueError(f"--export {ext!r}: one of {', '.join(EXPORTS)}")
+            if ext not in choices:
+                raise ValueError(f"--export {ext!r}: one of {', '.join(choices)}")
             if ext not in exports:
                 exports.append(ext)
     subsets: list[tuple[str, ...] | None] = [None]
