@@ -23,6 +23,7 @@ sensor's own heading offset), so a walk back after a turn votes for the same for
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -41,7 +42,9 @@ WARN_DEG = 15.0  # a heading this far from the others' is named in the report
 UNSURE_DEG = 20.0  # an estimate whose thirds disagree by more is not used
 STILL_DEG_S = 15.0  # every sensor slower than this: standing
 MIN_STILL_S = 0.3
+MAX_BOUT_S = 10.0  # integrated longer, a real accelerometer's drift is no longer a line
 STEP_DEG_S = 90.0  # a leg segment's swing peaks exceed this in any walk
+TURN_DEG_S = 30.0  # the subject turning faster than this is not walking straight
 MIN_STEPS = 4  # swing peaks of one leg segment that make a log "hold walking"
 
 
@@ -121,12 +124,29 @@ def _peak_forward(w: np.ndarray) -> np.ndarray:
     return np.array([-right[1], right[0]])
 
 
+def _axis_forward(w: np.ndarray, sign_from: np.ndarray | None = None) -> np.ndarray:
+    """Forward (2,) from the principal axis of horizontal angular velocities (N,2), its sign
+    that of the fastest tenth's mean (of ``sign_from`` when given): a stretch of a log whose
+    peaks read backwards (a slower walk back) still gives the axis."""
+    axis = np.linalg.eigh(w.T @ w)[1][:, -1]
+    if float(axis @ _rot90(_peak_forward(w if sign_from is None else sign_from))) < 0:
+        axis = -axis
+    return np.array([-axis[1], axis[0]])
+
+
+def _rot90(f: np.ndarray) -> np.ndarray:
+    """The right (2,) of a forward: forward turned by -90 deg (the inverse of z x right)."""
+    return np.array([f[1], -f[0]])
+
+
 def swing_forward(quat: np.ndarray, present: np.ndarray, fps: float, window: tuple[int, int],
-                  turn: np.ndarray | None = None, frames: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                  turn: np.ndarray | None = None, frames: np.ndarray | None = None,
+                  axis: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Per sensor, the forward direction (S,2) in its reference frame from its swing axis,
     and the same from each third of the frames (S,3,2) (module docstring). ``turn`` (T,)
     the subject's turn since the stand (rad), ``frames`` (T,) bool: only these count (the
-    walking ones of a log)."""
+    walking ones of a log). ``axis``: the principal axis of the rate, signed by the peaks
+    of the whole (``_axis_forward``), for logs whose walks differ in pace."""
     a, b = window
     S = quat.shape[1]
     fwd = np.full((S, 2), np.nan)
@@ -146,9 +166,9 @@ def swing_forward(quat: np.ndarray, present: np.ndarray, fps: float, window: tup
         w = w[use]
         if len(w) < MIN_SWING_FRAMES:
             continue
-        fwd[k] = _peak_forward(w)
+        fwd[k] = _axis_forward(w) if axis else _peak_forward(w)
         for j, part in enumerate(np.array_split(w, 3)):
-            thirds[k, j] = _peak_forward(part)
+            thirds[k, j] = _axis_forward(part, w) if axis else _peak_forward(part)
     return fwd, thirds
 
 
@@ -158,7 +178,8 @@ def pick_direction(sites: Sequence[str], disp: np.ndarray, disp_thirds: np.ndarr
     where it came from ("displacement", "swing axis"): a thigh or shank has both witnesses,
     the others only their displacement."""
     direction = np.array(disp, float, copy=True)
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a sensor without a walk: NaN, as it should
         spread = np.nanmax(angle_between_2d(disp_thirds, disp[:, None, :]), axis=1)
     source = ["displacement"] * len(sites)
     for k, s in enumerate(sites):
@@ -256,17 +277,19 @@ def gait_headings(sites: Sequence[str], quat: np.ndarray, rate: np.ndarray, pres
     turn = turn_of(anchor) if anchor is not None else None
     moving = ~still_frames(rate, ok, fps)
     moving[: still.stop] = False
+    straight = moving & _not_turning(turn, fps)  # a leg pivoting in a turn swings about no lateral axis
     swing = np.full((S, 2), np.nan)
     swing_thirds = np.full((S, 3, 2), np.nan)
     for k in legs:
         own = turn if turn is not None else turn_of(k)
-        f, th = swing_forward(quat[:, k:k + 1], ok[:, k:k + 1], fps, (0, T), own, moving)
+        f, th = swing_forward(quat[:, k:k + 1], ok[:, k:k + 1], fps, (0, T), own, straight, axis=True)
         swing[k], swing_thirds[k] = f[0], th[0]
     # displacement over each stretch between still moments after the stand, summed
     a_G = _free_acc_G(quat, free_acc, acc)
     disp = np.zeros((S, 2))
     parts: list[list[np.ndarray]] = [[] for _ in range(S)]
-    bouts = _bouts(~moving, still.stop)
+    long_bouts = [(a, b) for a, b in _bouts(~moving, still.stop) if (b - a) / fps > MAX_BOUT_S]
+    bouts = [(a, b) for a, b in _bouts(~moving, still.stop) if (b - a) / fps <= MAX_BOUT_S]
     for a, b in bouts:
         d, th = walk_displacements(a_G, ok, fps, (a, b), (still.start, still.stop), turn)
         disp += np.nan_to_num(d)
@@ -282,16 +305,35 @@ def gait_headings(sites: Sequence[str], quat: np.ndarray, rate: np.ndarray, pres
             disp_thirds[k] = np.sum(parts[k], axis=0)
     short = ~(path >= MIN_WALK_M)
     disp[short] = np.nan
+    for k in legs:  # a thigh swings back about as fast as forward: where the sensor's path says, it signs the axis
+        if np.isfinite(disp[k]).all() and np.isfinite(swing[k]).all() and float(disp[k] @ swing[k]) < 0:
+            swing[k], swing_thirds[k] = -swing[k], -swing_thirds[k]
     direction, spread, source = pick_direction(sites, disp, disp_thirds, swing, swing_thirds)
     for k in range(S):
         if not np.isfinite(direction[k]).all():
             source[k] = (f"no swing, and a path of {path[k]:.1f} m (at least {MIN_WALK_M:g} m needed)"
-                         if bouts else "no walk between two still moments after the stand")
+                         if bouts else f"no swing, and no walk between two still moments under {MAX_BOUT_S:g} s"
+                         + (f" (its {max(b - a for a, b in long_bouts) / fps:.0f} s walk would drift)"
+                            if long_bouts else ""))
     unsure = spread > UNSURE_DEG
     for k in np.flatnonzero(unsure):
         source[k] = f"its walk's thirds disagree by {spread[k]:.0f} deg ({source[k]})"
     direction[unsure] = np.nan
     return GaitHeadings(sites, direction, spread, source, path, steps, {"bouts": bouts})
+
+
+def _not_turning(turn: np.ndarray | None, fps: float) -> np.ndarray | bool:
+    """(T,) bool: the subject turns slower than TURN_DEG_S (over 0.5 s); True without a trunk sensor."""
+    if turn is None:
+        return True
+    ok = np.isfinite(turn)
+    if ok.sum() < 2:
+        return ok
+    t = np.arange(len(turn))
+    yaw = np.unwrap(np.interp(t, t[ok], turn[ok]))
+    h = max(1, int(0.25 * fps))
+    rate = np.degrees(np.abs(yaw[np.minimum(t + h, len(t) - 1)] - yaw[np.maximum(t - h, 0)])) * fps / (2 * h)
+    return ok & (rate < TURN_DEG_S)
 
 
 def _bouts(still: np.ndarray, start: int) -> list[tuple[int, int]]:
@@ -312,16 +354,19 @@ def _bouts(still: np.ndarray, start: int) -> list[tuple[int, int]]:
     return out
 
 
-def consensus_forward(forward: np.ndarray) -> np.ndarray | None:
-    """(2,) the forward most sensors agree on: the estimate with the least summed angle
-    to the others (a median, robust to one sensor far off); None when there is none."""
+def consensus_forward(forward: np.ndarray, min_agree: int = 2) -> np.ndarray | None:
+    """(2,) the forward most sensors agree on: the mean of the largest group of estimates
+    within WARN_DEG of one of them (robust to a sensor far off); None when fewer than
+    ``min_agree`` agree."""
     f = forward[np.all(np.isfinite(forward), axis=-1)]
     if not len(f):
         return None
-    cost = angle_between_2d(f[:, None], f[None]).sum(1)
-    best = f[int(np.argmin(cost))]
-    near = f[angle_between_2d(f, best[None]) < WARN_DEG]  # refine: mean of the agreeing ones
-    m = (near / np.linalg.norm(near, axis=-1, keepdims=True)).mean(0)
+    f = f / np.linalg.norm(f, axis=-1, keepdims=True)
+    close = angle_between_2d(f[:, None], f[None]) < WARN_DEG
+    best = int(np.argmax(close.sum(1) - 1e-3 * angle_between_2d(f[:, None], f[None]).sum(1)))
+    if close[best].sum() < min_agree:
+        return None
+    m = f[close[best]].mean(0)
     return m / np.linalg.norm(m)
 
 

@@ -182,11 +182,14 @@ def forward_from_motion(sites: Sequence[str], quat: np.ndarray, gyro: np.ndarray
 def calibrate_standing(sites: Sequence[str], quat: np.ndarray, free_acc: np.ndarray | None = None,
                        acc: np.ndarray | None = None, gyro: np.ndarray | None = None,
                        present: np.ndarray | None = None, still: slice | None = None, rate: float = 60.0,
-                       forward_G: np.ndarray | None = None, limits: StillnessLimits | None = None) -> Calibration:
+                       forward_G: np.ndarray | None = None, limits: StillnessLimits | None = None,
+                       sensor_forward_G: np.ndarray | None = None) -> Calibration:
     """A ``Calibration`` from a session that starts standing still (module docstring).
     quat (T,S,4) R_GS, free_acc (T,S,3) in G or acc (T,S,3) specific force, gyro (T,S,3),
     present (T,S); ``still`` the standing frames (default ``still_start``), ``forward_G``
-    the subject's forward in G (default from the knees)."""
+    the subject's forward in G (default from the knees). ``sensor_forward_G`` (S,2+):
+    each sensor's own forward in its own frame (``gait_heading``), where its frame does
+    not share the others' heading; NaN rows keep ``forward_G``."""
     sites = tuple(parse_sites(list(sites)))
     quat = np.asarray(quat, dtype=np.float64)
     present = np.all(np.isfinite(quat), axis=-1) if present is None else np.asarray(present, bool)
@@ -200,7 +203,12 @@ def calibrate_standing(sites: Sequence[str], quat: np.ndarray, free_acc: np.ndar
         f, method = np.asarray(forward_G, float), "given"
     yaw = float(np.arctan2(f[1], f[0]))
     S = len(sites)
-    R_WG = np.tile(matrix_about_axis(np.array([0.0, 0.0, 1.0]), -yaw), (S, 1, 1))
+    yaws = np.full(S, yaw)
+    if sensor_forward_G is not None:
+        own = np.asarray(sensor_forward_G, float)[:, :2]
+        mine = np.all(np.isfinite(own), axis=-1)
+        yaws[mine] = np.arctan2(own[mine, 1], own[mine, 0])
+    R_WG = matrix_about_axis(np.tile([0.0, 0.0, 1.0], (S, 1)), -yaws)
     win = {k: None if v is None else np.asarray(v, dtype=np.float64)[still]
            for k, v in (("free_acc", free_acc), ("acc", acc), ("gyro", gyro))}
     R_SB, valid, resid = calibrate_tpose(sites, quat[still], R_WG, present=present[still],

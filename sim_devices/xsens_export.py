@@ -290,4 +290,46 @@ def write_mvnx(sig: SiteSignals, path: str | os.PathLike, labels: Mapping[str, s
     return path
 
 
-__all__ = ["DOT_GROUPS", "MT_GROUPS", "write_dot_exports", "write_mtmanager_exports", "write_mvnx"]
+# ------------------------------------------------------------------ a logged walk with its truth
+
+
+def stand_walk_stand(walk_s: float = 6.0, stand_s: float = 2.0, end_s: float = 2.0, seed: int = 0,
+                     heading_deg: float = 0.0, blend_s: float = 0.5) -> Motion:
+    """What a lab logs for a calibrated trial: standing still in the N-pose, blending into a
+    walk straight ahead, blending back into standing still where the walk ended. Still at
+    both ends, so each sensor's path over the walk can be integrated (``calibration.gait_heading``).
+    Faces +X turned by ``heading_deg``; 60 Hz."""
+    from inference.body.rotations import matrix_to_quat, quat_slerp
+
+    from .motions import generate
+
+    walk = generate("walk", seconds=walk_s, seed=seed)
+    hold = generate("npose", seconds=max(stand_s, end_s))
+    nb = max(int(round(blend_s * 60.0)), 1)
+    w = (np.arange(nb) + 1.0) / (nb + 1.0)
+    w = w * w * (3.0 - 2.0 * w)
+
+    def blend(R0: np.ndarray, R1: np.ndarray, p0: np.ndarray, p1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        q0, q1 = matrix_to_quat(R0), matrix_to_quat(R1)
+        q = quat_slerp(np.broadcast_to(q0, (nb,) + q0.shape), np.broadcast_to(q1, (nb,) + q1.shape),
+                       w.reshape(-1, 1))
+        return quat_to_matrix(q), p0 + w[:, None] * (p1 - p0)
+
+    n0, n1 = int(round(stand_s * 60.0)), int(round(end_s * 60.0))
+    start_root = hold.root[:n0] + (walk.root[0] - hold.root[0]) * [1, 1, 0]
+    end_root = hold.root[:n1] + (walk.root[-1] - hold.root[0]) * [1, 1, 0]
+    r_in, p_in = blend(hold.rot[0], walk.rot[0], start_root[-1], walk.root[0])
+    r_out, p_out = blend(walk.rot[-1], hold.rot[0], walk.root[-1], end_root[0])
+    rot = np.concatenate([hold.rot[:n0], r_in, walk.rot, r_out, hold.rot[:n1]])
+    root = np.concatenate([start_root, p_in, walk.root, p_out, end_root])
+    if heading_deg:
+        from .motions import rz
+
+        Rh = rz(np.deg2rad(heading_deg))
+        rot, root = Rh @ rot, root @ Rh.T
+    return Motion(rot=rot, root=root, fps=60.0, body=hold.body, name="stand_walk_stand",
+                  meta={"still_frames": n0, "walk_seed": seed})
+
+
+__all__ = ["DOT_GROUPS", "MT_GROUPS", "stand_walk_stand", "write_dot_exports", "write_mtmanager_exports",
+           "write_mvnx"]

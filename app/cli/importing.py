@@ -57,7 +57,8 @@ import numpy as np
 
 from app.recording import Recorder
 from calibration.core import Calibration
-from calibration.standing import calibrate_standing
+from calibration.imported import MODES as CALIBRATIONS
+from calibration.imported import calibrate_log
 from drivers.device_log import DeviceLog
 from drivers.hub import HubFrame
 from drivers.ximu3 import read_log
@@ -154,6 +155,8 @@ class Imported:
     ignored: list[str] = field(default_factory=list)
     grid_t0: float = 0.0  # the log's time (s, its own clock) of the recording's frame 0
     truth: str = ""
+    calibration: dict[str, Any] = field(default_factory=dict)  # method, warnings, notes, headings
+    warnings: list[str] = field(default_factory=list)  # about the files and sensors, not the calibration
 
 
 def _unique(names: Sequence[str]) -> tuple[str, ...]:
@@ -177,8 +180,10 @@ def _site_of(src: Source, mapping: dict[str, str]) -> str | None:
     return next((s for s in (site_for(i, {}) for i in src.ids) if s), None)
 
 
-def _assign_sites(sources: Sequence[Source], mapping: dict[str, str]) -> dict[str, Source]:
-    """site -> its device; refuses devices without a site and two devices on one site."""
+def _assign_sites(sources: Sequence[Source], mapping: dict[str, str]) -> tuple[dict[str, Source], list[str]]:
+    """(site -> its device, a warning per device without a site, which is skipped): a folder
+    often holds sensors the study did not use. Refuses two devices on one site, and a log
+    where no device has a site."""
     by_site: dict[str, Source] = {}
     unknown = []
     for src in sources:
@@ -190,11 +195,24 @@ def _assign_sites(sources: Sequence[Source], mapping: dict[str, str]) -> dict[st
         if site in by_site:
             raise ValueError(f"sensors {by_site[site].label} and {src.label} both map to {site}; use --map ID=SITE")
         by_site[site] = src
-    if unknown:
+    if unknown and not by_site:
         example = unknown[0].ids[0]
         raise ValueError(f"no site for sensor(s) {', '.join(s.label for s in unknown)}; map each with --map ID=SITE "
                          f"(e.g. --map '{example}=pelvis'; sites: {', '.join(SITES)})")
-    return by_site
+    skipped = [f"{s.label}: no site, skipped (--map '{s.ids[0]}=SITE' to use it)" for s in unknown]
+    return by_site, skipped
+
+
+def _duplicates(files: Sequence[Path]) -> list[str]:
+    """A warning per group of byte-identical files: one sensor's export copied under a
+    second name imports as two sensors moving exactly alike."""
+    import hashlib
+
+    groups: dict[str, list[Path]] = {}
+    for f in files:
+        groups.setdefault(hashlib.sha256(f.read_bytes()).hexdigest(), []).append(f)
+    return [f"{' and '.join(map(str, g))}: byte-identical (one sensor's export twice?); each imported as its own "
+            "sensor" for g in groups.values() if len(g) > 1]
 
 
 def gyro_from_orientation(t: np.ndarray, quat: np.ndarray, window_s: float = GYRO_WINDOW_S) -> np.ndarray:
@@ -285,21 +303,26 @@ def _device_summary(src: Source, present: np.ndarray) -> dict[str, Any]:
 
 
 def import_sources(sources: Sequence[Source], out: str | Path, fmt: str, log: str,
-                   mapping: dict[str, str] | None = None, height: float | None = None) -> Imported:
+                   mapping: dict[str, str] | None = None, height: float | None = None,
+                   calibration: str = "auto") -> Imported:
     """Put the devices of one logged session on the 60 Hz grid, calibrate them from their
-    standing start and write them as a session recording at ``out``."""
-    by_site = {s: _check_acc(src) for s, src in _assign_sites(sources, mapping or {}).items()}
+    standing start (each sensor's heading from the gait, ``calibration.imported``) and
+    write them as a session recording at ``out``."""
+    assigned, skipped = _assign_sites(sources, mapping or {})
+    by_site = {s: _check_acc(src) for s, src in assigned.items()}
     sites = tuple(s for s in SITES if s in by_site)  # canonical order
     clock = _align_clocks(by_site)
     quat, vec, t0 = _on_grid(by_site, sites)
     acc, gyro, cal_rate = vec[:, :, 0], vec[:, :, 1], vec[:, :, 2]
     present = np.all(np.isfinite(quat), axis=-1)
-    cal = calibrate_standing(sites, quat, acc=acc, gyro=cal_rate, present=present, rate=RATE)
+    lc = calibrate_log(sites, quat, cal_rate, present, RATE, calibration, acc=acc)
+    cal = lc.calibration
     meta: dict[str, Any] = {
         "source": SOURCE_TITLES[fmt], "log": log, "sensors": list(sites), "insoles": False,
         "devices": {s: {"name": by_site[s].log.name, "serial": by_site[s].log.serial} for s in sites},
-        "calibration": "standing start (calibration/standing.py)", "stride_scale": True,
-        "pelvis_odometry": True, "clock": clock,
+        "calibration": f"{lc.method} (calibration/imported.py)", "calibration_warnings": lc.warnings,
+        "stride_scale": True,
+        "pelvis_odometry": True, "clock": clock, "log_time_origin_s": float(t0),
     }
     if height is not None:
         meta["body_height_m"] = float(height)
@@ -308,29 +331,34 @@ def import_sources(sources: Sequence[Source], out: str | Path, fmt: str, log: st
     devices = {s: _device_summary(by_site[s], present[:, k]) for k, s in enumerate(sites)}
     return Imported(Path(out), sites, n, round(n / RATE, 3), round(still / RATE, 3),
                     [round(float(x), 4) for x in cal.meta["forward_G"]], str(cal.meta["forward_from"]), devices,
-                    format=fmt, clock=clock, grid_t0=t0)
+                    format=fmt, clock=clock, grid_t0=t0,
+                    warnings=skipped, calibration={"method": lc.method, "warnings": lc.warnings, "notes": lc.notes,
+                                 "headings": lc.headings})
 
 
 def import_ximu3(log_dir: str | Path, out: str | Path, mapping: dict[str, str] | None = None,
-                 height: float | None = None) -> Imported:
+                 height: float | None = None, calibration: str = "auto") -> Imported:
     """An x-IMU3 log folder as a session recording at ``out`` (``import_sources``)."""
     sources = [Source(d, _unique([d.name, d.serial])) for d in read_log(log_dir)]
-    return import_sources(sources, out, "ximu3", str(log_dir), mapping, height)
+    return import_sources(sources, out, "ximu3", str(log_dir), mapping, height, calibration)
 
 
 def import_xsens(files: Sequence[str | Path], out: str | Path, layout: str | None = None,
-                 mapping: dict[str, str] | None = None, height: float | None = None) -> Imported:
+                 mapping: dict[str, str] | None = None, height: float | None = None,
+                 calibration: str = "auto") -> Imported:
     """Xsens export files of one session (one per sensor; ``layout`` "mtmanager" or "dot",
     else told by each file) as a session recording at ``out`` (``import_sources``)."""
     files = [Path(f) for f in files]
     logs = read_exports(files, layout)
     fmt = layout or logs[0].info["layout"]
     sources = [Source(d, _unique([d.name, d.serial, f.stem]), str(f)) for d, f in zip(logs, files)]
-    return import_sources(sources, out, fmt, ", ".join(map(str, files)), mapping, height)
+    res = import_sources(sources, out, fmt, ", ".join(map(str, files)), mapping, height, calibration)
+    res.warnings = _duplicates(files) + res.warnings
+    return res
 
 
 def import_mvnx(file: str | Path, out: str | Path, mapping: dict[str, str] | None = None,
-                height: float | None = None, truth: str | Path | None = None) -> Imported:
+                height: float | None = None, truth: str | Path | None = None, calibration: str = "auto") -> Imported:
     """An MVN take's MVNX export as a session recording at ``out`` (``import_sources``):
     the sensors at imucap's sites (by MVN label, or ``--map LABEL=SITE``); the others are
     listed in ``ignored``. ``truth``: also write MVN's full-suit solution there
@@ -365,7 +393,8 @@ def import_mvnx(file: str | Path, out: str | Path, mapping: dict[str, str] | Non
                 raise
     if height is None and motion is not None:
         height = round(float(motion.body.height), 3)  # MVN's body, as the subject was measured for the suit
-    res = import_sources(sources, out, "mvnx", str(file), {s.ids[0]: s.ids[1] for s in sources}, height)
+    res = import_sources(sources, out, "mvnx", str(file), {s.ids[0]: s.ids[1] for s in sources}, height,
+                         calibration)
     res.ignored = unused
     if truth is not None and motion is not None:
         write_mvn_truth(motion, res, truth)
@@ -418,7 +447,7 @@ def _export_files(paths: Sequence[Path], fmt: str) -> tuple[list[Path], list[Pat
 
 def import_paths(paths: Sequence[str | Path], out: str | Path, fmt: str = "auto",
                  mapping: dict[str, str] | None = None, height: float | None = None,
-                 truth: str | Path | None = None) -> Imported:
+                 truth: str | Path | None = None, calibration: str = "auto") -> Imported:
     """The CLI's import: an x-IMU3 log folder, or Xsens export folders and files (module docstring)."""
     paths = [Path(p) for p in paths]
     if fmt not in FORMATS:
@@ -430,15 +459,15 @@ def import_paths(paths: Sequence[str | Path], out: str | Path, fmt: str = "auto"
                          and (paths[0].suffix.lower() == ".mvnx" or is_mvnx(paths[0]))):
         if len(paths) != 1 or paths[0].is_dir():
             raise ValueError("an MVNX export is one file for the whole suit; give just that file")
-        return import_mvnx(paths[0], out, mapping, height, truth)
+        return import_mvnx(paths[0], out, mapping, height, truth, calibration)
     if truth is not None:
         raise ValueError("--truth: only an MVN take (.mvnx) holds a full-body solution to score against")
     if fmt == "ximu3" or (fmt == "auto" and len(paths) == 1 and _is_ximu3_log(paths[0])):
         if len(paths) != 1:
             raise ValueError("an x-IMU3 log is one folder; give just that folder")
-        return import_ximu3(paths[0], out, mapping, height)
+        return import_ximu3(paths[0], out, mapping, height, calibration)
     files, ignored, layout = _export_files(paths, fmt)
-    res = import_xsens(files, out, layout, mapping, height)
+    res = import_xsens(files, out, layout, mapping, height, calibration)
     res.ignored = [str(f) for f in ignored]
     return res
 
@@ -454,16 +483,21 @@ def _mapping(items: list[str]) -> dict[str, str]:
 
 
 def run_import(args: argparse.Namespace) -> int:
-    res = import_paths(args.logs, args.out, args.format, _mapping(args.map), args.height, args.truth)
+    res = import_paths(args.logs, args.out, args.format, _mapping(args.map), args.height, args.truth,
+                       args.calibration)
     summary = {"recording": str(res.path), "format": res.format, "sites": list(res.sites), "frames": res.frames,
                "duration_s": res.duration_s, "still_start_s": res.still_s, "forward_G": res.forward_G,
-               "forward_from": res.forward_from, "clock": res.clock, "devices": res.devices, "ignored": res.ignored,
-               **({"truth": res.truth} if res.truth else {})}
+               "forward_from": res.forward_from, "clock": res.clock, "log_time_origin_s": round(res.grid_t0, 6),
+               "calibration": res.calibration, "warnings": res.warnings, "devices": res.devices,
+               "ignored": res.ignored, **({"truth": res.truth} if res.truth else {})}
+    for w in res.warnings + res.calibration.get("warnings", []) + res.calibration.get("notes", []):
+        print(f"imucap import: warning: {w}", file=sys.stderr)
     if args.json:
         print(json.dumps(summary))
     else:
         print(f"imported {len(res.sites)} sensors ({', '.join(res.sites)}) from an {SOURCE_TITLES[res.format]}, "
-              f"{res.duration_s} s, calibrated on the first {res.still_s} s standing -> {res.path}")
+              f"{res.duration_s} s, calibrated ({res.calibration.get('method')}) on the first {res.still_s} s "
+              f"standing -> {res.path}")
         if res.ignored:
             what = "not used" if res.format == "mvnx" else "ignored (not Xsens exports)"
             print(f"{what}: {', '.join(res.ignored)}")
@@ -484,6 +518,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--height", type=float, default=None, help="the subject's height in m (stored for replay)")
     p.add_argument("--truth", type=Path, default=None, metavar="TRUTH.npz",
                    help="with an MVN take: also write MVN's own full-suit solution, for imucap replay --truth")
+    p.add_argument("--calibration", default="auto", choices=CALIBRATIONS,
+                   help="standing: one heading for all sensors; walk: each sensor's heading from the gait; auto "
+                        "(default): walk when the log holds walking")
     p.add_argument("--json", action="store_true", help="print one JSON summary on stdout")
     p.set_defaults(func=run_import)
 

@@ -21,6 +21,7 @@ lines up with the recording it came from); the session-clock value subtracted is
 
 from __future__ import annotations
 
+import json
 import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -67,17 +68,27 @@ def _time_origin(rec: Recording) -> float:
     return float(t[0]) if len(t) else 0.0
 
 
+def md_source(rec: Recording) -> str:
+    """The system an imported recording came from ("" for one recorded here)."""
+    return str(rec.metadata.get("source") or "")
+
+
 def _provenance(rec: Recording) -> dict[str, Any]:
     md = rec.metadata
-    return {"source_recording": str(rec.path), "recorded_sensors": list(rec.sites),
-            "created": rec.attrs.get("created"), "app_version": md.get("app_version")}
+    out = {"source_recording": str(rec.path), "recorded_sensors": list(rec.sites),
+           "created": rec.attrs.get("created"), "app_version": md.get("app_version")}
+    if md.get("log_time_origin_s") is not None:  # an import: frame 0 on the original log's clock
+        out["log_time_origin_s"] = float(md["log_time_origin_s"])
+    return out
 
 
 def motion_from_recording(rec: Recording, body: Body) -> ExportMotion:
     """The live reconstruction stored in a recording (``/recon``)."""
     r = rec.recon
     if len(r["t"]) == 0:
-        raise ValueError(f"{rec.path} holds no reconstructed frames (was the session calibrated?)")
+        what = "an imported log is calibrated, not reconstructed" if md_source(rec) else "was the session calibrated?"
+        raise ValueError(f"{rec.path} holds no reconstructed frames ({what}); reconstruct and write it with: "
+                         f"imucap replay {rec.path} --out FILE")
     md = rec.metadata
     t0 = _time_origin(rec)
     meta = {**_provenance(rec), "model": md.get("model"), "steps": md.get("steps"),
@@ -109,8 +120,31 @@ def motion_from_poses(poses: Sequence[LivePose], body: Body, rec: Recording | No
 # ---------------------------------------------------------------------------- dispatch
 
 
+BVH_SIDECAR = ".json"  # NAME.bvh -> NAME.bvh.json
+
+
 def _write_bvh(path: Path, m: ExportMotion) -> Path:
-    return write_bvh(path, m.rot, m.root, m.body, m.fps)
+    """BVH has no field for when its first frame was, and no comments: the time origin goes
+    beside it in ``NAME.bvh.json`` (``bvh_sidecar``), as JSON any tool reads."""
+    out = write_bvh(path, m.rot, m.root, m.body, m.fps)
+    side = path.with_name(path.name + BVH_SIDECAR)
+    tmp = side.with_name(side.name + ".tmp")
+    tmp.write_text(json.dumps(bvh_sidecar(m), indent=1, default=str) + "\n")
+    os.replace(tmp, side)
+    return out
+
+
+def bvh_sidecar(m: ExportMotion) -> dict[str, Any]:
+    """What a BVH cannot say of its frames: frame 0's time on the recording's clock
+    (``time_origin_s`` + the first frame's ``time``) and, for an import, on the original
+    log's clock (``log_time_origin_s``); the frame time; where the motion came from."""
+    t0 = float(m.meta.get("time_origin") or 0.0) + (float(m.time[0]) if m.n_frames else 0.0)
+    out = {"format": "imucap-bvh-sidecar", "version": 1, "first_frame_time_s": round(t0, 6),
+           "frame_time_s": 1.0 / m.fps, "frames": m.n_frames, "gaps_closed": m.gaps,
+           **{k: v for k, v in m.meta.items() if k in ("source_recording", "model", "sensors", "what")}}
+    if "log_time_origin_s" in m.meta:
+        out["log_first_frame_time_s"] = round(float(m.meta["log_time_origin_s"]) + t0, 6)
+    return out
 
 
 def _write_csv(path: Path, m: ExportMotion) -> Path:

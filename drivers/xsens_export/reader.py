@@ -12,7 +12,7 @@ from drivers.xsens_export.dot import DOT, is_dot
 from drivers.xsens_export.dot import OWN_COLUMNS as DOT_COLUMNS
 from drivers.xsens_export.mtmanager import MTMANAGER, is_mtmanager
 from drivers.xsens_export.mtmanager import OWN_COLUMNS as MT_COLUMNS
-from drivers.xsens_export.samples import Layout, recognised, to_device_log
+from drivers.xsens_export.samples import EULER_SETS, MATRIX, QUAT_SETS, Layout, recognised, to_device_log
 from drivers.xsens_export.table import ExportError, Table, norm_key, read_table
 
 HEAD_LINES = 64  # more than any preamble, so the column names are among them
@@ -33,14 +33,26 @@ def layout_of(table: Table) -> str | None:
     return None
 
 
+def _has_orientation(table: Table) -> bool:
+    names = {norm_key(c) for c in table.columns}
+    return any(set(g) <= names for g in (*QUAT_SETS, MATRIX, *EULER_SETS))
+
+
 def detect_layout(path: str | os.PathLike) -> str | None:
-    """``"mtmanager"``, ``"dot"``, or None for a file that is not an Xsens export (empty, or
-    without Xsens column names, whatever its preamble); never raises on content."""
+    """``"mtmanager"``, ``"dot"``, or None for a file that is not an Xsens export (empty,
+    without Xsens column names whatever its preamble, or a table that neither has an Xsens
+    preamble nor orientation columns: a lab's own CSV with an ``Acc_X`` column is not an
+    export); never raises on content. A file with the preamble but no orientation is an
+    export, damaged, and reading it says so."""
     try:
         table = read_table(path, limit=HEAD_LINES)
     except (ExportError, OSError):
         return None
-    return layout_of(table) if recognised(table.columns) else None
+    if not recognised(table.columns):
+        return None
+    if not (is_mtmanager(table) or is_dot(table) or _has_orientation(table)):
+        return None
+    return layout_of(table)
 
 
 def _read(path: str | os.PathLike, layout: str | None) -> tuple[DeviceLog, float]:

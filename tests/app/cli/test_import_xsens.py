@@ -102,7 +102,8 @@ def _replay(capsys, path, tmp_path, motion):
 
 
 def test_an_mtmanager_session_imports_by_device_id_and_replays(mt_folder, motion, tmp_path, capsys):
-    out = _import(capsys, mt_folder, "--out", tmp_path / "mt.h5", "--height", "1.75", *_mt_maps())
+    out = _import(capsys, mt_folder, "--out", tmp_path / "mt.h5", "--height", "1.75", "--calibration", "standing",
+                  *_mt_maps())
     assert out["format"] == "mtmanager" and out["clock"] == "shared"
     assert out["sites"] == ["pelvis", "head", "l_thigh", "r_thigh", "l_shank", "r_shank"]
     assert out["ignored"] == [str(mt_folder / "notes.txt")]
@@ -200,7 +201,9 @@ def test_an_mvn_takes_own_solution_is_the_truth_for_a_sparse_rerun(mvnx_file, mt
     assert "only an MVN take" in capsys.readouterr().err
 
 
-def test_sensors_without_a_site_are_refused_with_the_way_out(mt_folder, dot_folder, tmp_path, capsys):
+def test_sensors_without_a_site_are_skipped_or_refused_with_the_way_out(mt_folder, dot_folder, tmp_path, capsys):
+    """One sensor without a site is skipped with a warning (a folder holds sensors the
+    study did not use); when none has a site, the import is refused in one line."""
     assert main(["import", str(mt_folder), "--out", str(tmp_path / "x.h5")]) != 0
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--map" in err and all(i in err for i in MT_IDS.values())
@@ -209,8 +212,13 @@ def test_sensors_without_a_site_are_refused_with_the_way_out(mt_folder, dot_fold
     renamed.write_text(tibia.read_text().replace("DeviceTag:,LTibia", "DeviceTag:,bei"))
     tibia.unlink()
     try:
-        assert main(["import", str(dot_folder), "--out", str(tmp_path / "y.h5")]) != 0
-        assert "bei" in capsys.readouterr().err
+        assert main(["import", str(dot_folder), "--out", str(tmp_path / "y.h5"), "--json"]) == 0
+        cap = capsys.readouterr()
+        out = json.loads(cap.out)
+        assert "l_shank" not in out["sites"] and len(out["sites"]) == 5
+        assert [w for w in out["warnings"] if w.startswith("bei")] == [
+            f"bei ({renamed.name}): no site, skipped (--map 'bei=SITE' to use it)"]
+        assert "no site, skipped" in cap.err
         for way in ("bei=l_shank", "D4:CA:6E:F1:72:04=l_shank", f"{renamed.stem}=l_shank"):  # tag, address, stem
             assert "l_shank" in _import(capsys, dot_folder, "--out", tmp_path / "z.h5", "--map", way)["sites"]
     finally:
