@@ -3,11 +3,13 @@ serial transports): inertial and quaternion messages joined on their timestamps 
 samples, battery from the battery message.
 
 Time is the device's microsecond timestamp. The messages carry no packet counter, so
-lost samples are inferred from the timestamps at the URL's ``rate``. Loss of the link:
-TCP and serial report it (the package's connection status); UDP has no connection, so a
-stream silent for ``stale`` seconds is a lost link, and reconnecting means the device
-answers a ping on its command port again. Either way the base class reconnects with its
-backoff and counts it.
+lost samples are inferred from the timestamps at the URL's ``rate``. Loss of the link: an
+x-IMU3 streams without pause, so a stream silent for ``stale`` seconds is a lost link on
+every transport (the package's status callback did not report a TCP peer that closed;
+UDP has no connection at all); a disconnected status counts too. Reconnecting means
+opening the connection again (TCP connects, the serial port opens) and, over UDP, the
+device answering a ping on its command port. The base class reconnects with its backoff
+and counts it.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ class Ximu3Device(Device):
     """``ximu3://udp/8000?ip=127.0.0.1&send_port=9000`` (receive on 8000, commands to the
     device at ip:send_port; send_port defaults to PORT+1000), ``ximu3://tcp/HOST:PORT``,
     ``ximu3://serial/dev/ttyACM0?baud=115200``. ``rate`` (Hz, default 100) is the rate the
-    device was set to send at, for the loss count; ``stale`` (s, default 1.0) how long a UDP
+    device was set to send at, for the loss count; ``stale`` (s, default 1.0) how long the
     stream may be silent before it counts as lost."""
 
     scheme = "ximu3"
@@ -141,8 +143,8 @@ class Ximu3Device(Device):
             if self._conn is None:
                 raise DeviceGone("connection closed")
             now = time.monotonic()
-            if self.transport == "udp" and now - self._last_msg > self.stale:
-                raise DeviceGone(f"no x-IMU3 datagrams for {self.stale:g} s")
+            if now - self._last_msg > self.stale:
+                raise DeviceGone(f"no x-IMU3 messages for {self.stale:g} s")
             wait = None if end is None else max(0.0, end - now)
             wait = self.stale if wait is None else min(wait, self.stale)
             try:
