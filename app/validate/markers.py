@@ -1,0 +1,172 @@
+"""Marker files as joint centres: C3D (read with ezc3d) and OpenSim's TRC (text).
+
+A lab's file names its points as its software does. We take a point as one of our joint
+centres (``kinematics.JOINT_NAMES``) when its label, lower-cased without a subject
+prefix (``Subject:``), is our name or one of the aliases below: the joint-centre names
+of Vicon's Plug-in Gait and of most lab pipelines (``LKJC``, ``RHJC``, ...), OpenSim's
+(``r_knee_study``...: not centres, but on the joint's axis) and, where a lab exported
+only surface markers, the lateral markers at the joint (``LKNE``, ``LANK``, ``LSHO``,
+``LELB``, ``LWRA``): a joint centre a few centimetres off, which the report's mapping
+lines say. Units come from the file (C3D ``POINT:UNITS``, TRC ``Units``); the up axis
+is the one the legs hang along (hip above ankle), turned onto our Z.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from app.validate.kinematics import JOINT_INDEX
+from inference.body.motion import MotionFormatError
+from inference.loaders.retarget import world_map
+
+UNITS = {"m": 1.0, "mm": 0.001, "cm": 0.01, "in": 0.0254, "inch": 0.0254}
+
+_ALIASES: dict[str, tuple[str, ...]] = {
+    "hip": ("hjc", "_hip", "hipjc", "_hjc"), "knee": ("kjc", "_kjc", "kne", "knee_study", "_knee_study"),
+    "ankle": ("ajc", "_ajc", "ank", "ankle_study", "_ankle_study"), "mtp": ("toe", "_toe", "mt2", "_mtp"),
+    "shoulder": ("sjc", "_sjc", "sho"), "elbow": ("ejc", "_ejc", "elb"), "wrist": ("wjc", "_wjc", "wra"),
+}
+
+
+def _candidates(joint: str) -> list[str]:
+    """Lower-case labels a file may give our joint ``joint`` (ours first)."""
+    out = [joint]
+    if joint[:2] in ("l_", "r_"):
+        side, part = joint[0], joint[2:]
+        for a in _ALIASES.get(part, ()):
+            out += [f"{side}{a}", f"{side}_{a.lstrip('_')}", f"{'left' if side == 'l' else 'right'}{a.lstrip('_')}"]
+    return out
+
+
+@dataclass
+class Markers:
+    """Points of a marker file: time (T,) s, positions (T, N, 3) in the file's axes and
+    metres (NaN where a point is missing), their labels, and the frame rate."""
+
+    path: str
+    t: np.ndarray
+    pos: np.ndarray
+    labels: list[str]
+    rate: float
+
+
+def map_joints(labels: list[str]) -> dict[str, int]:
+    """our joint name -> index into ``labels`` (module docstring)."""
+    plain = {}
+    for i, lab in enumerate(labels):
+        key = lab.split(":")[-1].strip().lower()
+        plain.setdefault(key, i)
+    out = {}
+    for joint in JOINT_INDEX:
+        for cand in _candidates(joint):
+            if cand in plain:
+                out[joint] = plain[cand]
+                break
+    return out
+
+
+def read_c3d(path: str | os.PathLike) -> Markers:
+    import ezc3d
+
+    spath = os.fspath(path)
+    try:
+        c = ezc3d.c3d(spath)
+    except Exception as exc:  # ezc3d raises RuntimeError/IOError for anything it cannot parse
+        raise MotionFormatError(spath, f"not a readable C3D file ({str(exc).strip() or type(exc).__name__})") from None
+    P = c["parameters"]["POINT"]
+    labels = [str(s) for s in P["LABELS"]["value"]]
+    pts = np.asarray(c["data"]["points"], dtype=np.float64)  # (4, N, T)
+    rate = float(np.ravel(P["RATE"]["value"])[0]) if len(np.ravel(P["RATE"]["value"])) else 0.0
+    if not (math.isfinite(rate) and rate > 0):
+        raise MotionFormatError(spath, f"POINT:RATE is {rate}, not a frame rate")
+    units = str(P["UNITS"]["value"][0]).strip().lower() if len(P["UNITS"]["value"]) else "mm"
+    if units not in UNITS:
+        raise MotionFormatError(spath, f"POINT:UNITS {units!r} is not a length unit ({', '.join(UNITS)})")
+    if pts.ndim != 3 or pts.shape[0] < 3 or pts.shape[1] != len(labels):
+        raise MotionFormatError(spath, f"{pts.shape[1] if pts.ndim == 3 else '?'} points for {len(labels)} labels")
+    pos = np.moveaxis(pts[:3], (0, 1, 2), (2, 1, 0)) * UNITS[units]  # (T, N, 3)
+    first = int(c["header"]["points"]["first_frame"])
+    t = (first + np.arange(pos.shape[0])) / rate
+    return Markers(spath, t, pos, labels, rate)
+
+
+def read_trc(path: str | os.PathLike) -> Markers:
+    """OpenSim's TRC: ``PathFileType`` line, a line of header keys and one of their values
+    (``DataRate``, ``NumFrames``, ``NumMarkers``, ``Units``, ...), the marker names (each
+    over three columns after ``Frame#`` and ``Time``), X/Y/Z labels, then rows."""
+    spath = os.fspath(path)
+    try:
+        lines = Path(path).read_text(errors="strict").splitlines()
+    except UnicodeDecodeError:
+        raise MotionFormatError(spath, "not a text file (a TRC is tab-separated text)") from None
+    if len(lines) < 5 or not lines[0].startswith("PathFileType"):
+        raise MotionFormatError(spath, "not a TRC file: the first line is not 'PathFileType ...'", 1)
+    keys, vals = lines[1].split("\t"), lines[2].split("\t")
+    head = {k.strip(): v.strip() for k, v in zip(keys, vals)}
+    try:
+        rate = float(head.get("DataRate") or head["CameraRate"])
+        n_markers = int(head["NumMarkers"])
+    except (KeyError, ValueError) as exc:
+        raise MotionFormatError(spath, f"header line 3: no usable {exc} (DataRate, NumMarkers)", 3) from None
+    units = head.get("Units", "mm").lower()
+    if units not in UNITS:
+        raise MotionFormatError(spath, f"Units {units!r} is not a length unit ({', '.join(UNITS)})", 3)
+    if not (math.isfinite(rate) and rate > 0) or not 0 < n_markers < 100_000:
+        raise MotionFormatError(spath, f"DataRate {rate} / NumMarkers {n_markers} out of range", 3)
+    names = [n.strip() for n in lines[3].split("\t")[2:] if n.strip()]
+    if len(names) != n_markers:
+        raise MotionFormatError(spath, f"{len(names)} marker names for NumMarkers {n_markers}", 4)
+    rows = []
+    for no, ln in enumerate(lines[5:], start=6):
+        if not ln.strip():
+            continue
+        cells = ln.split("\t")
+        try:
+            vals_ = [float(c) if c.strip() else math.nan for c in cells[1:2 + 3 * n_markers]]
+        except ValueError as exc:
+            raise MotionFormatError(spath, f"not a number ({exc})", no) from None
+        if len(vals_) < 1 + 3 * n_markers:
+            vals_ += [math.nan] * (1 + 3 * n_markers - len(vals_))
+        rows.append(vals_)
+        if not math.isfinite(vals_[0]):
+            raise MotionFormatError(spath, "a row without a time", no)
+    if len(rows) < 2:
+        raise MotionFormatError(spath, f"{len(rows)} data row(s); at least 2 are needed")
+    a = np.array(rows)
+    return Markers(spath, a[:, 0], a[:, 1:].reshape(len(a), n_markers, 3) * UNITS[units], names, rate)
+
+
+def marker_joints(m: Markers) -> tuple[np.ndarray, set[str], list[str]]:
+    """(joints (T, 24, 3) in our Z-up world, NaN where unknown; the joints found; mapping
+    lines 'ours <- theirs') of a marker file. The up axis: along which the hips stand above
+    the ankles (or knees), on average."""
+    found = map_joints(m.labels)
+    if not found:
+        raise MotionFormatError(m.path, f"none of its {len(m.labels)} points is a joint centre we know "
+                                        f"(e.g. l_knee, LKJC, LKNE); labels: {', '.join(m.labels[:12])}")
+    T = m.pos.shape[0]
+    J = np.full((T, len(JOINT_INDEX), 3), np.nan)
+    for joint, k in found.items():
+        J[:, JOINT_INDEX[joint]] = m.pos[:, k]
+    up = None
+    for top, bottom in (("hip", "ankle"), ("hip", "knee"), ("shoulder", "elbow")):
+        d = [J[:, JOINT_INDEX[f"{s}_{top}"]] - J[:, JOINT_INDEX[f"{s}_{bottom}"]] for s in "lr"
+             if f"{s}_{top}" in found and f"{s}_{bottom}" in found]
+        if d:
+            up = np.nanmean(np.concatenate(d), axis=0)
+            break
+    if up is None or not np.all(np.isfinite(up)):
+        raise MotionFormatError(m.path, "cannot tell which way is up: it needs hip and knee or ankle centres "
+                                        f"(found {', '.join(sorted(found))})")
+    W = world_map(up)
+    J = J @ W.T
+    lines = [f"{j} <- {m.labels[k]}" for j, k in found.items()]
+    return J, set(found), lines
+
+
+__all__ = ["Markers", "UNITS", "map_joints", "read_c3d", "read_trc", "marker_joints"]
