@@ -13,8 +13,9 @@ from typing import Any
 import numpy as np
 
 from app import APP_VERSION
-from app.pipeline import LivePipeline, LivePose, Pipeline, Sink, SuitHub, close_sink
+from app.pipeline import LivePipeline, LivePose, Pipeline, Sink, close_sink
 from app.replay import model_label, poser_metadata
+from drivers.hub import Hub
 
 FRAMES_PATIENCE = 20.0  # --frames: wait at most this many times --seconds for the poses
 
@@ -195,7 +196,7 @@ class DemoSession:
         self.pipeline = Pipeline(self.poser, cfg.sensors, calibrator=self.calibrator, insoles=cfg.insoles,
                                  clock=time.monotonic, causal=self.causal)
         self.suit = None  # SimulatedSuit (suit "thread") or SuitProcess ("process")
-        self.hub: SuitHub | None = None
+        self.hub: Hub | None = None
         self.live: LivePipeline | None = None
         self.recorder = None
         self.origin = 0.0
@@ -231,7 +232,7 @@ class DemoSession:
         if self.cfg.record:
             self.start_recording(self.cfg.record)
         devices = {site: drivers.make_device(url) for site, url in self.suit.urls().items()}
-        self.hub = SuitHub(devices, **hub_options(self.cfg.latency))
+        self.hub = Hub(devices, **hub_options(self.cfg.latency))
         self.hub.start()
         self.live = LivePipeline(self.pipeline, self.hub).start()
         return self

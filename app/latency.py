@@ -55,13 +55,14 @@ def latency_settings(mode: str) -> LatencySettings:
 
 
 def hub_options(mode: str) -> dict[str, Any]:
-    """Keyword arguments for ``Hub``/``SuitHub`` in this mode (``latency``, ``max_latency``, ``resampler``)."""
-    from drivers.hub import resampler_from_to_grid
-    from inference.signals.resample import slerp_unit, to_grid
+    """Keyword arguments for ``Hub`` in this mode (``latency``, ``max_latency``, ``interpolation``): the
+    centred mode interpolates with inference's slerp, the one its offline resampler uses."""
+    from drivers.hub import Interpolation
+    from inference.signals.resample import slerp_unit
 
     s = latency_settings(mode)
     return {"latency": s.hub_wait, "max_latency": s.hub_max_wait,
-            "resampler": resampler_from_to_grid(to_grid, slerp=slerp_unit) if s.interpolate else None}
+            "interpolation": Interpolation(slerp_unit) if s.interpolate else None}
 
 
 def causal_weights() -> os.PathLike:

@@ -27,8 +27,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from calibration import Calibration, Calibrator
-from drivers.base import Sample
-from drivers.hub import Hub, HubFrame
+from drivers.hub import HubFrame
 from inference.body.rotations import matrix_to_rot6d
 from inference.body.skeleton import N_CONTACTS, N_SITES, SITE_INDEX, SITE_SEGMENT_INDEX, SITES
 from inference.features.layout import N_FEATURES, SL_ACC, SL_CONTACT, SL_ROT, observation_mask
@@ -409,35 +408,6 @@ class FrameSource(Protocol):
     def poll(self) -> list[HubFrame]: ...
 
 
-class SuitHub(Hub):
-    """The hub plus what a status panel wants that the hub does not keep: each device's
-    last battery level and sample count per second."""
-
-    def __init__(self, *a: Any, **kw: Any) -> None:
-        super().__init__(*a, **kw)
-        self.battery: dict[str, float] = {}
-
-    def push_many(self, name: str, samples: Sequence[Sample]) -> None:
-        """Every reader path (per-sample ``push`` too) ends here."""
-        for s in reversed(samples):
-            if s.battery is not None:
-                self.battery[name] = float(s.battery)
-                break
-        super().push_many(name, samples)
-
-    def status(self) -> dict[str, dict[str, Any]]:
-        """Per device: packets decoded, errors, gaps, queue drops, battery (None if unknown)."""
-        out = {}
-        for name, tr in self.tracks.items():
-            st = tr.device.stats
-            out[name] = {
-                "packets": int(st.decoded), "errors": int(st.errors), "gaps": int(self.stats.gaps.get(name, 0)),
-                "lost": int(st.lost_packets), "dropped": int(tr.dropped), "reconnects": int(st.reconnects),
-                "battery": self.battery.get(name),
-            }
-        return out
-
-
 def frames_from_signals(sig: SiteSignals, t0: float = 0.0, insoles: bool = False,
                         drop: dict[str, list[tuple[float, float]]] | None = None) -> list[HubFrame]:
     """Hub frames straight from synthesized signals (no devices): raw free acceleration
@@ -638,7 +608,7 @@ class LivePipeline:
 
 
 __all__ = [
-    "LivePose", "Sink", "CallbackSink", "PipelineStats", "Pipeline", "SuitHub", "FrameSource",
+    "LivePose", "Sink", "CallbackSink", "PipelineStats", "Pipeline", "FrameSource",
     "frames_from_signals", "ListSource", "LivePipeline", "STEP", "stride_text",
 ]
 

@@ -215,21 +215,36 @@ def live_repeated(seconds: float, repeat: int, protocol: str = "xbus", **hub_kw:
     return out
 
 
+def to_grid_per_stream(to_grid: Any, max_gap: float = 0.1) -> Any:
+    """Inference's ``to_grid(t, quat, acc, fps, max_gap, t0)`` as the hub's per-stream
+    resampler (``drivers.hub.StreamResampler``): one site's samples onto the grid times."""
+
+    def resample(t: np.ndarray, q: np.ndarray, a: np.ndarray, grid: np.ndarray):
+        tg, qg, ag, valid = to_grid(t, q, a, fps=60.0, max_gap=max_gap, t0=float(grid[0]))
+        G = grid.size
+        quat, acc, ok = np.full((G, 4), np.nan), np.full((G, 3), np.nan), np.zeros(G, bool)
+        n = min(G, len(tg))
+        quat[:n], acc[:n], ok[:n] = qg[:n], ag[:n], valid[:n]
+        return quat, acc, ok
+
+    return resample
+
+
 def interpolation_cost(seconds: float, repeat: int, **hub_kw: Any) -> dict[str, Any]:
     """The hub's share of a core with the 13 twins when it interpolates each site to the
     grid (the centred mode): one batched slerp over all sites (``Hub._interp_all``) against
     ``to_grid`` per site (``Hub._per_site``), and the hold, taken in turn in each repeat
     so the machine's load falls on all three."""
-    from drivers.hub import resampler_from_to_grid
+    from drivers.hub import Interpolation
     from inference.signals.resample import slerp_unit, to_grid
 
-    modes = {"hold": None, "batched": resampler_from_to_grid(to_grid, slerp=slerp_unit),
-             "per_site": resampler_from_to_grid(to_grid)}
+    modes = {"hold": None, "batched": Interpolation(slerp_unit),
+             "per_site": Interpolation(per_stream=to_grid_per_stream(to_grid))}
     ratios: dict[str, list[float]] = {m: [] for m in modes}
     present: dict[str, list[float]] = {m: [] for m in modes}
     for _ in range(repeat):
         for m, rs in modes.items():
-            r = live_cost(seconds, resampler=rs, **hub_kw)
+            r = live_cost(seconds, interpolation=rs, **hub_kw)
             ratios[m].append(r["cpu_fraction_of_one_core"])
             present[m].append(r["present_fraction"])
     med = {m: float(np.median(v)) for m, v in ratios.items()}

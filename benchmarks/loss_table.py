@@ -42,16 +42,16 @@ sys.path.insert(0, str(REPO))
 
 import can  # noqa: E402
 
-from app.pipeline import Pipeline, SuitHub  # noqa: E402
+from app.pipeline import Pipeline  # noqa: E402
 from calibration import Calibration  # noqa: E402
 from drivers.bno08x.driver import Bno08xRvcDevice  # noqa: E402
-from drivers.hub import resampler_from_to_grid  # noqa: E402
+from drivers.hub import Hub, Interpolation  # noqa: E402
 from drivers.xbus.driver import XbusDevice  # noqa: E402
 from drivers.xsens_can.driver import XsensCanDevice  # noqa: E402
 from inference.body.motion import Motion  # noqa: E402
 from inference.loaders import find_motion_files, load_motion  # noqa: E402
 from inference.metrics.errors import evaluate_clip, global_angle_error, summarize  # noqa: E402
-from inference.signals.resample import FPS_MODEL, slerp_unit, to_grid  # noqa: E402
+from inference.signals.resample import FPS_MODEL, slerp_unit  # noqa: E402
 from inference.signals.synthesis import kinematics, synthesize  # noqa: E402
 from sim_devices.devices import DeviceFaults, SignalSource, SimBno08xRvc, SimXbus, SimXsensCan  # noqa: E402
 
@@ -180,8 +180,8 @@ def simulate_frames(sig, sites: tuple[str, ...], loss: float, dropout: tuple[str
         faults = DeviceFaults(clock_offset=100.0 * (k + 1), drift_ppm=20.0 * (k - 2), seed=seed * 31 + k)
         links.append(Link(site, k, SignalSource(sig, site), faults, clock))
     losses = [BurstLoss(loss, np.random.default_rng(seed * 31 + k)) for k in range(len(links))]
-    hub = SuitHub({ln.site: ln.dev for ln in links}, clock=clock,
-                  resampler=resampler_from_to_grid(to_grid, slerp=slerp_unit), fill_gap=fill_gap)
+    hub = Hub({ln.site: ln.dev for ln in links}, clock=clock, interpolation=Interpolation(slerp_unit),
+              fill_gap=fill_gap)
     duration = (len(sig) - 1) / sig.fps
     events: list[tuple[float, int, object]] = []
     sent = lost = 0

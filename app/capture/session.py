@@ -26,10 +26,11 @@ import numpy as np
 
 from app import APP_VERSION
 from app.capture.setup_file import Setup
-from app.pipeline import LivePipeline, LivePose, Pipeline, Sink, SuitHub, close_sink
+from app.pipeline import LivePipeline, LivePose, Pipeline, Sink, close_sink
 from app.replay import poser_metadata
 from calibration import Calibration, GuidedCalibration
 from drivers.base import DeviceEvent
+from drivers.hub import Hub
 
 INSOLES = "insoles"
 SILENT_AFTER_S = 0.5  # a device with no sample for this long is reported as silent
@@ -108,7 +109,7 @@ class CaptureSession:
             self.pipeline.add_sink(sink)
         self.events: list[SessionEvent] = []
         self.recorder = None
-        self.hub: SuitHub | None = None
+        self.hub: Hub | None = None
         self.live: LivePipeline | None = None
         self.started_at: float | None = None
         self.calibration: Calibration | None = None
@@ -127,7 +128,7 @@ class CaptureSession:
             self.start_recording(self.options.record)
         from app.latency import hub_options
 
-        self.hub = SuitHub(devices, **hub_options(self.options.latency), on_event=self._device_event)
+        self.hub = Hub(devices, **hub_options(self.options.latency), on_event=self._device_event)
         self.started_at = time.monotonic()
         self.guided.reset(self.started_at)
         self.hub.start()

@@ -130,7 +130,7 @@ def _feed(hub: Hub, times: np.ndarray) -> None:
 def test_low_mode_hub_holds_the_latest_sample_at_or_before_the_grid_time():
     times = 10.0 + np.arange(0, 0.5, 0.01) + 0.003  # 100 Hz, off the 60 Hz grid
     hub = _hub(interpolate=False)
-    assert hub.latency == latency.LOW_HUB_WAIT and hub.resampler is None
+    assert hub.latency == latency.LOW_HUB_WAIT and hub.interpolation is None
     _feed(hub, times)
     hub.poll(now=10.1)
     frames = hub.poll(now=10.45)
@@ -146,7 +146,7 @@ def test_low_mode_hub_holds_the_latest_sample_at_or_before_the_grid_time():
 def test_centred_mode_hub_reports_the_sample_after_the_grid_time_it_waited_for():
     times = 10.0 + np.arange(0, 0.5, 0.01) + 0.003
     hub = _hub(interpolate=True)
-    assert hub.latency == latency.CENTRED_HUB_WAIT and hub.resampler is not None
+    assert hub.latency == latency.CENTRED_HUB_WAIT and hub.interpolation is not None
     _feed(hub, times)
     hub.poll(now=10.1)
     frames = hub.poll(now=10.45)

@@ -178,20 +178,6 @@ def test_threaded_runner_drops_oldest_when_inference_lags(session):
     assert ran == ["calibration: waiting"]
 
 
-def test_suit_hub_keeps_battery_and_status():
-    import drivers
-    from app.pipeline import SuitHub
-    from drivers.base import Sample
-
-    dev = drivers.make_device("xbus:///dev/imucap-no-such-port")  # never opened: the hub is fed by hand
-    hub = SuitHub({"pelvis": dev})
-    q = np.array([1.0, 0, 0, 0])
-    hub.push("pelvis", Sample(t=1.0, device_time=1.0, device_id="p", quat=q, battery=80.0))
-    hub.push("pelvis", Sample(t=1.01, device_time=1.01, device_id="p", quat=q))
-    st = hub.status()["pelvis"]
-    assert st["battery"] == 80.0 and st["packets"] == 0 and st["errors"] == 0 and st["gaps"] == 0
-
-
 def test_stride_status_says_whether_the_distance_comes_from_the_shanks(session):
     sig, truth = session
     pipe = Pipeline(make_poser("diffusion", body=truth.body, steps=[0]), SITES,

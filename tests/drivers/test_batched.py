@@ -210,7 +210,7 @@ def test_hub_selector_survives_an_unplugged_xbus_and_forwards_events():
     try:
         devs = {s: drivers.make_device(sim.url) for s, sim in sims.items()}
         with Hub(devs, latency=0.05) as hub:
-            assert hub._selector_thread is not None  # noqa: SLF001 - both are served by the selector
+            assert hub.readers.selector_thread is not None  # both are served by the selector
             list(hub.frames(duration=0.5))
             sims["pelvis"].disconnect(0.4)
             frames = list(hub.frames(duration=3.0))

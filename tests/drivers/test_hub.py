@@ -7,7 +7,7 @@ import pytest
 
 import drivers
 from drivers.base import Sample
-from drivers.hub import ClockModel, Hub, resampler_from_to_grid
+from drivers.hub import ClockModel, Hub, Interpolation
 
 
 def _dev(name="x"):
@@ -103,14 +103,14 @@ def test_device_clock_used_for_session_time():
     assert np.std(np.diff(ts[-100:])) < 1e-4
 
 
-def test_injected_resampler_interpolates():
+def test_injected_interpolation_interpolates():
     resample = pytest.importorskip("inference.signals.resample")
     hub = Hub(
         {"pelvis": _dev()},
         latency=0.0,
         staleness=0.05,
         max_backlog=5,
-        resampler=resampler_from_to_grid(resample.to_grid, max_gap=0.05),
+        interpolation=Interpolation(resample.slerp_unit, max_gap=0.05),
     )
     for k in range(100):
         hub.push("pelvis", _sample(k / 100, None, k, yaw=k / 100))  # yaw = t
@@ -119,3 +119,14 @@ def test_injected_resampler_interpolates():
     yaw = np.array([2 * np.arctan2(f.quat[0, 3], f.quat[0, 0]) for f in frames])
     t = np.array([f.t for f in frames])
     assert np.allclose(yaw, t, atol=1e-6)  # slerp between samples, not the held value
+
+
+def test_hub_keeps_battery_and_status():
+    """What a status panel shows of each device, the battery from the last sample that had one."""
+    dev = drivers.make_device("xbus:///dev/imucap-no-such-port")  # never opened: the hub is fed by hand
+    hub = Hub({"pelvis": dev})
+    q = np.array([1.0, 0, 0, 0])
+    hub.push("pelvis", Sample(t=1.0, device_time=1.0, device_id="p", quat=q, battery=80.0))
+    hub.push("pelvis", Sample(t=1.01, device_time=1.01, device_id="p", quat=q))
+    st = hub.status()["pelvis"]
+    assert st["battery"] == 80.0 and st["packets"] == 0 and st["errors"] == 0 and st["gaps"] == 0

@@ -13,7 +13,7 @@ import pytest
 
 import drivers
 from drivers.base import Sample
-from drivers.hub import LATE_PERSIST_S, LATE_QUIET_S, Hub, resampler_from_to_grid
+from drivers.hub import LATE_PERSIST_S, LATE_QUIET_S, Hub, Interpolation
 
 resample = pytest.importorskip("inference.signals.resample")
 
@@ -29,7 +29,7 @@ def _run(max_latency: float | None, burst_until: float = 12.0, seconds: float = 
     now = [0.0]
     devs = {n: drivers.make_device(f"bno08x-rvc:///dev/null-late-{n}") for n in ("a", "b")}
     hub = Hub(devs, latency=0.05, max_backlog=2.0, queue_size=4096, clock=lambda: now[0],
-              resampler=resampler_from_to_grid(resample.to_grid), max_latency=max_latency)
+              interpolation=Interpolation(resample.slerp_unit), max_latency=max_latency)
     frames, waits = [], []
     held: list[Sample] = []
     k = 0

@@ -9,7 +9,7 @@ import pytest
 
 import drivers
 from drivers.base import Sample
-from drivers.hub import Hub, resampler_from_to_grid
+from drivers.hub import Hub, Interpolation
 
 resample = pytest.importorskip("inference.signals.resample")
 
@@ -52,7 +52,7 @@ def test_bursts_of_lost_packets_are_interpolated_across():
     lost: set[int] = set()
     for start in rng.choice(np.arange(10, 280), 15, replace=False):
         lost.update(range(int(start), int(start) + int(rng.integers(1, 8))))  # bursts of 1-7 packets
-    hub = _hub(resampler=resampler_from_to_grid(resample.to_grid))
+    hub = _hub(interpolation=Interpolation(resample.slerp_unit))
     _stream(hub, lost)
     t, yaw, present = _poll(hub)
     inside = t < 3.95
@@ -61,7 +61,7 @@ def test_bursts_of_lost_packets_are_interpolated_across():
 
 
 def test_a_long_gap_stays_a_gap_with_the_resampler():
-    hub = _hub(resampler=resampler_from_to_grid(resample.to_grid))
+    hub = _hub(interpolation=Interpolation(resample.slerp_unit))
     _stream(hub, set(range(100, 125)))  # 250 ms
     t, _, present = _poll(hub)
     gap = (t > 1.995) & (t < 2.245)
@@ -69,7 +69,7 @@ def test_a_long_gap_stays_a_gap_with_the_resampler():
 
 
 def test_fill_gap_bounds_what_is_bridged():
-    hub = _hub(resampler=resampler_from_to_grid(resample.to_grid), fill_gap=0.03)
+    hub = _hub(interpolation=Interpolation(resample.slerp_unit), fill_gap=0.03)
     _stream(hub, set(range(100, 105)))  # 60 ms between the samples either side
     t, _, present = _poll(hub)
     assert not present[(t > 1.995) & (t < 2.045)].any()
