@@ -76,7 +76,7 @@ def run(seed: int, calibration: str = "walk", offsets: dict[str, float] | None =
         folder = Path(tmp) / "exports"
         R = simulated_walk_exports(folder, seed, offsets=offsets)
         res = import_paths([folder], Path(tmp) / "rec.h5", mapping={i: s for s, i in IDS.items()},
-                           calibration=calibration)
+                           calibration=calibration, reconstruct=False)
         return heading_errors(Path(tmp) / "rec.h5", R), res.calibration
 
 

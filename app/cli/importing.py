@@ -1,14 +1,31 @@
 """`imucap import`: another system's logged session -> an imucap session recording.
 
     imucap import FOLDER_OR_FILES... --out SESSION.h5 [--format auto|ximu3|mtmanager|dot|mvnx] [--truth T.npz]
-                  [--map ID=SITE ...] [--height M] [--json]
+                  [--calibration standing|walk|auto] [--map ID=SITE ...] [--height M] [--no-reconstruct] [--json]
 
 Why: a researcher's sessions are often logged with the sensor maker's own software. Once
 imported, ``imucap replay`` reconstructs them with any model, sensor subset or step list,
 and ``imucap export`` writes BVH, OpenSim, HDF5 or CSV, exactly as for a session recorded
 here. The import keeps the raw stream (on the 60 Hz grid the live hub uses, by the live
-app's slerp resampler) and adds one calibration, computed from the standing start
-(``calibration.standing``: the log has no table or T-pose window).
+app's slerp resampler), adds one calibration computed from the standing start (the log
+has no table or T-pose window), and reconstructs the body with the default model and
+every imported sensor (``--no-reconstruct`` skips that), so ``imucap export`` works at once.
+
+Calibration (``calibration.imported``): the stand fixes each sensor's tilt and
+sensor-to-bone; the subject's forward comes from the knees. ``--calibration walk`` also
+gives each sensor its own heading from the gait (the swing axis of thighs and shanks,
+every sensor's path between two still moments: ``calibration.gait_heading``, as the live
+walk protocol), for sensors whose frames do not share one heading; ``standing`` assumes
+they do; ``auto`` (default) is ``walk`` when the log holds walking. ``--json`` lists under
+``calibration.warnings`` each sensor whose heading is off the others' or that keeps the
+shared one, a line starting with its site; they are printed on stderr too.
+
+A messy folder imports: sensors without a site are skipped with a warning (``warnings``),
+files that are not exports are listed as ignored, a byte-identical copy of an export is
+skipped with a warning; a file that claims to be an export but is damaged stops the
+import with its one-line reason. ``log_time_origin_s`` is the original log's time of the
+recording's frame 0 (kept in the recording and in every export; a BVH's goes beside it
+in ``NAME.bvh.json``).
 
 Formats (``--format auto``, the default, tells them apart):
 - ``ximu3``: the x-IMU3 GUI's data logs (``drivers.ximu3``): one folder holding a folder
@@ -156,6 +173,7 @@ class Imported:
     grid_t0: float = 0.0  # the log's time (s, its own clock) of the recording's frame 0
     truth: str = ""
     calibration: dict[str, Any] = field(default_factory=dict)  # method, warnings, notes, headings
+    reconstruction: dict[str, Any] = field(default_factory=dict)  # poses, sensors, model; empty when not asked
     warnings: list[str] = field(default_factory=list)  # about the files and sensors, not the calibration
 
 
@@ -203,16 +221,22 @@ def _assign_sites(sources: Sequence[Source], mapping: dict[str, str]) -> tuple[d
     return by_site, skipped
 
 
-def _duplicates(files: Sequence[Path]) -> list[str]:
-    """A warning per group of byte-identical files: one sensor's export copied under a
-    second name imports as two sensors moving exactly alike."""
+def _duplicates(files: Sequence[Path]) -> tuple[list[Path], list[str]]:
+    """(the files without byte-identical copies of an earlier one, a warning per copy): one
+    sensor's export copied under a second name would import as two sensors moving exactly
+    alike, or clash on one site."""
     import hashlib
 
-    groups: dict[str, list[Path]] = {}
+    first: dict[str, Path] = {}
+    keep, warnings = [], []
     for f in files:
-        groups.setdefault(hashlib.sha256(f.read_bytes()).hexdigest(), []).append(f)
-    return [f"{' and '.join(map(str, g))}: byte-identical (one sensor's export twice?); each imported as its own "
-            "sensor" for g in groups.values() if len(g) > 1]
+        h = hashlib.sha256(f.read_bytes()).hexdigest()
+        if h in first:
+            warnings.append(f"{f}: byte-identical to {first[h]} (one sensor's export twice?); skipped")
+            continue
+        first[h] = f
+        keep.append(f)
+    return keep, warnings
 
 
 def gyro_from_orientation(t: np.ndarray, quat: np.ndarray, window_s: float = GYRO_WINDOW_S) -> np.ndarray:
@@ -275,11 +299,14 @@ def _on_grid(by_site: dict[str, Source], sites: tuple[str, ...]) -> tuple[np.nda
 
 
 def _record(out: str | Path, sites: tuple[str, ...], meta: dict[str, Any], quat: np.ndarray, acc: np.ndarray,
-            gyro: np.ndarray, present: np.ndarray, cal: Calibration) -> None:
-    """Write the grid as a session recording, the calibration at the stand's last frame."""
+            gyro: np.ndarray, present: np.ndarray, cal: Calibration, poses: Sequence[Any] = ()) -> None:
+    """Write the grid as a session recording, the calibration at the stand's last frame,
+    and ``poses`` (LivePose) as its reconstruction."""
     still = int(cal.meta["still_frames"])
     rec = Recorder(out, sites, metadata=meta)
     try:
+        for pose in poses:
+            rec.on_pose(pose)
         nan3 = np.full((len(sites), 3), np.nan)
         for i in range(len(quat)):
             rec.on_frame(HubFrame(t=i / RATE, index=i, sites=sites, quat=quat[i], free_acc=nan3, acc=acc[i],
@@ -289,6 +316,29 @@ def _record(out: str | Path, sites: tuple[str, ...], meta: dict[str, Any], quat:
                 rec.on_calibration(cal, i / RATE)
     finally:
         rec.close()
+
+
+def _reconstruct(out: str | Path, sites: tuple[str, ...], meta: dict[str, Any], quat: np.ndarray, acc: np.ndarray,
+                 gyro: np.ndarray, present: np.ndarray, cal: Calibration) -> dict[str, Any]:
+    """Run the default poser over the written recording with every imported sensor, as
+    ``imucap replay`` would, and write the recording again with those poses as its
+    reconstruction and the poser's settings in its metadata: ``imucap export`` then works
+    on an import as on a live session, and a plain ``imucap replay`` runs the same poser."""
+    import os
+
+    from app.export.formats import body_for_recording
+    from app.recording import read_recording
+    from app.replay import ReplaySettings, build_replay_poser, poser_metadata, replay_recording
+
+    rec = read_recording(out)
+    body, _ = body_for_recording(rec.metadata)
+    built = build_replay_poser(rec, ReplaySettings(), body)
+    res = replay_recording(rec, built.poser, causal=built.causal)
+    meta = {**meta, "model": built.label, **poser_metadata(built.poser, built.latency)}
+    tmp = Path(str(out) + ".recon.tmp")
+    _record(tmp, sites, meta, quat, acc, gyro, present, cal, res.poses)
+    os.replace(tmp, out)
+    return {"poses": len(res.poses), "sensors": list(res.sensors), "model": built.label}
 
 
 def _device_summary(src: Source, present: np.ndarray) -> dict[str, Any]:
@@ -304,7 +354,7 @@ def _device_summary(src: Source, present: np.ndarray) -> dict[str, Any]:
 
 def import_sources(sources: Sequence[Source], out: str | Path, fmt: str, log: str,
                    mapping: dict[str, str] | None = None, height: float | None = None,
-                   calibration: str = "auto") -> Imported:
+                   calibration: str = "auto", reconstruct: bool = True) -> Imported:
     """Put the devices of one logged session on the 60 Hz grid, calibrate them from their
     standing start (each sensor's heading from the gait, ``calibration.imported``) and
     write them as a session recording at ``out``."""
@@ -327,38 +377,41 @@ def import_sources(sources: Sequence[Source], out: str | Path, fmt: str, log: st
     if height is not None:
         meta["body_height_m"] = float(height)
     _record(out, sites, meta, quat, acc, gyro, present, cal)
+    recon = _reconstruct(out, sites, meta, quat, acc, gyro, present, cal) if reconstruct else {}
     n, still = len(quat), int(cal.meta["still_frames"])
     devices = {s: _device_summary(by_site[s], present[:, k]) for k, s in enumerate(sites)}
     return Imported(Path(out), sites, n, round(n / RATE, 3), round(still / RATE, 3),
                     [round(float(x), 4) for x in cal.meta["forward_G"]], str(cal.meta["forward_from"]), devices,
                     format=fmt, clock=clock, grid_t0=t0,
-                    warnings=skipped, calibration={"method": lc.method, "warnings": lc.warnings, "notes": lc.notes,
+                    warnings=skipped, reconstruction=recon,
+                    calibration={"method": lc.method, "warnings": lc.warnings, "notes": lc.notes,
                                  "headings": lc.headings})
 
 
 def import_ximu3(log_dir: str | Path, out: str | Path, mapping: dict[str, str] | None = None,
-                 height: float | None = None, calibration: str = "auto") -> Imported:
+                 height: float | None = None, calibration: str = "auto", reconstruct: bool = True) -> Imported:
     """An x-IMU3 log folder as a session recording at ``out`` (``import_sources``)."""
     sources = [Source(d, _unique([d.name, d.serial])) for d in read_log(log_dir)]
-    return import_sources(sources, out, "ximu3", str(log_dir), mapping, height, calibration)
+    return import_sources(sources, out, "ximu3", str(log_dir), mapping, height, calibration, reconstruct)
 
 
 def import_xsens(files: Sequence[str | Path], out: str | Path, layout: str | None = None,
                  mapping: dict[str, str] | None = None, height: float | None = None,
-                 calibration: str = "auto") -> Imported:
+                 calibration: str = "auto", reconstruct: bool = True) -> Imported:
     """Xsens export files of one session (one per sensor; ``layout`` "mtmanager" or "dot",
     else told by each file) as a session recording at ``out`` (``import_sources``)."""
-    files = [Path(f) for f in files]
+    files, copies = _duplicates([Path(f) for f in files])
     logs = read_exports(files, layout)
     fmt = layout or logs[0].info["layout"]
     sources = [Source(d, _unique([d.name, d.serial, f.stem]), str(f)) for d, f in zip(logs, files)]
-    res = import_sources(sources, out, fmt, ", ".join(map(str, files)), mapping, height, calibration)
-    res.warnings = _duplicates(files) + res.warnings
+    res = import_sources(sources, out, fmt, ", ".join(map(str, files)), mapping, height, calibration, reconstruct)
+    res.warnings = copies + res.warnings
     return res
 
 
 def import_mvnx(file: str | Path, out: str | Path, mapping: dict[str, str] | None = None,
-                height: float | None = None, truth: str | Path | None = None, calibration: str = "auto") -> Imported:
+                height: float | None = None, truth: str | Path | None = None, calibration: str = "auto",
+                reconstruct: bool = True) -> Imported:
     """An MVN take's MVNX export as a session recording at ``out`` (``import_sources``):
     the sensors at imucap's sites (by MVN label, or ``--map LABEL=SITE``); the others are
     listed in ``ignored``. ``truth``: also write MVN's full-suit solution there
@@ -394,7 +447,7 @@ def import_mvnx(file: str | Path, out: str | Path, mapping: dict[str, str] | Non
     if height is None and motion is not None:
         height = round(float(motion.body.height), 3)  # MVN's body, as the subject was measured for the suit
     res = import_sources(sources, out, "mvnx", str(file), {s.ids[0]: s.ids[1] for s in sources}, height,
-                         calibration)
+                         calibration, reconstruct)
     res.ignored = unused
     if truth is not None and motion is not None:
         write_mvn_truth(motion, res, truth)
@@ -447,7 +500,8 @@ def _export_files(paths: Sequence[Path], fmt: str) -> tuple[list[Path], list[Pat
 
 def import_paths(paths: Sequence[str | Path], out: str | Path, fmt: str = "auto",
                  mapping: dict[str, str] | None = None, height: float | None = None,
-                 truth: str | Path | None = None, calibration: str = "auto") -> Imported:
+                 truth: str | Path | None = None, calibration: str = "auto",
+                 reconstruct: bool = True) -> Imported:
     """The CLI's import: an x-IMU3 log folder, or Xsens export folders and files (module docstring)."""
     paths = [Path(p) for p in paths]
     if fmt not in FORMATS:
@@ -459,15 +513,15 @@ def import_paths(paths: Sequence[str | Path], out: str | Path, fmt: str = "auto"
                          and (paths[0].suffix.lower() == ".mvnx" or is_mvnx(paths[0]))):
         if len(paths) != 1 or paths[0].is_dir():
             raise ValueError("an MVNX export is one file for the whole suit; give just that file")
-        return import_mvnx(paths[0], out, mapping, height, truth, calibration)
+        return import_mvnx(paths[0], out, mapping, height, truth, calibration, reconstruct)
     if truth is not None:
         raise ValueError("--truth: only an MVN take (.mvnx) holds a full-body solution to score against")
     if fmt == "ximu3" or (fmt == "auto" and len(paths) == 1 and _is_ximu3_log(paths[0])):
         if len(paths) != 1:
             raise ValueError("an x-IMU3 log is one folder; give just that folder")
-        return import_ximu3(paths[0], out, mapping, height, calibration)
+        return import_ximu3(paths[0], out, mapping, height, calibration, reconstruct)
     files, ignored, layout = _export_files(paths, fmt)
-    res = import_xsens(files, out, layout, mapping, height, calibration)
+    res = import_xsens(files, out, layout, mapping, height, calibration, reconstruct)
     res.ignored = [str(f) for f in ignored]
     return res
 
@@ -484,11 +538,12 @@ def _mapping(items: list[str]) -> dict[str, str]:
 
 def run_import(args: argparse.Namespace) -> int:
     res = import_paths(args.logs, args.out, args.format, _mapping(args.map), args.height, args.truth,
-                       args.calibration)
+                       args.calibration, args.reconstruct)
     summary = {"recording": str(res.path), "format": res.format, "sites": list(res.sites), "frames": res.frames,
                "duration_s": res.duration_s, "still_start_s": res.still_s, "forward_G": res.forward_G,
                "forward_from": res.forward_from, "clock": res.clock, "log_time_origin_s": round(res.grid_t0, 6),
-               "calibration": res.calibration, "warnings": res.warnings, "devices": res.devices,
+               "calibration": res.calibration, "reconstruction": res.reconstruction, "warnings": res.warnings,
+               "devices": res.devices,
                "ignored": res.ignored, **({"truth": res.truth} if res.truth else {})}
     for w in res.warnings + res.calibration.get("warnings", []) + res.calibration.get("notes", []):
         print(f"imucap import: warning: {w}", file=sys.stderr)
@@ -521,6 +576,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--calibration", default="auto", choices=CALIBRATIONS,
                    help="standing: one heading for all sensors; walk: each sensor's heading from the gait; auto "
                         "(default): walk when the log holds walking")
+    p.add_argument("--no-reconstruct", dest="reconstruct", action="store_false",
+                   help="only calibrate; by default the import also reconstructs the body with the default model "
+                        "and every imported sensor, so imucap export works on it at once")
     p.add_argument("--json", action="store_true", help="print one JSON summary on stdout")
     p.set_defaults(func=run_import)
 

@@ -13,6 +13,9 @@ Formats (by the output file's extension, case-insensitive):
     .csv          app/export/csv_file.py      one row per 20 Hz frame, named columns
     .h5 / .hdf5   app/export/hdf5_file.py     arrays + attributes (units, names, provenance)
     .mot          app/export/opensim.py  OpenSim joint angles (Rajagopal-style coordinates)
+    .c3d          app/export/c3d_file.py      virtual markers at the joint centres, contact events (ezc3d)
+    .trc          app/export/trc_file.py      the same markers for OpenSim's marker IK
+    NAME_orientations.sto  app/export/opensense.py  OpenSense IMU orientations (quaternion table)
 
 Time in every export is seconds since the first raw frame of the recording (so a file
 lines up with the recording it came from); the session-clock value subtracted is kept as
@@ -30,15 +33,19 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from app.export.bvh import write_bvh
+from app.export.c3d_file import write_c3d
 from app.export.common import ExportMotion
 from app.export.csv_file import write_csv
 from app.export.hdf5_file import write_hdf5
+from app.export.opensense import SUFFIX as ORIENTATIONS_SUFFIX
+from app.export.opensense import write_orientations_sto
 from app.export.opensim import write_mot
+from app.export.trc_file import write_trc
 from inference.body.body import Body
 from inference.body.skeleton import N_SEGMENTS
 
 if TYPE_CHECKING:
-    from app.pipeline import LivePose
+    from app.live import LivePose
     from app.recording import Recording
 
 DEFAULT_HEIGHT_M = 1.75
@@ -161,18 +168,29 @@ def _write_mot(path: Path, m: ExportMotion) -> Path:
 
 WRITERS: dict[str, Callable[[Path, ExportMotion], Path]] = {
     ".bvh": _write_bvh, ".csv": _write_csv, ".h5": _write_hdf5, ".hdf5": _write_hdf5, ".mot": _write_mot,
+    ".c3d": write_c3d, ".trc": write_trc,
 }
+# formats named by the end of the file name, not its extension alone (checked first)
+NAME_WRITERS: dict[str, Callable[[Path, ExportMotion], Path]] = {ORIENTATIONS_SUFFIX: write_orientations_sto}
 
 
 def supported_extensions() -> str:
-    return ", ".join(WRITERS)
+    return ", ".join([*WRITERS, *(f"NAME{s}" for s in NAME_WRITERS)])
+
+
+def writer_for(path: Path) -> Callable[[Path, ExportMotion], Path] | None:
+    name = path.name.lower()
+    for end, writer in NAME_WRITERS.items():
+        if name.endswith(end) and len(name) > len(end):
+            return writer
+    return WRITERS.get(path.suffix.lower())
 
 
 def check_export_path(path: str | os.PathLike) -> Path:
     """The path if its extension names a format we write, else a ValueError listing the
     supported ones. Called before a long replay, so a typo fails at once, not at the end."""
     p = Path(path)
-    if p.suffix.lower() not in WRITERS:
+    if writer_for(p) is None:
         raise ValueError(f"cannot export to {p.name!r}: unknown extension {p.suffix or '(none)'!r}; "
                          f"supported: {supported_extensions()}")
     return p
@@ -183,6 +201,6 @@ def export_motion(path: str | os.PathLike, motion: ExportMotion) -> Path:
     p = check_export_path(path)
     if motion.n_frames < 1:
         raise ValueError(f"nothing to export to {p}: no frames")
-    return WRITERS[p.suffix.lower()](p, motion)
+    return writer_for(p)(p, motion)
 
 
