@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from app import APP_VERSION
-from app.pipeline import LivePipeline, LivePose, Pipeline, Sink, close_sink
+from app.live import LivePipeline, LivePose, Pipeline, Sink, close_sink
 from app.replay import model_label, poser_metadata
 from drivers.hub import Hub
 

@@ -62,7 +62,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from app.pipeline import LivePose, Sink
+from app.live import LivePose, Sink
 from calibration import Calibration
 from calibration.core import quat_of
 from drivers.hub import HubFrame

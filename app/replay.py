@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from app.pipeline import RECALIBRATION_EVENT, LivePose, Pipeline, Sink
+from app.live import RECALIBRATION_EVENT, LivePose, Pipeline, Sink
 from app.recording import Recording
 from calibration import Calibration
 from drivers.hub import HubFrame

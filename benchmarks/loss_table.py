@@ -42,7 +42,7 @@ sys.path.insert(0, str(REPO))
 
 import can  # noqa: E402
 
-from app.pipeline import Pipeline  # noqa: E402
+from app.live import Pipeline  # noqa: E402
 from calibration import Calibration  # noqa: E402
 from drivers.bno08x.driver import Bno08xRvcDevice  # noqa: E402
 from drivers.hub import Hub, Interpolation  # noqa: E402

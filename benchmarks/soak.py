@@ -35,7 +35,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from app.demo_session import SUIT_PLACES, DemoConfig, DemoSession  # noqa: E402
-from app.pipeline import Sink  # noqa: E402
+from app.live import Sink  # noqa: E402
 
 
 def rss_mb() -> float:

@@ -41,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-from app.pipeline import LivePose, Sink
+from app.live import LivePose, Sink
 
 SUITS = ("process", "thread")  # as app.demo_session.SUIT_PLACES (a bench's suit runs where a demo's can)
 CALIBRATION_TIMEOUT_S = 120.0

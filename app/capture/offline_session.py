@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.pipeline import Pipeline, frames_from_signals
+from app.live import Pipeline, frames_from_signals
 from app.recording import Recorder
 from calibration import Calibrator, Protocol, synthesize_session
 from inference.poser.poser import make_poser

@@ -26,7 +26,7 @@ import numpy as np
 
 from app import APP_VERSION
 from app.capture.setup_file import Setup
-from app.pipeline import LivePipeline, LivePose, Pipeline, Sink, close_sink
+from app.live import LivePipeline, LivePose, Pipeline, Sink, close_sink
 from app.replay import poser_metadata
 from calibration import Calibration, GuidedCalibration
 from drivers.base import DeviceEvent

@@ -17,7 +17,7 @@ from app.gui import views
 from app.gui.colours import segment_colours
 from app.gui.signal_tap import QUANTITIES, SignalTap
 from app.gui.widgets import Legend
-from app.pipeline import LivePose
+from app.live import LivePose
 from inference.body.body import Body
 
 PLOT_COLOURS = ("#3b82f6", "#ef4444", "#10b981", "#f59e0b", "#8b5cf6", "#ec4899", "#14b8a6", "#64748b")

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from app.capture.session import INSOLES, CaptureSession, SessionEvent
-from app.pipeline import LivePose, Sink
+from app.live import LivePose, Sink
 from calibration.guided import GuidedFeedback
 from calibration.quality import QualityReport
 from inference.body.body import Body

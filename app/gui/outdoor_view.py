@@ -17,7 +17,7 @@ from PySide6 import QtCore, QtWidgets
 
 from app.gui import views
 from app.gui.colours import segment_colours
-from app.pipeline import LivePose
+from app.live import LivePose
 from inference.body.body import Body
 from inference.metrics.gait import GaitNumbers
 

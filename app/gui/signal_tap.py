@@ -12,7 +12,7 @@ import threading
 
 import numpy as np
 
-from app.pipeline import Sink
+from app.live import Sink
 from drivers.hub import HubFrame
 
 QUANTITIES = {

@@ -21,7 +21,7 @@ import ipaddress
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from app.pipeline import Sink
+from app.live import Sink
 
 STREAM_KINDS: tuple[str, ...] = ("lsl", "vmc", "vrchat")
 DEFAULT_PORTS: dict[str, int] = {"vmc": 39539, "vrchat": 9000}

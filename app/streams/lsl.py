@@ -44,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from app.pipeline import LivePose, Sink
+from app.live import LivePose, Sink
 from calibration import Calibration
 from drivers.hub import HubFrame
 from inference.body.rotations import matrix_to_quat

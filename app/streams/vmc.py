@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from app.pipeline import LivePose, Sink
+from app.live import LivePose, Sink
 from app.streams.osc import OscTarget, message
 from app.streams.unity import rot_to_unity, unity_quat, vec_to_unity
 from inference.body.skeleton import PARENTS, SEGMENT_INDEX

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.pipeline import LivePose, Pipeline, frames_from_signals
+from app.live import LivePose, Pipeline, frames_from_signals
 from app.recording import Recorder
 from calibration import Calibrator, Protocol, synthesize_session
 from inference.body.body import Body

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from app import latency
-from app.pipeline import Pipeline, frames_from_signals
+from app.live import Pipeline, frames_from_signals
 from calibration import Calibrator, Protocol, synthesize_session
 from drivers.base import Sample
 from drivers.hub import Hub

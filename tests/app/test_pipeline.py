@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from app.pipeline import CallbackSink, ListSource, LivePipeline, Pipeline, frames_from_signals, stride_text
+from app.live import CallbackSink, ListSource, LivePipeline, Pipeline, frames_from_signals, stride_text
 from calibration import Calibrator, Protocol, synthesize_session
 from inference.body.rotations import matrix_angle_between
 from inference.body.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX

@@ -25,7 +25,7 @@ import pytest
 import torch
 
 from app.cli.main import main
-from app.pipeline import CallbackSink, Pipeline, frames_from_signals
+from app.live import CallbackSink, Pipeline, frames_from_signals
 from app.recording import VERSION, Recorder, Recording, RecordingError, read_recording
 from app.replay import replay_recording
 from calibration import Calibrator, Protocol, synthesize_session

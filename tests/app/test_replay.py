@@ -93,7 +93,7 @@ def test_a_recalibration_pauses_the_replay_where_it_paused_live(tmp_path):
     the calibrator until the new calibration; the replay must pose the very same frames."""
     import itertools
 
-    from app.pipeline import RECALIBRATION_EVENT, Pipeline, frames_from_signals
+    from app.live import RECALIBRATION_EVENT, Pipeline, frames_from_signals
     from app.recording import Recorder
     from calibration import Calibrator, synthesize_session
     from inference.signals.synthesis import NoiseModel

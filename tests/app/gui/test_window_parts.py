@@ -207,7 +207,7 @@ def test_the_skeleton_is_drawn_with_and_without_opengl(qtbot, monkeypatch, gl):
 
 def test_recordings_are_listed_from_their_headers(tmp_path):
     from app.gui.recordings_panel import fmt_length, scan_folder
-    from app.pipeline import frames_from_signals
+    from app.live import frames_from_signals
     from app.recording import Recorder
     from sim_devices.devices import spinning_signals
 
@@ -266,7 +266,7 @@ def test_the_live_view_colours_by_spread_when_the_pose_has_one(qtbot):
     (green sure to red unsure) and the legend shows the ramp; without it, measured/inferred."""
     from app.gui.colours import MEASURED, spread_colour
     from app.gui.live_panel import LivePanel
-    from app.pipeline import LivePose
+    from app.live import LivePose
     from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX
     from inference.poser.poser import PoseFrame
 

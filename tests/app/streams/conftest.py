@@ -19,7 +19,7 @@ import pytest
 from pythonosc.dispatcher import Dispatcher
 from pythonosc.osc_server import ThreadingOSCUDPServer
 
-from app.pipeline import CallbackSink, LivePose, Pipeline, frames_from_signals
+from app.live import CallbackSink, LivePose, Pipeline, frames_from_signals
 from calibration import Calibrator, Protocol, synthesize_session
 from drivers.hub import HubFrame
 from inference.body.body import Body, forward_kinematics

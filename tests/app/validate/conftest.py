@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.pipeline import Pipeline, frames_from_signals
+from app.live import Pipeline, frames_from_signals
 from app.recording import Recorder
 from app.validate.align import rz
 from calibration import Calibrator, Protocol, synthesize_session

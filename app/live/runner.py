@@ -1,0 +1,173 @@
+"""A ``Pipeline`` run on threads of its own (DESIGN.md: inference never runs on the GUI
+thread): an ingest thread polls the frame source (the hub) into a bounded queue (oldest
+dropped and counted when inference falls behind, so the output describes *now*), an
+inference thread drains it through the Pipeline; the GUI only reads ``latest()``."""
+
+from __future__ import annotations
+
+import threading
+import time
+import traceback
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+from app.live.pipeline import LivePose, Pipeline, Sink
+from app.live.sources import FrameSource
+from drivers.hub import HubFrame
+
+
+class LivePipeline:
+    """Runs a Pipeline off the caller's thread.
+
+    ingest thread: ``source.poll()`` every ``poll_interval`` into a bounded queue of
+    ``queue_size`` frames (oldest dropped, ``stats.dropped``: those reach no sink, so the
+    default holds a minute, and a stalled inference thread passes the backlog over, into the
+    recording, when it comes back); inference thread: the
+    Pipeline. ``latest()`` is what a GUI timer reads; ``stats()`` a snapshot of the
+    counters. Exceptions on either thread stop the run and are kept in ``error``.
+
+    ``max_lag`` (s): when the inference thread comes back to the queue, frames older than
+    the newest by more than this are dropped (counted) instead of worked through. A poser
+    slower than real time then shows the newest motion at a lower frame rate rather than
+    an ever older one (the resampler restarts across the hole; the poser continues).
+    """
+
+    def __init__(self, pipeline: Pipeline, source: FrameSource, queue_size: int = 3600,
+                 poll_interval: float = 1.0 / 120.0, max_lag: float | None = 0.15) -> None:
+        self.pipeline = pipeline
+        self.source = source
+        self.max_lag = max_lag
+        self.queue_size = queue_size
+        self.poll_interval = poll_interval
+        self._q: deque[HubFrame] = deque()
+        self._cv = threading.Condition()
+        self._stop = threading.Event()
+        self._latest: LivePose | None = None
+        self._threads: list[threading.Thread] = []
+        self.error: BaseException | None = None
+        self._commands: deque[Callable[[Pipeline], Any]] = deque()
+
+    def start(self) -> LivePipeline:
+        self._stop.clear()
+        self._threads = [
+            threading.Thread(target=self._guard, args=(self._ingest,), name="pipeline-ingest", daemon=True),
+            threading.Thread(target=self._guard, args=(self._infer,), name="pipeline-infer", daemon=True),
+        ]
+        for th in self._threads:
+            th.start()
+        return self
+
+    def stop(self, timeout: float = 5.0) -> None:
+        self._stop.set()
+        with self._cv:
+            self._cv.notify_all()
+        for th in self._threads:
+            th.join(timeout)
+        self._threads = []
+
+    def __enter__(self) -> LivePipeline:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    @property
+    def running(self) -> bool:
+        return any(th.is_alive() for th in self._threads)
+
+    def latest(self) -> LivePose | None:
+        """The newest reconstructed frame (thread-safe: a reference swap)."""
+        return self._latest
+
+    def call(self, fn: Callable[[Pipeline], Any]) -> None:
+        """Run ``fn(pipeline)`` on the inference thread before the next frame (changing the
+        active sites, recalibrating, adding a sink) without locking the chain."""
+        self._commands.append(fn)
+        with self._cv:
+            self._cv.notify_all()
+
+    def stats(self) -> dict[str, Any]:
+        s = self.pipeline.stats.summary()
+        s["queued"] = len(self._q)
+        return s
+
+    def _guard(self, fn: Callable[[], None]) -> None:
+        try:
+            fn()
+        except BaseException as exc:  # noqa: BLE001 - kept for the caller, the run stops
+            self.error = exc
+            traceback.print_exc()
+            self._stop.set()
+            with self._cv:
+                self._cv.notify_all()
+
+    def _ingest(self) -> None:
+        # a source that knows when its next frame is due (the hub) is polled right then: a
+        # fixed timer adds half its period to every frame's latency on average
+        due_in = getattr(self.source, "due_in", None)
+        while not self._stop.is_set():
+            frames = self.source.poll()
+            if frames:
+                with self._cv:
+                    for f in frames:
+                        if len(self._q) >= self.queue_size:
+                            self._q.popleft()
+                            self.pipeline.stats.dropped += 1
+                        self._q.append(f)
+                    self._cv.notify_all()
+            wait = self.poll_interval
+            if due_in is not None:
+                wait = min(wait, max(due_in(), 0.0005))
+            self._stop.wait(wait)
+
+    def _infer(self) -> None:
+        while not self._stop.is_set():
+            with self._cv:
+                while not self._q and not self._commands and not self._stop.is_set():
+                    self._cv.wait(0.1)
+                batch = list(self._q)
+                self._q.clear()
+            while self._commands:
+                self._commands.popleft()(self.pipeline)
+            if self.max_lag is not None and batch:
+                newest = batch[-1].t
+                late = [f for f in batch if newest - f.t > self.max_lag]
+                self.pipeline.stats.dropped += len(late)
+                for f in late:  # not reconstructed, but recorded and calibrated from
+                    self.pipeline.pass_over(f)
+                batch = [f for f in batch if newest - f.t <= self.max_lag]
+            for f in batch:
+                if self._stop.is_set():
+                    break
+                for lp in self.pipeline.push(f):
+                    self._latest = lp
+
+    def wait_for(self, predicate: Callable[[], bool], timeout: float) -> bool:
+        """Block until ``predicate()`` or ``timeout`` s (polling; for tests and the CLI)."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if predicate():
+                return True
+            if self.error is not None:
+                return False
+            time.sleep(0.02)
+        return predicate()
+
+
+def close_sink(live: LivePipeline | None, pipeline: Pipeline, sink: Sink, timeout: float = 5.0) -> None:
+    """Take ``sink`` off the pipeline and close it on the pipeline's own thread when it runs
+    (a recorder must not be closed between two of its writes), else here."""
+    done: list[bool] = []
+
+    def detach(p: Pipeline) -> None:
+        if sink in p.sinks:
+            p.sinks.remove(sink)
+        sink.close()
+        done.append(True)
+
+    if live is not None and live.running:
+        live.call(detach)
+        live.wait_for(lambda: bool(done), timeout)
+    if not done:
+        detach(pipeline)
