@@ -19,17 +19,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from app.export.markers import JOINT_NAMES
 from inference.body.skeleton import SEGMENT_INDEX
 
-# joint centre (marker) names: joint i is where segment i starts (DESIGN.md)
-JOINT_NAMES: dict[str, str] = {
-    "pelvis": "pelvis", "l_thigh": "l_hip", "r_thigh": "r_hip", "spine1": "spine1", "l_shank": "l_knee",
-    "r_shank": "r_knee", "spine2": "spine2", "l_foot": "l_ankle", "r_foot": "r_ankle", "spine3": "spine3",
-    "l_toes": "l_mtp", "r_toes": "r_mtp", "neck": "neck", "l_collar": "l_collar", "r_collar": "r_collar",
-    "head": "head", "l_upperarm": "l_shoulder", "r_upperarm": "r_shoulder", "l_forearm": "l_elbow",
-    "r_forearm": "r_elbow", "l_hand": "l_wrist", "r_hand": "r_wrist", "l_fingers": "l_knuckles",
-    "r_fingers": "r_knuckles",
-}
+# joint centre (marker) names: joint i is where segment i starts (DESIGN.md); the C3D/TRC exports write them
 JOINT_INDEX: dict[str, int] = {j: SEGMENT_INDEX[s] for s, j in JOINT_NAMES.items()}
 
 # segment -> (from joint, to joint): the direction compared for a marker reference. The
