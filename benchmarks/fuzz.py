@@ -652,7 +652,8 @@ def _amass_arrays(tmp: Path) -> tuple[Run, list[bytes], Errors]:
 def _recording(tmp: Path) -> tuple[Run, list[bytes], Errors]:
     import numpy as np
 
-    import app.recording as recording
+    import app.recording.libhdf5 as libhdf5
+    import app.recording.reader as reader
     from app.recording import Recorder, RecordingError, read_recording
     from drivers.hub import HubFrame
 
@@ -660,8 +661,8 @@ def _recording(tmp: Path) -> tuple[Run, list[bytes], Errors]:
     # up to 24 times with growing sleeps; a chunk retried after 10 ms) take the same code
     # paths with one try and no pause, and a fuzzed file has no writer: with them an input
     # took 325 ms of wall clock for 30 ms of CPU, and the run mostly slept.
-    recording.SWMR_READ_ATTEMPTS = 1
-    recording.IN_FLIGHT_RETRY_S = 0.0
+    libhdf5.SWMR_READ_ATTEMPTS = 1
+    reader.IN_FLIGHT_RETRY_S = 0.0
     path = tmp / "rec.h5"
 
     def run(data: bytes) -> None:
@@ -729,7 +730,7 @@ TARGETS: dict[str, Target] = {t.name: t for t in (
            surface=("inference.loaders", "inference.loaders.amass", "inference.loaders.amass_frames")),
     Target("recording", "HDF5 session recording: app.recording.read_recording + hub_frames", _recording,
            max_len=65536, timeout=20,
-           surface=("app.recording",)),
+           surface=("app.recording.format", "app.recording.header", "app.recording.libhdf5", "app.recording.reader")),
 )}
 
 

@@ -160,7 +160,7 @@ def test_each_dataset_caches_only_the_chunks_being_written(tmp_path):
     first; what a long session costs is measured by benchmarks/soak.py --malloc."""
     import h5py
 
-    from app.recording import CHUNKS_CACHED
+    from app.recording.writer import CHUNKS_CACHED
 
     rec = Recorder(tmp_path / "r.h5", sites=("pelvis", "l_wrist"), metadata={})
     try:

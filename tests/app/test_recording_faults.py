@@ -207,7 +207,7 @@ def test_a_damaged_global_heap_is_an_error_not_a_hang(good, tmp_path, monkeypatc
     """The fuzzer found a recording whose global heap (the free space at its end, size 0)
     sent HDF5 2.0 into an endless loop reading the 'format' attribute: the read is given
     a time limit and the file a one-line error."""
-    import app.recording as recording
+    import app.recording.header as header
 
     old = tmp_path / "heap.h5"
     _with_heap_strings(good, old)
@@ -219,7 +219,7 @@ def test_a_damaged_global_heap_is_an_error_not_a_hang(good, tmp_path, monkeypatc
         p += 16 + (struct.unpack_from("<Q", data, p + 8)[0] + 7) // 8 * 8
     struct.pack_into("<Q", data, p + 8, 0)
     old.write_bytes(bytes(data))
-    monkeypatch.setattr(recording, "HEAP_READ_TIMEOUT_S", 3.0)
+    monkeypatch.setattr(header, "HEAP_READ_TIMEOUT_S", 3.0)
     with pytest.raises(RecordingError, match="did not return within 3 s"):
         read_recording(old)
     code, _, err = _run(capsys, "replay", str(old))
