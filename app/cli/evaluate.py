@@ -16,6 +16,14 @@ longer clip than any given is null.
 --data takes files, folders and the held-out sets by name (inference/training/splits.py,
 ``HELD_OUT_SETS``): @dg (HDM05 actor dg), @sad (Bandai's held-out style), @cmu-val (the CMU
 validation subjects), read from $IMUCAP_DATA; a report's reproduce line keeps the name.
+``segments`` gives each segment's GA (deg) over all frames.
+
+@real scores real recordings instead (app/real_eval.py): every x-IMU3 log under
+$IMUCAP_DATA/ximu3 is imported as ``imucap import`` does, replayed with each standard sensor
+set (pelvis+shanks, shanks, pelvis+shanks+feet, pelvis+thighs) and with every sensor, and
+each left-out segment is compared with what its own sensor measured: key ``held_out``
+(log -> set -> ``deg`` per left-out site, ``mean_deg``, ``frames``), and with --against the
+same for that model under ``against.held_out``. --sensors does not apply to it.
 
 --against SPEC scores a second model on the same clips, sensors and noise, and adds
 ``against``: its figures and, for GA, LA and JPE, --model minus it with a percentile
@@ -50,11 +58,16 @@ from pathlib import Path
 
 from app.cli.train import NOISE_MODES
 
+REAL = "@real"
+
 
 def data_paths(data: list) -> list:
-    """--data with every ``@NAME`` replaced by the files of that held-out set."""
+    """--data with every ``@NAME`` replaced by the files of that held-out set (``@real`` is
+    not motion files and is left out: ``real_held_out`` scores it)."""
     out: list = []
     for d in data:
+        if str(d) == REAL:
+            continue
         if str(d).startswith("@"):
             from inference.training.splits import held_out_files
 
@@ -64,11 +77,34 @@ def data_paths(data: list) -> list:
     return out
 
 
+def real_held_out(spec: str, seed: int, progress: bool) -> dict:
+    """``held_out`` of --data @real for the model ``spec`` (app/real_eval.py); an error
+    naming the folder when it holds no real log."""
+    from app.cli.importing import import_paths
+    from app.real_eval import real_logs, score_logs
+    from inference.training.data import data_root
+
+    root = data_root()
+    logs = real_logs(root)
+    if not logs:
+        raise FileNotFoundError(f"--data @real: no x-IMU3 log folder under {root / 'ximu3'}")
+
+    def import_log(path, out):
+        import_paths([path], out, reconstruct=False)
+
+    def say(msg: str) -> None:
+        if progress:
+            print(f"evaluate: {msg}", file=sys.stderr, flush=True)
+
+    return score_logs(logs, import_log, spec, seed, progress=say)
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("evaluate", help="score reconstructions of motion files from synthesized sensors",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", nargs="+", required=True, metavar="PATH",
-                   help="motion files or folders (BVH, AMC, npz), or held-out sets by name: @dg, @sad, @cmu-val")
+                   help="motion files or folders (BVH, AMC, npz), or held-out sets by name: @dg, @sad, @cmu-val; "
+                        "@real: the real logs under $IMUCAP_DATA, held-out scoring")
     p.add_argument("--sensors", default="pelvis,head,l_wrist,r_wrist,l_shank,r_shank",
                    help="comma separated sensor sites (default: the paper's 6)")
     p.add_argument("--insoles", action="store_true", help="also observe the 4 foot contacts (pressure insoles)")
@@ -184,7 +220,7 @@ def run(args: argparse.Namespace) -> int:
         report_markdown,
     )
     from inference.evaluation.subjects import per_subject, per_subject_markdown
-    from inference.metrics.errors import paired_difference
+    from inference.metrics.errors import paired_difference, segment_errors
     from inference.model.diffusion import parse_steps
     from inference.poser.models import default_steps, mirror_for, noise_mode_for, resolve_model
     from inference.signals.resample import FPS_MODEL
@@ -198,7 +234,22 @@ def run(args: argparse.Namespace) -> int:
     noise = evaluation_noise() if args.noise else None
     progress = not args.no_progress
     t0 = time.time()
-    motions = load_motions(data_paths(args.data), args.limit)
+    real = REAL in map(str, args.data)
+    paths = data_paths(args.data)
+    if real and not paths:
+        if args.report or args.export_dir or args.confidence:
+            raise ValueError("--data @real alone takes no --report, --export-dir or --confidence (no truth)")
+        result = {"clips": 0, "frames": 0, **{k: None for k in ("ga_deg", "la_deg", "jpe_cm", "jitter_ratio",
+                                                                "re2_m", "re5_m", "re10_m")},
+                  "segments": None, "model": str(args.model), "seed": args.seed,
+                  "held_out": real_held_out(args.model, args.seed, progress)}
+        if args.against is not None:
+            result["against"] = {"model": str(args.against),
+                                 "held_out": real_held_out(args.against, args.seed, progress)}
+        result["seconds"] = round(time.time() - t0, 2)
+        _print_real(result, args.json)
+        return 0
+    motions = load_motions(paths, args.limit)
     print(f"evaluate: {len(motions)} clip(s) loaded", file=sys.stderr)
     repaired = None
     if args.repair_truth:
@@ -259,6 +310,7 @@ def run(args: argparse.Namespace) -> int:
                         confidence=args.confidence)
     if args.confidence:
         _confidence(args, result, clips, sites, one)
+    result["segments"] = segment_errors([c.metrics for c in clips])
     result["per_clip"] = [{"name": c.name, **c.metrics.summary()} for c in clips]
     result["per_subject"] = per_subject([c.metrics for c in clips])
     result["truth_repaired"] = repaired
@@ -271,6 +323,7 @@ def run(args: argparse.Namespace) -> int:
             **{k: other[k] for k in ("model", "kind", "steps", "mirror", "ga_deg", "la_deg", "jpe_cm",
                                      "jitter_ratio", "re2_m", "re5_m", "re10_m")},
             "differences": {m: d.as_dict() for m, d in diffs.items()},
+            "segments": segment_errors(theirs),
             "per_clip": [{"name": c.name, **c.metrics.summary()} for c in other_clips],
             "per_subject": per_subject([c.metrics for c in other_clips]),
         }
@@ -319,6 +372,10 @@ def run(args: argparse.Namespace) -> int:
         args.report.write_text(text)
         result["report"] = {"path": str(args.report), "rows": rows, "comparisons": comparisons}
 
+    if real:
+        result["held_out"] = real_held_out(args.model, args.seed, progress)
+        if args.against is not None:
+            result["against"]["held_out"] = real_held_out(args.against, args.seed, progress)
     result["seconds"] = round(time.time() - t0, 2)
     if args.json:
         print(json.dumps(result))
@@ -340,4 +397,16 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-__all__ = ["register", "run"]
+def _print_real(result: dict, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(result))
+        return
+    for name, sets in result["held_out"].items():
+        for label, r in sets.items():
+            other = result.get("against", {}).get("held_out", {}).get(name, {}).get(label)
+            cells = ", ".join(f"{s} {v}" + (f" (against {other['deg'][s]})" if other else "")
+                              for s, v in r["deg"].items())
+            print(f"{name} {label}: {cells}; mean {r['mean_deg']} deg over {r['frames']} frames")
+
+
+__all__ = ["register", "run", "real_held_out"]

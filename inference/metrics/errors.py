@@ -98,6 +98,9 @@ class ClipMetrics:
     # frames whose truth no body makes (``plausibility``) and their share of ga_sum
     implausible: int = 0
     ga_implausible_sum: float = 0.0
+    # (24,) per segment, the sum over frames of its global angle error (deg): which segment
+    # carries the error (``segment_errors``)
+    seg_sum: np.ndarray | None = None
 
     def summary(self) -> dict:
         """This clip's own figures (same keys as ``summarize``)."""
@@ -112,10 +115,11 @@ def evaluate_clip(name: str, R_pred: np.ndarray, root_pred: np.ndarray, j_pred: 
     if R_pred.shape[0] != T or j_pred.shape[0] != T or root_pred.shape[0] != T:
         raise ValueError(f"clip {name}: prediction has {R_pred.shape[0]} frames, truth {T}")
     jp, jt = jitter(j_pred, fps), jitter(j_true, fps)
-    ga = global_angle_error(R_pred, R_true)
+    seg = np.rad2deg(matrix_angle_between(np.asarray(R_pred, np.float64), np.asarray(R_true, np.float64)))
+    ga = seg[:, list(EVAL_SEGMENTS)].mean(axis=1)
     bad = implausible_frames(R_true)
     cm = ClipMetrics(
-        name=name, frames=T, ga_sum=float(ga.sum()), implausible=int(bad.sum()),
+        name=name, frames=T, ga_sum=float(ga.sum()), implausible=int(bad.sum()), seg_sum=seg.sum(axis=0),
         ga_implausible_sum=float(ga[bad].sum()),
         la_sum=float(local_angle_error(R_pred, R_true).sum()),
         jpe_sum=float(joint_position_error(j_pred, j_true).sum()),
@@ -154,6 +158,20 @@ def summarize(clips: list[ClipMetrics], re_seconds: tuple[int, ...] = RE_SECONDS
         n = sum(c.re_n.get(s, 0) for c in clips)
         out[f"re{s}_m"] = mean(sum(c.re_sum.get(s, 0.0) for c in clips), n)
     return out
+
+
+def segment_errors(clips: list[ClipMetrics]) -> dict[str, float] | None:
+    """Segment name -> its global angle error (deg) pooled over the clips' frames, for
+    every segment (GA averages only the evaluated ones): a held-out thigh's error is read
+    here, not guessed from the mean. None without frames."""
+    from inference.body.skeleton import SEGMENTS
+
+    have = [c for c in clips if c.seg_sum is not None and c.frames > 0]
+    frames = sum(c.frames for c in have)
+    if not frames:
+        return None
+    total = np.sum([c.seg_sum for c in have], axis=0) / frames
+    return {name: round(float(v), 2) for name, v in zip(SEGMENTS, total)}
 
 
 # per-frame metrics a paired comparison can pool: key -> (ClipMetrics sum attribute, scale)
@@ -224,5 +242,6 @@ def paired_difference(a: list[ClipMetrics], b: list[ClipMetrics], metric: str = 
 
 __all__ = [
     "EVAL_SEGMENTS", "RE_SECONDS", "global_angle_error", "local_angle_error", "joint_position_error", "jitter",
-    "root_error", "ClipMetrics", "evaluate_clip", "summarize", "PairedDifference", "paired_difference",
+    "root_error", "ClipMetrics", "evaluate_clip", "summarize", "segment_errors", "PairedDifference",
+    "paired_difference",
 ]

@@ -246,3 +246,32 @@ def test_a_held_out_set_by_name_reads_its_files_and_keeps_the_name(capsys, tmp_p
     assert code != 0 and "unknown held-out set @cmu; choose from @dg, @sad, @cmu-val" in err
     code, _, err = _run(capsys, "--data", "@dg", "--model", "floor")
     assert code != 0 and "held-out set @dg: " in err and "hdm05/dg" in err
+
+
+def test_segments_name_each_segments_ga(capsys, data_dir):
+    code, out, _ = _run(capsys, "--data", str(data_dir), "--sensors", "pelvis,l_shank,r_shank", "--model", "floor",
+                        "--json")
+    res = json.loads(out)
+    assert code == 0 and len(res["segments"]) == 24
+    assert res["segments"]["l_thigh"] > 0.0 and res["segments"]["pelvis"] < res["segments"]["l_thigh"]
+
+
+def test_real_set_scores_the_held_out_sites_of_each_real_log(capsys):
+    from app.real_eval import real_logs
+    from inference.training.data import data_root
+
+    if not real_logs(data_root()):
+        pytest.skip("no real x-IMU3 log under the data folder")
+    code, out, _ = _run(capsys, "--data", "@real", "--model", "floor", "--json")
+    res = json.loads(out)
+    assert code == 0 and res["clips"] == 0 and res["ga_deg"] is None
+    sets = res["held_out"]["ximu3/logged_lower_body"]
+    assert set(sets["pelvis+shanks"]["deg"]) == {"l_thigh", "r_thigh", "l_foot", "r_foot"}
+    # a standing pose is far from a walk's thighs: the scoring sees the motion
+    assert sets["pelvis+shanks"]["deg"]["l_thigh"] > 10.0 and sets["pelvis+shanks"]["frames"] > 300
+
+
+def test_real_set_without_logs_is_a_clear_error(capsys, tmp_path, monkeypatch):
+    monkeypatch.setenv("IMUCAP_DATA", str(tmp_path))
+    code, _, err = _run(capsys, "--data", "@real", "--model", "floor", "--json")
+    assert code != 0 and "--data @real: no x-IMU3 log folder under" in err
