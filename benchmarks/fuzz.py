@@ -715,7 +715,7 @@ TARGETS: dict[str, Target] = {t.name: t for t in (
     Target("mvnx", "Xsens MVN take (MVNX XML): is_mvnx + read_mvnx, and its segments by parse_mvnx", _mvnx,
            max_len=8192, surface=("drivers.xsens_export.mvnx", "inference.loaders.mvnx")),
     Target("setup", "setup TOML: app.capture.setup_file.load_setup (parse_setup)", _setup,
-           surface=("app.capture.setup_file",)),
+           surface=("app.capture.setup_file", "app.capture.setup_lines")),
     Target("bvh", "BVH via inference.loaders.load_motion", _bvh, max_len=16384, timeout=20,
            surface=("inference.loaders", "inference.loaders.bvh", "inference.loaders.joint_maps",
                     "inference.loaders.retarget")),
