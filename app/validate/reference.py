@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import os
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -90,8 +91,9 @@ def _is_truth(p: Path) -> bool:
     try:
         with np.load(p, allow_pickle=False) as z:
             return "format" in z.files
-    except (OSError, ValueError) as exc:
-        raise MotionFormatError(str(p), f"not a readable .npz ({str(exc).splitlines()[0][:120]})") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        why = (str(exc).splitlines() or [type(exc).__name__])[0][:120]
+        raise MotionFormatError(str(p), f"not a readable .npz ({why})") from None
 
 
 def _rotation_reference(path: Path, kind: str, t: np.ndarray, rot: np.ndarray, root: np.ndarray, offsets: np.ndarray,
