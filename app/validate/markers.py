@@ -8,7 +8,8 @@ of Vicon's Plug-in Gait and of most lab pipelines (``LKJC``, ``RHJC``, ...), Ope
 only surface markers, the lateral markers at the joint (``LKNE``, ``LANK``, ``LSHO``,
 ``LELB``, ``LWRA``): a joint centre a few centimetres off, which the report's mapping
 lines say. Units come from the file (C3D ``POINT:UNITS``, TRC ``Units``); the up axis
-is the one the legs hang along (hip above ankle), turned onto our Z.
+is the one the legs hang along (hip above ankle), turned onto our Z (Y up is taken as
+OpenSim's ground, X forward; any other heading is found by the alignment).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from app.export.opensim import M_OS
 from app.validate.kinematics import JOINT_INDEX
 from inference.body.motion import MotionFormatError
 from inference.loaders.retarget import world_map
@@ -163,7 +165,9 @@ def marker_joints(m: Markers) -> tuple[np.ndarray, set[str], list[str]]:
     if up is None or not np.all(np.isfinite(up)):
         raise MotionFormatError(m.path, "cannot tell which way is up: it needs hip and knee or ankle centres "
                                         f"(found {', '.join(sorted(found))})")
-    W = world_map(up)
+    k = int(np.argmax(np.abs(up)))
+    # Y up is OpenSim's ground (X forward, Z right): its own map keeps X forward; else any proper turn
+    W = M_OS.T if (k == 1 and up[1] > 0) else world_map(up)
     J = J @ W.T
     lines = [f"{j} <- {m.labels[k]}" for j, k in found.items()]
     return J, set(found), lines

@@ -202,3 +202,19 @@ def test_a_c3d_without_joint_centres_says_what_it_looked_for(walk, tmp_path, cap
     assert main(["validate", str(walk.path), "--reference", str(path), "--model", "floor"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(path) in err[0] and "joint centre" in err[0] and "FOO" in err[0]
+
+
+def test_trc_written_by_our_export_and_a_report(walk, tmp_path, capsys):
+    """The reconstruction's own TRC (OpenSim's axes, mm) as the reference: the alignment
+    finds no offset and no turn, the errors vanish, and --report writes the markdown,
+    its three plots and the JSON."""
+    assert main(["export", str(walk.path), "--out", str(tmp_path / "self.trc")]) == 0
+    capsys.readouterr()
+    out = _validate(capsys, walk, tmp_path / "self.trc", "--sensors", "pelvis,torso,l_thigh,r_thigh,l_shank,r_shank,"
+                    "l_upperarm,r_upperarm,l_wrist,r_wrist", "--report", str(tmp_path / "report"))
+    assert abs(out["time_offset_s"]) < 0.01 and abs(out["heading_deg"]) < 0.5
+    assert out["subsets"][0]["mean_deg"] < 1.0 and out["baseline"]["mean_deg"] > 5.0
+    md = (tmp_path / "report" / "report.md").read_text()
+    for png in ("joint_angles.png", "segments.png", "bland_altman.png"):
+        assert (tmp_path / "report" / png).stat().st_size > 1000 and f"]({png})" in md
+    assert json.loads((tmp_path / "report" / "validation.json").read_text())["heading_deg"] == out["heading_deg"]
