@@ -688,6 +688,35 @@ def _recording(tmp: Path) -> tuple[Run, list[bytes], Errors]:
     return run, seeds, (RecordingError, OSError)
 
 
+# ------------------------------------------------------------------------------------------ references
+def _reference(suffix: str) -> Callable[[Path], tuple[Run, list[bytes], Errors]]:
+    """A lab's reference file for imucap validate (app.validate.reference.read_reference):
+    seeded with our own export of a short walk in that format."""
+
+    def setup(tmp: Path) -> tuple[Run, list[bytes], Errors]:
+        import numpy as np
+
+        from app.export.common import ExportMotion
+        from app.export.formats import export_motion
+        from app.validate.reference import read_reference
+        from inference.body.motion import MotionFormatError
+
+        path = tmp / f"reference{suffix}"
+
+        def run(data: bytes) -> None:
+            path.write_bytes(data)
+            read_reference(path)
+
+        m = _short_motion(6)
+        joints = m.joints()
+        em = ExportMotion(time=np.arange(m.n_frames) / m.fps, rot=m.rot, root=m.root, joints=joints,
+                          contacts=np.zeros((m.n_frames, 4), bool), body=m.body, fps=m.fps)
+        seed = export_motion(tmp / f"seed{suffix}", em)
+        return run, [seed.read_bytes()], (MotionFormatError,)
+
+    return setup
+
+
 TARGETS: dict[str, Target] = {t.name: t for t in (
     Target("xbus", "Xsens Xbus: stream parser, frame, MTData2 and config decoders, XbusDevice.read_many", _xbus,
            surface=("drivers.xbus.protocol", "drivers.xbus.driver")),
@@ -731,6 +760,13 @@ TARGETS: dict[str, Target] = {t.name: t for t in (
     Target("recording", "HDF5 session recording: app.recording.read_recording + hub_frames", _recording,
            max_len=65536, timeout=20,
            surface=("app.recording.format", "app.recording.header", "app.recording.libhdf5", "app.recording.reader")),
+    Target("reference-c3d", "C3D markers as an imucap validate reference (ezc3d, then the joint-centre mapping)",
+           _reference(".c3d"), max_len=16384, timeout=20,
+           surface=("app.validate.reference", "app.validate.markers")),
+    Target("reference-trc", "TRC markers as an imucap validate reference", _reference(".trc"), max_len=16384,
+           timeout=20, surface=("app.validate.reference", "app.validate.markers")),
+    Target("reference-mot", "OpenSim .mot coordinates as an imucap validate reference", _reference(".mot"),
+           max_len=16384, timeout=20, surface=("app.validate.reference",)),
 )}
 
 
