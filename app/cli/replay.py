@@ -5,7 +5,7 @@
                   [--insoles/--no-insoles] [--steps K] [--seed S] [--threads N] [--height M]
                   [--out FILE.{bvh,csv,h5,mot}]... [--json] [--no-progress]
                   [--stream lsl,vmc,vrchat [--stream-host HOST] [--stream-speed X]]
-    imucap export REC.h5 --out FILE.{bvh,csv,h5,mot} [--out ...] [--height M] [--json]
+    imucap export REC.h5 --out FILE.{bvh,csv,h5,mot,c3d,trc} | NAME_orientations.sto [--out ...] [--height M] [--json]
 
 ``replay`` re-runs the poser over the recording's raw sensor stream with the recorded
 calibration(s): another model or step count, or only some of the recorded sensors (the
@@ -22,7 +22,9 @@ vs_recorded_ga_deg = how far the re-run is from the live reconstruction, outputs
 
 Formats by extension: .bvh (skeleton, metres, Y up), .csv (one row per 20 Hz frame),
 .h5/.hdf5 (arrays + units and provenance), .mot (OpenSim joint angles, Rajagopal-model
-coordinates). See app/export/formats.py and the export_*.py modules for the exact layouts.
+coordinates), .c3d (virtual markers at the joint centres, foot strike/off events), .trc (the same
+markers for OpenSim), NAME_orientations.sto (OpenSense's IMU orientations).
+See app/export/formats.py and the export_*.py modules for the exact layouts.
 The subject's body comes from the recording (bone offsets or height); ``--height``
 overrides it.
 """
@@ -41,7 +43,8 @@ import numpy as np
 from app.streams import add_stream_arguments, parse_stream_spec, sinks_from_args, stream_summary
 from app.streams.pacing import Pacer
 
-OUT_HELP = "write the poses to FILE; format by extension: .bvh, .csv, .h5/.hdf5, .mot (repeatable)"
+OUT_HELP = ("write the poses to FILE; format by extension: .bvh, .csv, .h5/.hdf5, .mot, .c3d, .trc, "
+            "NAME_orientations.sto (OpenSense) (repeatable)")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -85,7 +88,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_stream_arguments(p, replay=True)
     p.set_defaults(func=run_replay)
 
-    e = subparsers.add_parser("export", help="write a recording's reconstruction as BVH, CSV, HDF5 or OpenSim .mot",
+    e = subparsers.add_parser("export", help="write a recording's reconstruction as BVH, CSV, HDF5, OpenSim .mot, "
+                                                  "C3D, TRC or OpenSense .sto",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     e.add_argument("recording", type=Path, metavar="REC.h5", help="a session recording")
     e.add_argument("--out", action="append", type=Path, required=True, metavar="FILE", help=OUT_HELP)
