@@ -6,7 +6,11 @@ From a `Motion` resampled to 60 Hz (the rate of the paper's Xsens stream):
   orientation = segment orientation);
 - free acceleration (world frame, gravity removed): double finite difference of the site
   position, then the centred 11-frame moving average (the same routine the live
-  resampler uses, so training and deployment see the same filter);
+  resampler uses, so training and deployment see the same filter). A motion captured
+  below 60 Hz (Bandai: 30) has its site paths put on the 60 Hz grid by a cubic spline
+  (``upsampled_site_paths``): on the slerped, piecewise-linear path the double difference
+  alternates between twice the acceleration and zero, a 30 Hz component as large as the
+  signal that no real sensor shows (docs/real_signals.md);
 - specific force (sensor frame, gravity included, unsmoothed): what a raw accelerometer
   reads, R^T (a - g) with g = (0, 0, -9.81): +9.81 along world up when still, 0 in free fall;
 - angular velocity in the sensor frame from consecutive orientations (centred difference
@@ -135,6 +139,20 @@ def contact_labels(points: np.ndarray, fps: float, threshold: float = CONTACT_SP
     return np.linalg.norm(v, axis=-1) < threshold
 
 
+def upsampled_site_paths(motion: Motion, fps: float) -> np.ndarray | None:
+    """(T, 13, 3) site positions on the ``fps`` grid of ``motion.resample(fps)`` by a cubic
+    spline through the captured frames, when the motion is captured below ``fps``; None
+    otherwise (a resampling down or at the same rate is already smooth enough). Only the
+    accelerations are taken from these paths: the orientations stay slerped."""
+    if motion.fps >= fps - 1e-9 or motion.n_frames < 4:
+        return None
+    from scipy.interpolate import CubicSpline
+
+    n_new = int(np.floor(motion.duration * fps + 1e-9)) + 1
+    t_new = np.minimum(np.arange(n_new) / fps, motion.times[-1])
+    return CubicSpline(motion.times, motion.sites(motion.joints()), axis=0)(t_new)
+
+
 @dataclass
 class Kinematics:
     """Everything synthesis derives from positions, at the motion's rate (60 Hz)."""
@@ -155,9 +173,10 @@ def kinematics(motion: Motion, fps: float = FPS_SIGNAL) -> Kinematics:
     joints = m.joints()
     sites = m.sites(joints)
     cpts = m.contacts(joints)
+    smooth = upsampled_site_paths(motion, fps)
     return Kinematics(
         fps=float(fps), rot=m.rot, root=m.root, joints=joints, site_pos=sites,
-        site_acc_raw=second_difference(sites, fps), contact_pos=cpts,
+        site_acc_raw=second_difference(sites if smooth is None else smooth, fps), contact_pos=cpts,
         contacts=contact_labels(cpts, fps),
     )
 
@@ -274,6 +293,8 @@ def synthesize(
     R_WG = _rz(heading)
     R_GW = np.swapaxes(R_WG, -1, -2)
     R_SB = np.swapaxes(R_BS, -1, -2)
+    smooth = upsampled_site_paths(motion, fps)
+    acc_smooth = None if smooth is None else second_difference(smooth[:, k_idx], fps)
 
     quat = np.empty((T, S, 4))
     f_meas = np.empty((T, S, 3))
@@ -291,7 +312,7 @@ def synthesize(
         sl = slice(start - a, stop - a)
         out = slice(start, stop)
         R_WB = kin.rot[sl][:, seg]
-        a_W = kin.site_acc_raw[sl][:, k_idx]
+        a_W = kin.site_acc_raw[sl][:, k_idx] if acc_smooth is None else acc_smooth[out]
         R_WS = R_WB @ R_BS
         f = (np.swapaxes(R_WS, -1, -2) @ (a_W - GRAVITY)[..., None])[..., 0] + acc_bias
         if acc_w is not None:
@@ -330,6 +351,6 @@ def synthesize(
 
 __all__ = [
     "GRAVITY", "CONTACT_SPEED", "NoiseModel", "SiteSignals", "synthesize", "kinematics", "Kinematics",
-    "second_difference", "angular_velocity", "contact_labels", "insole_force", "segment_com",
+    "second_difference", "upsampled_site_paths", "angular_velocity", "contact_labels", "insole_force", "segment_com",
     "kinetic_energy", "body_mass", "SEGMENT_MASS_FRACTION", "N_SEGMENTS",
 ]

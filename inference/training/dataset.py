@@ -35,7 +35,7 @@ from inference.signals.synthesis import kinetic_energy
 
 log = logging.getLogger(__name__)
 
-CODE_VERSION = "features-v3"  # bump when the meaning of cached features changes (loaders included)
+CODE_VERSION = "features-v4"  # bump when the meaning of cached features changes (loaders included)
 WEIGHT_FLOOR_OF_MEDIAN = 0.05
 
 # --------------------------------------------------------------------------- normaliser
