@@ -14,7 +14,8 @@ import numpy as np
 
 from app import APP_VERSION
 from app.live import LivePipeline, LivePose, Pipeline, Sink, close_sink
-from app.replay import model_label, poser_metadata
+from app.model_choice import choose_model, set_torch_threads
+from app.replay import poser_metadata
 from drivers.hub import Hub
 
 FRAMES_PATIENCE = 20.0  # --frames: wait at most this many times --seconds for the poses
@@ -90,23 +91,6 @@ def load_activity(cfg: DemoConfig, seconds: float):
     return generate(cfg.motion, seconds=max(seconds, 1.0), seed=cfg.seed)
 
 
-def resolve_demo_model(spec: str) -> tuple[Any, str, str | None]:
-    """(LoadedModel or None, label, warning). The default model falls back to the floor
-    baseline when its weights are not there (the model is trained separately), with a
-    warning the caller must show; an explicit path that does not exist is an error."""
-    from inference.poser.models import DEFAULT_WEIGHTS, resolve_model
-
-    try:
-        model = resolve_model(spec)
-    except FileNotFoundError as exc:
-        if spec not in DEFAULT_WEIGHTS:
-            raise
-        warning = (f"!!! NO TRAINED MODEL: {DEFAULT_WEIGHTS[spec]} is missing; running the FLOOR BASELINE "
-                   f"(observed segments only, everything else held standing). {exc}")
-        return None, "floor (fallback: weights missing)", warning
-    return model, model_label(spec, model), None
-
-
 class TruthSink(Sink):
     """Global angle error of each pose against the synthesized truth (the demo knows what
     the subject did), over the activity part of the session only (not the calibration)."""
@@ -167,20 +151,15 @@ class DemoSession:
             raise ValueError("--seconds must be positive")
         if cfg.suit not in SUIT_PLACES:
             raise ValueError(f"--suit must be one of {', '.join(SUIT_PLACES)}, not {cfg.suit!r}")
-        if cfg.threads > 0:
-            import torch
-
-            torch.set_num_threads(cfg.threads)
+        set_torch_threads(cfg.threads)
         if cfg.calibration_protocol is not None:
             self.protocol = cfg.calibration_protocol
         else:
             self.protocol = Protocol.fitted(cfg.seconds) if cfg.headless else Protocol()
         activity_s = cfg.seconds - self.protocol.prefix + 2.0 if cfg.headless else cfg.seconds
-        from app.latency import model_spec_for, resolve_filter
-
-        self.model, self.model_label, self.warning = resolve_demo_model(model_spec_for(cfg.latency, cfg.model))
-        self.causal, latency_warning = resolve_filter(cfg.latency, self.model)
-        self.warning = "; ".join(w for w in (self.warning, latency_warning) if w) or None
+        choice = choose_model(cfg.model, cfg.latency, fallback=True)
+        self.model, self.model_label, self.causal, self.warning = (choice.model, choice.label, choice.causal,
+                                                                   choice.warning)
         self.activity = load_activity(cfg, activity_s)
         sites = tuple(cfg.sensors)
         if cfg.insoles:

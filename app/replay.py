@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from app.live import RECALIBRATION_EVENT, LivePose, Pipeline, Sink
+from app.model_choice import choose_model
 from app.recording import Recording
 from calibration import Calibration
 from drivers.hub import HubFrame
@@ -168,39 +169,22 @@ def poser_metadata(poser: Poser, latency: str) -> dict[str, Any]:
     }
 
 
-def model_label(spec: str, model: Any) -> str:
-    """``diffusion 4/128/512 (diffusionposer.pt)``: the kind, size and file of a model."""
-    from pathlib import Path
-
-    from inference.poser.models import DEFAULT_WEIGHTS
-
-    if model is None:
-        return "floor"
-    c = model.config
-    where = DEFAULT_WEIGHTS.get(spec, spec)
-    return f"{model.kind} {c.layers}/{c.d_model}/{c.ff} ({Path(str(where)).name})"
-
-
 def build_replay_poser(rec: Recording, settings: ReplaySettings, body: Any, model: Any = "resolve") -> ReplayPoser:
     """The poser a replay of ``rec`` runs: ``settings`` where given, else what the recording
     says the session ran with (a session recorded before a default changed replays as it
     ran). ``model``: an already loaded model for ``settings.model`` (a batch worker loads
     it once), or "resolve" to load it here."""
-    from app.latency import model_spec_for, resolve_filter
-    from inference.poser.models import resolve_model
     from inference.poser.poser import Poser
 
     meta = rec.metadata
     latency = settings.latency or meta.get("latency") or "centred"
-    spec = model_spec_for(latency, settings.model)
-    loaded = resolve_model(spec) if isinstance(model, str) and model == "resolve" else model
-    causal, warning = resolve_filter(latency, loaded)
+    choice = choose_model(settings.model, latency, loaded=model)
+    loaded, causal, warning, label = choice.model, choice.causal, choice.warning, choice.label
     mirror = settings.mirror if settings.mirror is not None else meta.get("mirror")
     stride = settings.stride_scale if settings.stride_scale is not None else bool(meta.get("stride_scale", False))
     odometry = (settings.pelvis_odometry if settings.pelvis_odometry is not None
                 else bool(meta.get("pelvis_odometry", False)))
     # the step list the session ran (a model file's default may have changed since), unless asked otherwise
-    label = model_label(spec, loaded)
     same_model = label == meta.get("model")
     steps = settings.steps if settings.steps is not None else (meta.get("step_list") or None if same_model else None)
     seed = settings.seed if settings.seed is not None else int(meta.get("seed") or 0)
@@ -345,7 +329,7 @@ def held_out_errors(poses: Sequence[LivePose], measured: Sequence[LivePose], sit
     return {"frames": len(pairs), "deg": out, "mean_deg": round(float(np.mean(vals)), 2) if vals else None}
 
 
-__all__ = ["replay_recording", "build_replay_poser", "ReplaySettings", "ReplayPoser", "model_label", "poser_metadata",
+__all__ = ["replay_recording", "build_replay_poser", "ReplaySettings", "ReplayPoser", "poser_metadata",
            "resolve_sensors", "resolve_insoles", "recording_has_insoles", "compare_to_recorded",
            "held_out_errors", "ReplayResult", "SITES"]
 

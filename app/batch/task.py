@@ -122,11 +122,14 @@ def _json_atomic(path: Path, obj: dict[str, Any]) -> None:
     write_atomic(path, write)
 
 
-def _model(spec: str) -> Any:
-    from inference.poser.models import resolve_model
+def _model(spec: str, latency: str) -> Any:
+    """The model for ``spec`` in latency mode ``latency``, loaded once per worker."""
+    from app.latency import model_spec_for
+    from app.model_choice import load_model
 
+    spec = model_spec_for(latency, spec)
     if spec not in _MODELS:
-        _MODELS[spec] = resolve_model(spec)
+        _MODELS[spec] = load_model(spec)[0]
     return _MODELS[spec]
 
 
@@ -137,9 +140,9 @@ def one_line(exc: BaseException) -> str:
 
 def run_task(task: Task) -> dict[str, Any]:
     """Do ``task`` (or find it done); never raises for a bad recording: the result says."""
-    import torch
+    from app.model_choice import set_torch_threads
 
-    torch.set_num_threads(1)  # one core per worker: the pool is the parallelism
+    set_torch_threads(1)  # one core per worker: the pool is the parallelism
     t0, c0 = time.perf_counter(), time.process_time()
     base = {"recording": task.recording, "folder": task.folder, "meta": task.meta}
     try:
@@ -176,7 +179,6 @@ def _stamp_or_none(path: str) -> list[int] | None:
 def _run(task: Task) -> dict[str, Any]:
     from app.capture.simulate import read_truth
     from app.export.formats import body_for_recording, export_motion, motion_from_poses
-    from app.latency import model_spec_for
     from app.recording import read_recording
     from app.replay import build_replay_poser, compare_to_recorded, held_out_errors, replay_recording, truth_errors
 
@@ -188,7 +190,7 @@ def _run(task: Task) -> dict[str, Any]:
     body, note = body_for_recording(rec.metadata)
     opts = task.options
     latency = opts.settings.latency or rec.metadata.get("latency") or "centred"
-    model = _model(model_spec_for(latency, opts.settings.model))
+    model = _model(opts.settings.model, latency)
     truth = read_truth(task.truth) if task.truth else None
     warnings = list(rec.damage) + ([note] if note else [])
     full = None  # every recorded sensor's replay, once, for the held-out error of each subset

@@ -27,6 +27,7 @@ import numpy as np
 from app import APP_VERSION
 from app.capture.setup_file import Setup
 from app.live import LivePipeline, LivePose, Pipeline, Sink, close_sink
+from app.model_choice import choose_model, set_torch_threads
 from app.replay import poser_metadata
 from calibration import Calibration, GuidedCalibration
 from drivers.base import DeviceEvent
@@ -81,22 +82,16 @@ class CaptureSession:
     the devices and finalises the recording, whatever state the session is in."""
 
     def __init__(self, setup: Setup, options: CaptureOptions | None = None) -> None:
-        from app.demo_session import resolve_demo_model
         from inference.body.body import Body
         from inference.poser.poser import Poser
 
         self.setup = setup
         self.options = opt = options or CaptureOptions()
-        if opt.threads > 0:
-            import torch
-
-            torch.set_num_threads(opt.threads)
+        set_torch_threads(opt.threads)
         self.sites = setup.sites()
-        from app.latency import model_spec_for, resolve_filter
-
-        self.model, self.model_label, self.warning = resolve_demo_model(model_spec_for(opt.latency, setup.model))
-        causal, latency_warning = resolve_filter(opt.latency, self.model)
-        self.warning = "; ".join(w for w in (self.warning, latency_warning) if w) or None
+        choice = choose_model(setup.model, opt.latency, fallback=True)
+        self.model, self.model_label, self.warning = choice.model, choice.label, choice.warning
+        causal = choice.causal
         steps = setup.steps
         self.poser = Poser(self.model, body=Body.from_height(setup.subject.height_m), steps=steps, runtime="auto",
                            confidence=opt.confidence or setup.confidence)

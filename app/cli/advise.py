@@ -95,8 +95,7 @@ def _summary(rows: list, task: str, paper: tuple[str, ...] | None) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    import torch
-
+    from app.model_choice import load_model, set_torch_threads
     from inference.evaluation.advisor import (
         PAPER_SETS,
         TASKS,
@@ -108,10 +107,8 @@ def run(args: argparse.Namespace) -> int:
         table,
     )
     from inference.evaluation.runner import load_motions
-    from inference.poser.models import resolve_model
 
-    if args.threads > 0:
-        torch.set_num_threads(args.threads)
+    set_torch_threads(args.threads)
     if args.max_sensors < 1:
         raise ValueError("--max-sensors must be at least 1")
     t0 = time.time()
@@ -123,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
     say = progress_printer() if not args.no_progress else None
     if say:
         say(f"{len(motions)} motion(s): {source}")
-    model = resolve_model(args.model)
+    model = load_model(args.model)[0]
     clips = advisor_clips(motions, insoles=args.insoles, seed=args.seed)
     adv = Advisor(model, clips, frame_step=args.frame_step, exact=args.exact, progress=say)
     rows = adv.search(args.task, args.max_sensors, beam=args.beam)

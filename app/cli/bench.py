@@ -199,14 +199,14 @@ def run_bench(model_spec: str = "diffusion", steps=None, frames: int = 200, pape
     """The `imucap bench` measurement (see the module docstring); returns its JSON object."""
     import torch
 
+    from app.model_choice import load_model, set_torch_threads
     from inference.features.layout import N_FEATURES
     from inference.model.config import ModelConfig
     from inference.model.diffusion import even_steps, parse_steps
     from inference.model.files import LoadedModel, build_model
-    from inference.poser.models import default_weights, resolve_model
+    from inference.poser.models import default_weights
 
-    if threads > 0:
-        torch.set_num_threads(threads)
+    set_torch_threads(threads)
     weights: str
     if random_weights:
         torch.manual_seed(0)
@@ -215,7 +215,7 @@ def run_bench(model_spec: str = "diffusion", steps=None, frames: int = 200, pape
                             norm_std=np.ones(N_FEATURES, np.float32))
         weights = "random (default ModelConfig)"
     else:
-        model = resolve_model(model_spec)
+        model = load_model(model_spec)[0]
         weights = str(default_weights(model_spec)) if model_spec in ("diffusion", "regressor") else model_spec
     st = parse_steps(steps) if steps is not None else None
     out = bench_poser(model, st, frames, warmup, label=_config_label(model), mirror=mirror)
@@ -311,13 +311,12 @@ def run(args: argparse.Namespace) -> int:
 def _run_sizes(args: argparse.Namespace) -> int:
     import torch
 
+    from app.model_choice import load_model, set_torch_threads
     from inference.model.diffusion import parse_steps
-    from inference.poser.models import resolve_model
 
     sizes = parse_sizes(args.sizes)
-    if args.threads > 0:
-        torch.set_num_threads(args.threads)
-    model = resolve_model(args.model)
+    set_torch_threads(args.threads)
+    model = load_model(args.model)[0]
     if model is None or model.kind != "diffusion":
         raise ValueError(f"--sizes times denoisers: --model {args.model} is not a diffusion model")
     steps = parse_steps(args.steps) if args.steps is not None else None

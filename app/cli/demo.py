@@ -11,8 +11,9 @@ and the live poser reconstructs the body from the chosen sensors at 20 Hz.
                 [--stream lsl,vmc,vrchat [--stream-host HOST]]
 
 ``--seconds N``: headless, the whole session lasts N s, calibration included (a short N
-gets a proportionally shorter protocol); with the window, the clip's length (it loops,
-and every loop calibrates again, as the subject would after taking the sensors off).
+gets a proportionally shorter protocol); with the window, the activity's length: the
+simulated subject's clip (the walk calibration's moves, then the activity) loops, and the
+calibration made once in the window's wizard holds across the loops.
 
 ``--frames N`` (headless): after the N s, run on until N poses were made, for at most
 20 times the seconds, so a script that needs N poses gets them on a busy machine too.

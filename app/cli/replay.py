@@ -161,6 +161,7 @@ def _mean_spread(poses) -> dict[str, float] | None:
 
 def run_replay(args: argparse.Namespace) -> int:
     from app.export.formats import body_for_recording, export_motion, motion_from_poses
+    from app.model_choice import set_torch_threads
     from app.replay import (
         ReplaySettings,
         build_replay_poser,
@@ -185,10 +186,7 @@ def run_replay(args: argparse.Namespace) -> int:
     body, note = body_for_recording(rec.metadata, args.height)
     if note:
         print(f"replay: warning: {note}", file=sys.stderr)
-    if args.threads > 0:
-        import torch
-
-        torch.set_num_threads(args.threads)
+    set_torch_threads(args.threads)
     built = build_replay_poser(rec, ReplaySettings(
         model=args.model, steps=args.steps, seed=args.seed, mirror=args.mirror, stride_scale=args.stride_scale,
         pelvis_odometry=args.pelvis_odometry, confidence=args.confidence or None, latency=args.latency), body)

@@ -183,11 +183,10 @@ def _leave_distributed_run(rc: int) -> None:
 def run_helper_stage(args: argparse.Namespace) -> int:
     """Train one of the poser's small helper stages (contact detector, pelvis odometry) on
     every frame of the split's clips; both train in about a minute on one core."""
-    import torch
-
+    from app.model_choice import set_torch_threads
     from inference.training import splits
 
-    torch.set_num_threads(1)
+    set_torch_threads(1)
     build = lambda paths: splits.build_files(paths, progress=not args.no_progress)  # noqa: E731
     train_clips = build(args.data).clips if args.data else splits.train_set(progress=not args.no_progress).clips
     val = ({"val": build(args.val).clips} if args.val else

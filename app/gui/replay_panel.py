@@ -84,26 +84,24 @@ def segment_differences(ref: Track, other: Track, index: np.ndarray) -> tuple[np
 def rerun(job: Job, rec: Recording, sensors: tuple[str, ...], insoles: bool, model_spec: str,
           steps: str | None, confidence: bool = False) -> Track:
     """The worker: a poser for ``model_spec`` and the recording's body, then the replay."""
-    import torch
-
-    from app.demo_session import resolve_demo_model
     from app.export.formats import body_for_recording
-    from app.latency import model_spec_for
+    from app.model_choice import FLOOR_FALLBACK_LABEL, choose_model, set_torch_threads
     from app.replay import ReplaySettings, build_replay_poser, replay_recording
 
-    torch.set_num_threads(1)  # leave the other core to the window and the devices
+    set_torch_threads(1)  # leave the other core to the window and the devices
     job.report((0, 1, "loading the model"))
     latency = rec.metadata.get("latency") or "centred"
-    model, _label, warning = resolve_demo_model(model_spec_for(latency, model_spec))
+    # the window falls back to the floor, as live, where the CLI replay would stop
+    choice = choose_model(model_spec, latency, fallback=True)
     body, _ = body_for_recording(rec.metadata)
     # the poser as the session ran it (steps, mirror, root, filter from the recording), with
     # what the user changed here: the same code as `imucap replay`
     built = build_replay_poser(rec, ReplaySettings(model=model_spec, steps=steps, confidence=confidence or None),
-                               body, model=model)
+                               body, model=choice.model)
     res = replay_recording(rec, built.poser, sensors=list(sensors), insoles=insoles, causal=built.causal,
                            progress=lambda done, total, poses: job.report((done, total, f"{poses} poses")))
     track = track_from_poses(res.poses, res.sensors, built.label)
-    if warning:
+    if choice.label == FLOOR_FALLBACK_LABEL:
         track.label += " [floor baseline: weights missing]"
     return track
 

@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from app.cli.main import main
-from app.demo_session import assignment_for, resolve_demo_model
+from app.demo_session import assignment_for
 from app.recording import read_recording
 from inference.features.layout import N_FEATURES
 from inference.model.config import ModelConfig
@@ -67,16 +67,6 @@ def test_headless_json_contract(tiny_model, tmp_path, capsys):
     assert r.metadata["pelvis_odometry"] is True
     assert len(r.calibrations) >= 1 and len(r.recon["t"]) >= out["frames"] - 25
     assert r.n_frames > 200
-
-
-def test_missing_weights_fall_back_to_floor_loudly(monkeypatch, tmp_path):
-    from inference.poser import models as poser
-
-    monkeypatch.setitem(poser.DEFAULT_WEIGHTS, "diffusion", tmp_path / "nope.pt")
-    model, label, warning = resolve_demo_model("diffusion")
-    assert model is None and "floor" in label and "NO TRAINED MODEL" in warning
-    with pytest.raises(FileNotFoundError):
-        resolve_demo_model(str(tmp_path / "also_missing.pt"))
 
 
 def test_assignment_and_bad_arguments(capsys):
