@@ -1,5 +1,6 @@
-"""`imucap demo`'s window: the main window on a simulated suit (Xbus devices on pseudo-terminals
-in this process) with the bundled model. It calibrates through the wizard by itself (the simulated
+"""`imucap demo`'s window: the main window on a simulated suit (Xbus devices on pseudo-terminals,
+served by ``imucap devices simulate`` in a process of its own, as a user's sensors would be) with
+the bundled model. It calibrates through the wizard by itself (the simulated
 subject follows the steps), the live view draws a moving skeleton (two grabs of the GL
 view differ and hold skeleton-coloured pixels: not a blank or black view), the sensors
 the reconstruction uses change live, and R / M record with a marker. Set
