@@ -3,6 +3,8 @@ a change of body scale, applied to features in place of re-synthesising the moti
 
 from __future__ import annotations
 
+import math
+
 import torch
 from torch import Tensor
 
@@ -55,3 +57,71 @@ def scale_features(x: Tensor, scale: Tensor) -> Tensor:
     for sl in (SL_ACC, SL_DP, SL_PZ):
         out[..., sl] = x[..., sl] * s
     return out
+
+
+def _rotations(axis: Tensor, angle: Tensor) -> Tensor:
+    """Rotation matrices (..., 3, 3) about unit ``axis`` (..., 3) by ``angle`` (...) (Rodrigues)."""
+    x, y, z = axis.unbind(-1)
+    o = torch.zeros_like(x)
+    K = torch.stack([torch.stack([o, -z, y], -1), torch.stack([z, o, -x], -1), torch.stack([-y, x, o], -1)], -2)
+    s, c = torch.sin(angle)[..., None, None], torch.cos(angle)[..., None, None]
+    eye = torch.eye(3, dtype=axis.dtype).expand(K.shape)
+    return eye + s * K + (1 - c) * (K @ K)
+
+
+def _shift(v: Tensor, lag: Tensor) -> Tensor:
+    """Signals (B, N, S, C) read ``lag`` (B, S) frames later (linear interpolation, the
+    window's ends held)."""
+    B, N = v.shape[:2]
+    t = torch.arange(N, dtype=v.dtype)[None, :, None] + lag[:, None, :]  # (B, N, S)
+    t = t.clamp(0, N - 1)
+    i0 = t.floor().long().clamp(max=N - 2)
+    w = (t - i0.to(v.dtype))[..., None]
+    g0 = torch.gather(v, 1, i0[..., None].expand(*i0.shape, v.shape[-1]))
+    g1 = torch.gather(v, 1, (i0 + 1)[..., None].expand(*i0.shape, v.shape[-1]))
+    return g0 * (1 - w) + g1 * w
+
+
+def sensor_effects(x: Tensor, fx, gen: torch.Generator) -> Tensor:
+    """Windows (B, N, F) of unnormalised features as real, calibrated sensors would report
+    the 13 sites' orientations and accelerations (``config.SensorEffects`` ``fx``): a
+    residual mounting rotation in the bone frame, a heading error of the sensor's world
+    frame (orientation and acceleration), an acceleration gain, white noise and a time
+    lag, each drawn per window and site; a share 1 - ``fx.p`` of the windows is left
+    clean. Only the sites' entries change, so the unmeasured segments the model infers
+    keep their true values as targets."""
+    from inference.body.rotations import matrix_to_rot6d, rot6d_to_matrix
+    from inference.body.skeleton import N_SITES, SITE_SEGMENT_INDEX
+
+    B, N, _ = x.shape
+    S = N_SITES
+    dt = x.dtype
+    seg = torch.tensor(SITE_SEGMENT_INDEX)
+    rot_idx = (SL_ROT.start + 6 * seg[:, None] + torch.arange(6)[None]).reshape(-1)  # (S*6,)
+    acc_idx = torch.arange(SL_ACC.start, SL_ACC.stop)
+    R = rot6d_to_matrix(x[..., rot_idx].reshape(B, N, S, 6))  # (B, N, S, 3, 3)
+    a = x[..., acc_idx].reshape(B, N, S, 3)
+    on = (torch.rand(B, generator=gen) < fx.p).to(dt)[:, None]  # (B, 1)
+    if fx.lag_frames > 0:
+        lag = (2 * torch.rand(B, S, generator=gen) - 1) * fx.lag_frames * on
+        R = _shift(R.reshape(B, N, S, 9), lag).reshape(B, N, S, 3, 3)
+        R = rot6d_to_matrix(matrix_to_rot6d(R))  # the blend of two rotations back onto SO(3)
+        a = _shift(a, lag)
+    if fx.mount_deg > 0:
+        axis = torch.randn(B, S, 3, generator=gen)
+        axis = axis / axis.norm(dim=-1, keepdim=True)
+        ang = torch.rand(B, S, generator=gen) * math.radians(fx.mount_deg) * on
+        R = R @ _rotations(axis, ang)[:, None]
+    if fx.heading_deg > 0:
+        ang = (2 * torch.rand(B, S, generator=gen) - 1) * math.radians(fx.heading_deg) * on
+        Rz = _rotations(torch.tensor([0.0, 0.0, 1.0]).expand(B, S, 3), ang)[:, None]  # (B, 1, S, 3, 3)
+        R = Rz @ R
+        a = (Rz @ a[..., None])[..., 0]
+    if fx.acc_gain > 0:
+        a = a * (1 + (2 * torch.rand(B, 1, S, 1, generator=gen) - 1) * fx.acc_gain * on[:, :, None, None])
+    if fx.acc_noise > 0:
+        a = a + torch.randn(a.shape, generator=gen) * fx.acc_noise * on[:, :, None, None]
+    out = x.clone()
+    out[..., rot_idx] = matrix_to_rot6d(R).reshape(B, N, S * 6).to(dt)
+    out[..., acc_idx] = a.reshape(B, N, S * 3).to(dt)
+    return torch.where(on[:, :, None] > 0, out, x)

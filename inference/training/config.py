@@ -67,6 +67,38 @@ class LossWeights:
 
 
 @dataclass
+class SensorEffects:
+    """What real, calibrated sensors add to the measured features and clean synthesis does
+    not (docs/real_signals.md): drawn per window and site, applied to the inputs the model
+    is told while its targets stay the true motion. All zero = off.
+
+    p: share of windows that get them. mount_deg: residual sensor-to-bone rotation after
+    calibration (random axis, angle uniform in [0, mount_deg]; skin and strap move over the
+    muscle). heading_deg: residual heading of the sensor's world frame, uniform in
+    [-h, h] (orientation and acceleration turn together). acc_gain: acceleration scaled by
+    1 + uniform [-g, g] (a sensor higher or lower on the segment than the synthesized site).
+    acc_noise: white noise std on the model-rate acceleration (m/s^2). lag_frames: the
+    site's signals shifted in time by uniform [-l, l] model frames (clocks of separate
+    sensors aligned by their timestamps).
+    """
+
+    p: float = 0.0
+    mount_deg: float = 0.0
+    heading_deg: float = 0.0
+    acc_gain: float = 0.0
+    acc_noise: float = 0.0
+    lag_frames: float = 0.0
+
+    @property
+    def active(self) -> bool:
+        return self.p > 0 and any(v > 0 for v in (self.mount_deg, self.heading_deg, self.acc_gain,
+                                                    self.acc_noise, self.lag_frames))
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
 class TrainConfig:
     """Everything that defines a training run; saved in every checkpoint."""
 
@@ -147,6 +179,8 @@ class TrainConfig:
     # the data (load_dataset) and written to the model file (meta "acc_filter"), from which the
     # poser's pipeline picks its resampler (docs/latency.md)
     causal: bool = False
+    # the measured features as real sensors give them (``SensorEffects``; off by default)
+    sensor_effects: SensorEffects = field(default_factory=SensorEffects)
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -165,6 +199,8 @@ class TrainConfig:
             d["loss"] = LossWeights(**d["loss"])
         if isinstance(d.get("mask"), dict):
             d["mask"] = MaskConfig.from_dict(d["mask"])
+        if isinstance(d.get("sensor_effects"), dict):
+            d["sensor_effects"] = SensorEffects(**d["sensor_effects"])
         cfg = cls(**d)
         if cfg.kind not in ("diffusion", "regressor"):
             raise ValueError(f"unknown model kind {cfg.kind!r}")

@@ -54,7 +54,7 @@ from inference.model.denoiser import deepened_state_dict
 from inference.model.diffusion import Schedule, inpaint, paper_steps, parse_steps
 from inference.model.files import MODEL_FORMAT, build_model, save_model, with_reading
 from inference.model.regressor import random_observation_mask
-from inference.training.augment import rotate_yaw, scale_features
+from inference.training.augment import rotate_yaw, scale_features, sensor_effects
 from inference.training.config import CHECKPOINT_FORMAT, LAST, LOG_FILE, MODEL_FILE, VAL_SITES, TrainConfig
 from inference.training.data import Dataset, default_data, load_dataset, window_stats
 from inference.training.distributed import all_reduce_mean, any_rank, barrier, init_distributed
@@ -208,6 +208,9 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
         offsets = torch.where(flip[:, None, None], mirror_points(offsets, SEGMENTS), offsets)
         contact_local = torch.where(flip[:, None, None], mirror_points(contact_local, CONTACTS), contact_local)
     xn = (x - ctx.mean) / ctx.std
+    # what the model is told of the measured entries: real sensors' errors on them when
+    # configured (``SensorEffects``); the targets stay ``xn``
+    xm = (sensor_effects(x, cfg.sensor_effects, gen) - ctx.mean) / ctx.std if cfg.sensor_effects.active else xn
     if cfg.mirror_average:
         model = MirrorAveraged(model, ctx.mean, ctx.std)
     told = ()  # the reading token, for models that take one
@@ -231,14 +234,14 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
             # output), so the loss is spent on what inpainting has to infer
             m = torch.as_tensor(random_observation_mask(rng, B, x.shape[1], cfg.mask))
             m &= torch.as_tensor(rng.random(B) < cfg.cond_prob)[:, None, None]
-            z = torch.where(m, xn, z)
+            z = torch.where(m, xm, z)
             out = model(z, t, height, m, *told) if cfg.model.mask_input else model(z, t, height, *unmasked)
             pred = torch.where(m, xn, out)
         else:
             pred = model(z, t, height, *unmasked)
     else:
         m = torch.as_tensor(random_observation_mask(rng, B, x.shape[1], cfg.mask))
-        pred = model(torch.where(m, xn, torch.zeros(())), m, height)
+        pred = model(torch.where(m, xm, torch.zeros(())), m, height)
     gate = sites_known_share(m, cfg.swing_gate) if cfg.swing_gate and m is not None else None
     terms = motion_losses(pred, xn, ctx.mean, ctx.std, offsets, contact_local, gate)
     loss = total_loss(terms, cfg.loss)
