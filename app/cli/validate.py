@@ -45,12 +45,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run_validate(args: argparse.Namespace) -> int:
+    from app.model_choice import set_torch_threads
     from app.validate.run import validate
 
-    if args.threads > 0:
-        import torch
-
-        torch.set_num_threads(args.threads)
+    set_torch_threads(args.threads)
 
     def progress(msg: str) -> None:
         print(f"validate: {msg}", file=sys.stderr, flush=True)

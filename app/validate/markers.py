@@ -1,5 +1,6 @@
 """Marker files as joint centres: C3D (read with ezc3d) and OpenSim's TRC (text).
 
+C3D is read with the pure-Python ``c3d`` package (``read_c3d`` says why not ezc3d).
 A lab's file names its points as its software does. We take a point as one of our joint
 centres (``kinematics.JOINT_NAMES``) when its label, lower-cased without a subject
 prefix (``Subject:``), is our name or one of the aliases below: the joint-centre names
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -72,28 +74,57 @@ def map_joints(labels: list[str]) -> dict[str, int]:
     return out
 
 
+# beyond this a C3D header is not a capture (an hour at 1 kHz has 3.6 million frames)
+MAX_C3D_VALUES = 50_000_000
+
+
 def read_c3d(path: str | os.PathLike) -> Markers:
-    import ezc3d
+    """A C3D's points, read with the pure-Python ``c3d`` package: a lab's file is
+    untrusted input, and ezc3d (which writes our exports) ends the process with a
+    segmentation fault on some malformed files (benchmarks/fuzz.py reference-c3d found
+    one), where ``c3d`` raises an exception we turn into one line naming the file."""
+    import c3d
 
     spath = os.fspath(path)
+
+    def bad(what: str) -> MotionFormatError:
+        return MotionFormatError(spath, what)
+
     try:
-        c = ezc3d.c3d(spath)
-    except Exception as exc:  # ezc3d raises RuntimeError/IOError for anything it cannot parse
-        raise MotionFormatError(spath, f"not a readable C3D file ({str(exc).strip() or type(exc).__name__})") from None
-    P = c["parameters"]["POINT"]
-    labels = [str(s) for s in P["LABELS"]["value"]]
-    pts = np.asarray(c["data"]["points"], dtype=np.float64)  # (4, N, T)
-    rate = float(np.ravel(P["RATE"]["value"])[0]) if len(np.ravel(P["RATE"]["value"])) else 0.0
-    if not (math.isfinite(rate) and rate > 0):
-        raise MotionFormatError(spath, f"POINT:RATE is {rate}, not a frame rate")
-    units = str(P["UNITS"]["value"][0]).strip().lower() if len(P["UNITS"]["value"]) else "mm"
-    if units not in UNITS:
-        raise MotionFormatError(spath, f"POINT:UNITS {units!r} is not a length unit ({', '.join(UNITS)})")
-    if pts.ndim != 3 or pts.shape[0] < 3 or pts.shape[1] != len(labels):
-        raise MotionFormatError(spath, f"{pts.shape[1] if pts.ndim == 3 else '?'} points for {len(labels)} labels")
-    pos = np.moveaxis(pts[:3], (0, 1, 2), (2, 1, 0)) * UNITS[units]  # (T, N, 3)
-    first = int(c["header"]["points"]["first_frame"])
-    t = (first + np.arange(pos.shape[0])) / rate
+        with open(spath, "rb") as fh, warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "No analog data found in file": markers only is what we want
+            r = c3d.Reader(fh)
+            labels = [str(s).strip() for s in r.point_labels]
+            rate = float(r.point_rate)
+            n_frames = int(r.last_frame) - int(r.first_frame) + 1
+            if not (math.isfinite(rate) and rate > 0):
+                raise bad(f"POINT:RATE is {rate}, not a frame rate")
+            if not labels or int(r.point_used) != len(labels):
+                raise bad(f"{int(r.point_used)} points for {len(labels)} labels")
+            if n_frames < 2 or n_frames * len(labels) * 3 > MAX_C3D_VALUES:
+                raise bad(f"{n_frames} frames of {len(labels)} points: not a capture")
+            try:
+                units = r.get("POINT:UNITS").string_value.strip().lower() or "mm"
+            except (AttributeError, KeyError):
+                units = "mm"
+            if units not in UNITS:
+                raise bad(f"POINT:UNITS {units!r} is not a length unit ({', '.join(UNITS)})")
+            frames = []
+            for _, pts, _ in r.read_frames(copy=True, check_nan=True):
+                p = np.asarray(pts[:, :3], dtype=np.float64)
+                p[pts[:, 3] < 0] = np.nan  # a negative residual: the point was not seen in that frame
+                frames.append(p)
+                if len(frames) > n_frames:
+                    break
+            first = int(r.first_frame)
+    except MotionFormatError:
+        raise
+    except Exception as exc:  # noqa: BLE001 -- whatever a malformed file makes the parser raise
+        raise bad(f"not a readable C3D file ({type(exc).__name__}: {str(exc)[:100]})") from None
+    if len(frames) < 2:
+        raise bad(f"{len(frames)} readable frame(s); at least 2 are needed (file cut short?)")
+    pos = np.stack(frames) * UNITS[units]
+    t = (first - 1 + np.arange(len(frames))) / rate
     return Markers(spath, t, pos, labels, rate)
 
 
@@ -159,10 +190,12 @@ def marker_joints(m: Markers) -> tuple[np.ndarray, set[str], list[str]]:
     for top, bottom in (("hip", "ankle"), ("hip", "knee"), ("shoulder", "elbow")):
         d = [J[:, JOINT_INDEX[f"{s}_{top}"]] - J[:, JOINT_INDEX[f"{s}_{bottom}"]] for s in "lr"
              if f"{s}_{top}" in found and f"{s}_{bottom}" in found]
-        if d:
-            up = np.nanmean(np.concatenate(d), axis=0)
+        d = np.concatenate(d) if d else np.zeros((0, 3))
+        d = d[np.all(np.isfinite(d), axis=-1)]
+        if len(d):
+            up = d.mean(axis=0)
             break
-    if up is None or not np.all(np.isfinite(up)):
+    if up is None or not np.all(np.isfinite(up)) or np.linalg.norm(up) < 1e-6:
         raise MotionFormatError(m.path, "cannot tell which way is up: it needs hip and knee or ankle centres "
                                         f"(found {', '.join(sorted(found))})")
     k = int(np.argmax(np.abs(up)))

@@ -20,6 +20,7 @@ from app.validate.compare import WINDOW_S
 from app.validate.run import Validation
 
 JOINT_ORDER = ("l_hip", "r_hip", "l_knee", "r_knee", "l_elbow", "r_elbow")
+PLOT_SECONDS = 15.0  # of the angles over time: a trial's first strides, readable; the tables cover all of it
 
 
 def _plt():
@@ -38,18 +39,21 @@ def plot_angles(v: Validation, path: Path) -> Path | None:
     joints = [j for j in JOINT_ORDER if j in a_ref and any(j in a for a in ours)]
     if not joints:
         return None
-    fig, axes = plt.subplots(len(joints), 1, figsize=(10, 1.9 * len(joints)), sharex=True, squeeze=False)
+    start = min(float(t[0]) for k, (t, _) in v.curves.items() if k != "reference" and len(t))
+    fig, axes = plt.subplots(len(joints), 1, figsize=(9, 1.5 * len(joints)), sharex=True, squeeze=False)
     for ax, j in zip(axes[:, 0], joints):
-        ax.plot(t_ref, a_ref[j], color="black", lw=2.0, label="reference")
+        keep = (t_ref >= start) & (t_ref <= start + PLOT_SECONDS)
+        ax.plot(t_ref[keep], a_ref[j][keep], color="black", lw=2.0, label="reference")
         for name, (t, a) in v.curves.items():
             if name != "reference" and j in a:
-                ax.plot(t, a[j], lw=1.0, label=f"imucap {name}")
+                keep = t <= start + PLOT_SECONDS
+                ax.plot(t[keep], a[j][keep], lw=1.0, label=f"imucap {subset_label(name.split(','))}")
         ax.set_ylabel(f"{j} (deg)")
         ax.grid(alpha=0.3)
     axes[0, 0].legend(fontsize=7, loc="upper right", ncol=2)
     axes[-1, 0].set_xlabel("time since the recording's first frame (s)")
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    fig.savefig(path, dpi=72)
     plt.close(fig)
     return path
 
@@ -64,7 +68,7 @@ def plot_segments(v: Validation, path: Path) -> Path | None:
     w = 0.8 / len(rows)
     x = np.arange(len(segs))
     for k, r in enumerate(rows):
-        label = "baseline (standing)" if r is v.baseline else ",".join(r["sensors"])
+        label = "baseline (standing)" if r is v.baseline else subset_label(r["sensors"])
         ax.bar(x + k * w, [r["segments"].get(s, np.nan) for s in segs], w, label=label)
     ax.set_xticks(x + 0.4 - w / 2, segs, rotation=60, fontsize=7)
     ax.set_ylabel("mean error (deg)")
@@ -93,11 +97,16 @@ def plot_bland_altman(v: Validation, path: Path) -> Path | None:
         ax.set_title(j, fontsize=9)
         ax.set_xlabel("mean range (deg)", fontsize=8)
     axes[0, 0].set_ylabel("imucap - reference (deg)", fontsize=8)
-    fig.suptitle(f"Range of motion per {WINDOW_S:g} s window, sensors {','.join(lead['sensors'])}", fontsize=9)
+    fig.suptitle(f"Range of motion per {WINDOW_S:g} s window, {subset_label(lead['sensors'])}", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
+
+
+def subset_label(sensors: list[str]) -> str:
+    """A subset's name in tables and legends: its sites, or their count when long."""
+    return ",".join(sensors) if len(sensors) <= 6 else f"{len(sensors)} sensors"
 
 
 def _table(rows: list[tuple[str, dict[str, Any]]], key: str, cols: list[str], fmt) -> list[str]:
@@ -109,13 +118,16 @@ def _table(rows: list[tuple[str, dict[str, Any]]], key: str, cols: list[str], fm
 
 def markdown(v: Validation, plots: dict[str, Path | None], command: str | None = None) -> str:
     s = v.summary()
-    rows = [(",".join(r["sensors"]), r) for r in v.subsets] + [("baseline (standing)", v.baseline)]
+    rows = [(subset_label(r["sensors"]), r) for r in v.subsets] + [("baseline (standing)", v.baseline)]
     corr = s["time_offset_correlation"]
     lines = [f"# imucap against {Path(v.reference.path).name}", "",
              f"Recording `{Path(v.recording).name}`, reference `{Path(v.reference.path).name}` "
              f"({v.reference.format}, {v.reference.n_frames} frames at {v.reference.fps:.4g} Hz).", ""]
     if command:
         lines += ["Made with:", "", f"    {command}", ""]
+    long = [r["sensors"] for r in v.subsets if len(r["sensors"]) > 6]
+    for sensors in long:
+        lines += [f"{len(sensors)} sensors: {','.join(sensors)}.", ""]
     lines += ["## Alignment", "",
               f"- time offset (reference clock minus recording clock): **{s['time_offset_s']:.4f} s**"
               + (" (given)" if s["time_offset_given"] else
@@ -148,7 +160,7 @@ def markdown(v: Validation, plots: dict[str, Path | None], command: str | None =
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     ba = v.subsets[0].get("bland_altman", {})
     if ba:
-        lines += ["", f"Bland-Altman of the ranges per window ({','.join(v.subsets[0]['sensors'])}):", "",
+        lines += ["", f"Bland-Altman of the ranges per window ({subset_label(v.subsets[0]['sensors'])}):", "",
                   "| joint | bias (deg) | 95% limits (deg) | windows |", "|---|---|---|---|"]
         for j in joints:
             b = ba.get(j)
@@ -156,8 +168,8 @@ def markdown(v: Validation, plots: dict[str, Path | None], command: str | None =
                 lines.append(f"| {j} | {b['bias_deg']:.2f} | {b['loa_low_deg']:.2f} to {b['loa_high_deg']:.2f} "
                              f"| {b['n']} |")
     lines.append("")
-    for title, key in (("Joint angles over time", "angles"), ("Segment errors", "segments"),
-                       ("Bland-Altman of the ranges", "bland_altman")):
+    for title, key in ((f"Joint angles over time (the first {PLOT_SECONDS:g} s)", "angles"),
+                       ("Segment errors", "segments"), ("Bland-Altman of the ranges", "bland_altman")):
         if plots.get(key) is not None:
             lines += [f"## {title}", "", f"![{title}]({plots[key].name})", ""]
     return "\n".join(lines)

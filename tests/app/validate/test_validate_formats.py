@@ -218,3 +218,21 @@ def test_trc_written_by_our_export_and_a_report(walk, tmp_path, capsys):
     for png in ("joint_angles.png", "segments.png", "bland_altman.png"):
         assert (tmp_path / "report" / png).stat().st_size > 1000 and f"]({png})" in md
     assert json.loads((tmp_path / "report" / "validation.json").read_text())["heading_deg"] == out["heading_deg"]
+
+
+@pytest.mark.parametrize("keep", [0.3, 0.6, 0.95])
+def test_a_c3d_cut_short_gets_one_line(walk, tmp_path, capsys, keep):
+    """A copy that stopped part way: read by the pure-Python reader (ezc3d, which writes
+    our exports, ends the process on some such files)."""
+    assert main(["export", str(walk.path), "--out", str(tmp_path / "full.c3d")]) == 0
+    capsys.readouterr()
+    data = (tmp_path / "full.c3d").read_bytes()
+    path = tmp_path / "cut.c3d"
+    path.write_bytes(data[:int(len(data) * keep)])
+    code = main(["validate", str(walk.path), "--reference", str(path), "--model", "floor", "--json"])
+    cap = capsys.readouterr()
+    if code == 0:  # the frames before the cut are a usable reference
+        assert json.loads(cap.out)["reference_frames"] < 0.96 * len(read_recording(walk.path).recon["t"])
+    else:
+        err = cap.err.strip().splitlines()
+        assert code == 2 and len(err) == 1 and str(path) in err[0], err
