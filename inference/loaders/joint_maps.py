@@ -230,7 +230,19 @@ ACCLAIM_BVH = replace(
     ASF, name="acclaim-bvh", segments={**ASF.segments, "pelvis": "hip"}, capture_fps=ACCLAIM_FPS,
 )
 
-BVH_MAPS = (BANDAI, CMU_CGSPEED, CMU_BVH, CMU_DAZ, ICLONE_CC, ACCLAIM_BVH, MIXAMO)
+# MVN Analyze's BVH export: its 23 segments named by the joint at their start (Chest = L5,
+# Chest2 = L3, which drives none of ours as in MVN above, Chest3 = T12, Chest4 = T8; the
+# collar is the shoulder blade, "Shoulder" the upper arm), a T-pose at zero, centimetres.
+MVN_BVH = JointMap(
+    name="mvn-bvh",
+    segments=_sides({
+        "pelvis": "Hips", "spine1": "Chest", "spine2": "Chest3", "spine3": "Chest4", "neck": "Neck", "head": "Head",
+        "collar": "{Side}Collar", "upperarm": "{Side}Shoulder", "forearm": "{Side}Elbow", "hand": "{Side}Wrist",
+        "thigh": "{Side}Hip", "shank": "{Side}Knee", "foot": "{Side}Ankle", "toes": "{Side}Toe",
+    }),
+)
+
+BVH_MAPS = (BANDAI, CMU_CGSPEED, CMU_BVH, CMU_DAZ, ICLONE_CC, ACCLAIM_BVH, MIXAMO, MVN_BVH)
 
 
 def _strip_prefix(name: str) -> str:

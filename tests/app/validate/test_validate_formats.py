@@ -236,3 +236,22 @@ def test_a_c3d_cut_short_gets_one_line(walk, tmp_path, capsys, keep):
     else:
         err = cap.err.strip().splitlines()
         assert code == 2 and len(err) == 1 and str(path) in err[0], err
+
+
+MVN_BVH_NAMES = {"Hips": "Hips", "LowerBack": "Chest", "Spine": "Chest3", "Spine1": "Chest4", "Neck": "Neck",
+                 "Head": "Head", **{f"{side}{ours}": f"{side}{mvn}" for side in ("Left", "Right") for ours, mvn in (
+                     ("Shoulder", "Collar"), ("Arm", "Shoulder"), ("ForeArm", "Elbow"), ("Hand", "Wrist"),
+                     ("UpLeg", "Hip"), ("Leg", "Knee"), ("Foot", "Ankle"), ("ToeBase", "Toe"))}}
+
+
+def test_mvn_analyze_bvh(walk, known, tmp_path, capsys):
+    """MVN Analyze's BVH naming (Chest..Chest4, RightCollar/Shoulder/Elbow/Wrist, RightHip/Knee/Ankle/Toe)."""
+    ref = walk.reference_motion()
+    text = bvh_text(ref.rot, ref.root, ref.body, ref.fps)
+    text = re.sub(r"\b(ROOT|JOINT) (\w+)", lambda m: f"{m[1]} {MVN_BVH_NAMES.get(m[2], m[2])}", text)
+    path = tmp_path / "mvn.bvh"
+    path.write_text(text)
+    out = _validate(capsys, walk, path)
+    assert "skeleton mvn-bvh" in out["mapping"] and "l_upperarm <- LeftShoulder" in out["mapping"]
+    _check(out, walk, known, ref.fps, "orientation",
+           segments=["pelvis", "l_thigh", "r_thigh", "l_shank", "r_shank", "spine3", "l_upperarm", "r_forearm"])
