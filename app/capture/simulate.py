@@ -219,6 +219,10 @@ class Truth:
 
 
 def read_truth(path: str | Path) -> Truth:
+    with open(path, "rb") as fh:
+        if fh.read(4) != b"PK\x03\x04":  # an .npz is a zip; np.load would speak of pickles
+            raise ValueError(f"{path}: not an imucap truth file (.npz); to score against another system's file "
+                             f"(BVH, MVNX, C3D, TRC, .mot) use: imucap validate REC.h5 --reference {path}")
     try:
         z = np.load(path, allow_pickle=False)
     except (OSError, ValueError) as exc:

@@ -255,3 +255,13 @@ def test_mvn_analyze_bvh(walk, known, tmp_path, capsys):
     assert "skeleton mvn-bvh" in out["mapping"] and "l_upperarm <- LeftShoulder" in out["mapping"]
     _check(out, walk, known, ref.fps, "orientation",
            segments=["pelvis", "l_thigh", "r_thigh", "l_shank", "r_shank", "spine3", "l_upperarm", "r_forearm"])
+
+
+def test_replay_truth_points_a_bvh_to_validate(walk, tmp_path, capsys):
+    """replay --truth takes imucap's own truth only; another system's file is pointed to
+    validate in one line, not refused with numpy's words about pickles."""
+    path = tmp_path / "take.bvh"
+    path.write_text(bvh_text(walk.truth.rot[:5], walk.truth.root[:5], walk.truth.body, walk.truth.fps))
+    assert main(["replay", str(walk.path), "--truth", str(path), "--model", "floor", "--json"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "imucap validate" in err[0] and str(path) in err[0] and "pickle" not in err[0]
