@@ -311,22 +311,47 @@ def held_out_errors(poses: Sequence[LivePose], measured: Sequence[LivePose], sit
     and in ``measured`` (a replay in which that site was observed, so its segment is the
     calibrated measurement), over the frames both replays produced at the same time and
     in which the site delivered. A real-data check that needs no motion capture, only a
-    session recorded with more sensors than the set under test."""
+    session recorded with more sensors than the set under test. ``axis_deg``: the same for
+    the segment's long axis only (the turn about the bone left out)."""
 
     by_t = {round(lp.t, 6): lp for lp in measured}
     pairs = [(lp, by_t[round(lp.t, 6)]) for lp in poses if round(lp.t, 6) in by_t]
     out: dict[str, float | None] = {}
+    axis: dict[str, float | None] = {}
     for s in sites:
         k, seg = SITE_INDEX[s], SITE_SEGMENT_INDEX[SITE_INDEX[s]]
         use = [(a, b) for a, b in pairs if b.observed_sites[k]]
         if not use:
-            out[s] = None
+            out[s] = axis[s] = None
             continue
-        ang = matrix_angle_between(np.stack([a.pose.rot[seg] for a, _ in use]),
-                                   np.stack([b.pose.rot[seg] for _, b in use]))
-        out[s] = round(float(np.degrees(np.mean(ang))), 2)
+        Ra = np.stack([a.pose.rot[seg] for a, _ in use])
+        Rb = np.stack([b.pose.rot[seg] for _, b in use])
+        out[s] = round(float(np.degrees(np.mean(matrix_angle_between(Ra, Rb)))), 2)
+        d = _BONE_AXIS[seg]
+        cos = np.einsum("tk,tk->t", Ra @ d, Rb @ d)
+        axis[s] = round(float(np.degrees(np.mean(np.arccos(np.clip(cos, -1.0, 1.0))))), 2)
     vals = [v for v in out.values() if v is not None]
-    return {"frames": len(pairs), "deg": out, "mean_deg": round(float(np.mean(vals)), 2) if vals else None}
+    avals = [v for v in axis.values() if v is not None]
+    return {"frames": len(pairs), "deg": out, "mean_deg": round(float(np.mean(vals)), 2) if vals else None,
+            "axis_deg": axis, "axis_mean_deg": round(float(np.mean(avals)), 2) if avals else None}
+
+
+def _bone_axes() -> np.ndarray:
+    """(24, 3) each segment's long axis in its own frame (rest pose: towards its main
+    child; a leaf segment's is +X)."""
+    from inference.body.body import MAIN_CHILD, anthropometric_offsets
+
+    off = anthropometric_offsets(1.75)
+    out = np.tile(np.array([1.0, 0.0, 0.0]), (len(off), 1))
+    for seg, child in MAIN_CHILD.items():
+        out[seg] = off[child] / np.linalg.norm(off[child])
+    return out
+
+
+# ``held_out_errors``' second figure: the angle between the two long axes leaves out the turn
+# about the bone, the part a left-out sensor's own heading drift and twist put in its "truth"
+# and the part the other sensors say least about (docs/real_signals.md)
+_BONE_AXIS = _bone_axes()
 
 
 __all__ = ["replay_recording", "build_replay_poser", "ReplaySettings", "ReplayPoser", "poser_metadata",

@@ -269,6 +269,9 @@ def test_real_set_scores_the_held_out_sites_of_each_real_log(capsys):
     assert set(sets["pelvis+shanks"]["deg"]) == {"l_thigh", "r_thigh", "l_foot", "r_foot"}
     # a standing pose is far from a walk's thighs: the scoring sees the motion
     assert sets["pelvis+shanks"]["deg"]["l_thigh"] > 10.0 and sets["pelvis+shanks"]["frames"] > 300
+    # the long axis alone leaves out the turn about the bone: never more than the whole angle
+    axis = sets["pelvis+shanks"]["axis_deg"]
+    assert all(axis[s] <= sets["pelvis+shanks"]["deg"][s] + 1e-6 for s in axis)
 
 
 def test_real_set_without_logs_is_a_clear_error(capsys, tmp_path, monkeypatch):
