@@ -16,6 +16,7 @@ result with its reason in one line; it writes no result, so the next run tries i
 
 from __future__ import annotations
 
+import glob
 import json
 import os
 import time
@@ -101,14 +102,19 @@ def _append(folder: Path, entry: dict[str, Any]) -> None:
 
 def write_atomic(path: Path, write) -> Path:
     """``write(tmp)`` to a temporary name beside ``path`` (same extension, so a writer that
-    picks its format by extension still does), then rename it into place."""
+    picks its format by extension still does), then rename it into place. Files the writer
+    puts beside it (``tmp.json``: a BVH's time origin) follow it to ``path``'s name first,
+    so the main file, renamed last, is never there without them."""
     tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}{path.suffix}")
     try:
         write(tmp)
+        for side in tmp.parent.glob(f"{glob.escape(tmp.name)}.*"):
+            os.replace(side, path.with_name(path.name + side.name[len(tmp.name):]))
         os.replace(tmp, path)
     finally:
-        if tmp.exists():
-            tmp.unlink()
+        for left in [tmp, *tmp.parent.glob(f"{glob.escape(tmp.name)}.*")]:
+            if left.exists():
+                left.unlink()
     return path
 
 
