@@ -61,7 +61,8 @@ REALTIME_MODULES = {"sim_devices/test_suit.py", "sim_devices/test_suit_process.p
 # from integrated accelerations, poses per second) depend on the cores being free: with another
 # test on the second core the capture's walk calibration put a CAN wrist 10-20 deg off.
 # scripts/test.sh runs these alone, after the parallel pass.
-SOLO_MODULES = {"app/capture/test_capture_e2e.py", "test_readme.py", "app/capture/test_replay_reproduces_capture.py"}
+SOLO_MODULES = {"app/capture/test_capture_e2e.py", "test_readme.py", "app/capture/test_replay_reproduces_capture.py",
+                "app/capture/test_capture_wireless.py"}
 
 
 def pytest_collection_modifyitems(config, items):
