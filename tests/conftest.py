@@ -51,7 +51,7 @@ REALTIME_MODULES = {"sim_devices/test_suit.py", "sim_devices/test_suit_process.p
                     "drivers/test_end_to_end.py",
                     "app/gui/test_main_window.py", "app/cli/test_demo.py", "app/capture/test_identify.py",
                     "app/cli/test_setup.py", "app/capture/test_capture_e2e.py",
-                    "app/capture/test_capture_loopback.py", "sim_devices/test_can_loopback.py",
+                    "app/capture/test_capture_loopback.py",
                     "app/gui/test_window_unplug.py", "app/gui/test_window_workflow.py",
                     "app/gui/test_window_simulate.py",
                     "app/cli/test_bench_latency.py"}
