@@ -205,8 +205,8 @@ def _confidence(args: argparse.Namespace, result: dict, clips: list, sites: list
 
 
 def run(args: argparse.Namespace) -> int:
-    import torch
 
+    from app.model_choice import set_torch_threads
     from inference.body.skeleton import parse_sites
     from inference.evaluation.runner import (
         DEFAULT_LANES,
@@ -225,8 +225,7 @@ def run(args: argparse.Namespace) -> int:
     from inference.poser.models import default_steps, mirror_for, noise_mode_for, resolve_model
     from inference.signals.resample import FPS_MODEL
 
-    if args.threads > 0:
-        torch.set_num_threads(args.threads)
+    set_torch_threads(args.threads)
     sites = parse_sites(args.sensors)
     if args.limit is not None and args.limit < 1:
         raise ValueError("--limit must be at least 1")
