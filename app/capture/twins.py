@@ -20,7 +20,13 @@ from pathlib import Path
 
 from app.capture.setup_file import SensorEntry, Setup, Subject
 from drivers.urls import parse_url
-from sim_devices.devices.can_loopback import REMOTE_INTERFACE, is_loopback, loopback_channel, split_host_port
+from sim_devices.devices.can_loopback import (
+    REMOTE_INTERFACE,
+    free_loopback_port,
+    is_loopback,
+    loopback_channel,
+    split_host_port,
+)
 
 WIRE_PROTOCOLS = ("xbus", "bno08x-rvc", "xsens-can", "dualsense")
 WIRELESS_PROTOCOLS = ("movella-dot", "ximu3")  # not in the "mixed" rotation, which stays as it was
@@ -28,9 +34,7 @@ EXAMPLE = "examples/simulated_suit.toml"
 
 
 def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    return free_loopback_port(socket.SOCK_DGRAM)
 
 
 def simulation_problem(url: str) -> str | None:

@@ -38,9 +38,10 @@ def split_host_port(channel: str) -> tuple[str, int]:
     return host, int(port)
 
 
-def free_loopback_port() -> int:
-    """A TCP port free on 127.0.0.1 now (the server binds it a moment later)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+def free_loopback_port(kind: int = socket.SOCK_STREAM) -> int:
+    """A port free on 127.0.0.1 now, TCP or (``socket.SOCK_DGRAM``) UDP: whoever serves it
+    binds it a moment later."""
+    with socket.socket(socket.AF_INET, kind) as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
 

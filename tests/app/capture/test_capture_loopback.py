@@ -16,13 +16,13 @@ from __future__ import annotations
 
 import json
 import os
-import socket
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
+from app.capture.twins import free_udp_port
 from sim_devices.devices.can_loopback import loopback_channel
 from tests.socket_watch import STRACE, destinations, off_machine, watched
 
@@ -30,11 +30,6 @@ pytestmark = [pytest.mark.slow,
               pytest.mark.skipif(STRACE is None, reason="strace not installed (scripts/test.sh installs it)")]
 CLI = [sys.executable, "-m", "app.cli.main"]
 
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def write_setup(tmp: Path) -> Path:

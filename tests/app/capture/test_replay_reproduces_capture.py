@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import os
-import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -20,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from app.capture.twins import free_udp_port
 from app.recording import read_recording
 from inference.metrics.errors import global_angle_error
 
@@ -27,11 +27,6 @@ pytestmark = pytest.mark.slow
 CLI = [sys.executable, "-m", "app.cli.main"]
 SITES = ("pelvis", "head", "l_wrist", "r_wrist", "l_shank", "r_shank")
 
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def capture(tmp: Path, latency: str) -> Path:
