@@ -13,6 +13,12 @@ After a recalibration started, the live pipeline posed nothing until the new cal
 took effect; the recording keeps when that began (the pipeline's ``recalibration`` event),
 and a replay poses nothing over the same stretch. Recordings made before the event existed
 do not say, and there a replay poses those frames with the previous calibration.
+
+A live loop that falls behind leaves 20 Hz frames unposed (``Pipeline.pass_over``) and the
+recording keeps each one's time (the ``pose skipped`` event). The poser is autoregressive,
+so every later frame depends on which frames it saw: a replay leaves out the same frames
+by default, and gives back the live reconstruction exactly; ``every_frame`` poses them
+all instead (a better reconstruction than live had time for, no longer the same one).
 """
 
 from __future__ import annotations
@@ -23,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from app.live import RECALIBRATION_EVENT, LivePose, Pipeline, Sink
+from app.live import POSE_SKIPPED_EVENT, RECALIBRATION_EVENT, LivePose, Pipeline, Sink
 from app.model_choice import choose_model
 from app.recording import Recording
 from calibration import Calibration
@@ -200,7 +206,8 @@ def build_replay_poser(rec: Recording, settings: ReplaySettings, body: Any, mode
 def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] | None = None,
                      insoles: bool | None = None, calibration: Calibration | None = None,
                      progress: Callable[[int, int, int], None] | None = None, sinks: Sequence[Sink] = (),
-                     pace: Callable[[float], None] | None = None, causal: bool | None = None) -> ReplayResult:
+                     pace: Callable[[float], None] | None = None, causal: bool | None = None,
+                     every_frame: bool = False) -> ReplayResult:
     """Run ``rec``'s raw stream through a Pipeline with ``poser``.
 
     sensors: the recorded sites whose measurements the poser gets (default all; the
@@ -211,7 +218,8 @@ def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] 
     and the recorded events at their times), and are closed at the end; pace(t) is called
     before the frame of time ``t`` is pushed (``app.streams.pacing.Pacer`` holds it back
     to real time). causal: the trailing acceleration filter of the low-latency mode (None:
-    the one the poser's model was trained on).
+    the one the poser's model was trained on). every_frame: also pose the frames the live
+    loop had no time for (default: leave them out, as live did).
     """
     use = resolve_sensors(rec, sensors)
     ins = resolve_insoles(rec, insoles)
@@ -224,6 +232,9 @@ def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] 
     recals = [] if calibration is not None else sorted(ev[0] for ev in rec.events if ev[1] == RECALIBRATION_EVENT)
     stream = _Stream(rec)
     pipe = Pipeline(poser, rec.sites, active_sites=use, insoles=ins, sinks=sinks, causal=causal)
+    skipped = live_skipped_times(rec)
+    if len(skipped) and not every_frame:
+        pipe.skip_pose = lambda t20: bool(match_times(np.array([t20]), skipped, SAME_FRAME_S)[0] >= 0)
     events = sorted(rec.events, key=lambda e: e[0]) if sinks else []
     e = 0  # next event to pass on
     poses: list[LivePose] = []
@@ -265,6 +276,15 @@ def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] 
     return ReplayResult(poses=poses, sensors=use, insoles=ins, hub_frames=n, calibrations_used=used,
                         stats=pipe.stats.summary())
 
+
+def live_skipped_times(rec: Recording) -> np.ndarray:
+    """Sorted times of the 20 Hz frames the live loop had no time to pose."""
+    return np.array(sorted(ev[0] for ev in rec.events if ev[1] == POSE_SKIPPED_EVENT), dtype=float)
+
+
+SAME_FRAME_S = 1e-6
+"""A skipped frame's recorded time and the replay's time for it come from the same
+resampler on the same recorded sample times: equal but for float formatting."""
 
 MATCH_TOLERANCE_S = 0.5 / FPS_MODEL - 1e-6
 """Two runs' frames stand for the same moment when their times are under half a model

@@ -2,14 +2,15 @@
 (`imucap demo --record FILE.h5`, the GUI's record button, or any ``Recorder``).
 
     imucap replay REC.h5 [--model diffusion|regressor|floor|PATH.pt] [--sensors SITE,...]
-                  [--insoles/--no-insoles] [--steps K] [--seed S] [--threads N] [--height M]
+                  [--insoles/--no-insoles] [--steps K] [--seed S] [--every-frame] [--threads N] [--height M]
                   [--out FILE.{bvh,csv,h5,mot}]... [--json] [--no-progress]
                   [--stream lsl,vmc,vrchat [--stream-host HOST] [--stream-speed X]]
     imucap export REC.h5 --out FILE.{bvh,csv,h5,mot,c3d,trc} | NAME_orientations.sto [--out ...] [--height M] [--json]
 
 ``replay`` re-runs the poser over the recording's raw sensor stream with the recorded
 calibration(s): another model or step count, or only some of the recorded sensors (the
-others are inpainted, as with a smaller suit live). Progress goes to stderr; ``--json``
+others are inpainted, as with a smaller suit live). Frames the live loop had no time to pose
+are left out as live left them (``--every-frame`` poses them too). Progress goes to stderr; ``--json``
 prints one JSON object on stdout (frames, duration_s, sensors, insoles, model, steps,
 vs_recorded_ga_deg = how far the re-run is from the live reconstruction, outputs ...).
 ``--out`` writes the re-run poses (repeat it for several formats).
@@ -77,6 +78,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--latency", default=None, choices=("centred", "low"),
                    help="acceleration filter of the replay: low = the trailing one of the low-latency mode "
                         "(docs/latency.md); default: as recorded, else centred")
+    p.add_argument("--every-frame", action="store_true",
+                   help="also pose the frames the live loop had no time for (default: leave them out, as live "
+                        "did, so that the replay gives back the live reconstruction)")
     p.add_argument("--threads", type=int, default=1, help="torch threads (0 = torch's default)")
     p.add_argument("--height", type=float, default=None, help="subject height in m (default: from the recording)")
     p.add_argument("--out", action="append", type=Path, default=[], metavar="FILE", help=OUT_HELP)
@@ -203,7 +207,7 @@ def run_replay(args: argparse.Namespace) -> int:
         print(f"replay: streaming {args.stream} to {args.stream_host}, {pace}", file=sys.stderr, flush=True)
     t0 = time.perf_counter()
     res = replay_recording(rec, poser, sensors=sensors, insoles=insoles, progress=_Progress(not args.no_progress),
-                           sinks=sinks, pace=pacer, causal=causal)
+                           sinks=sinks, pace=pacer, causal=causal, every_frame=args.every_frame)
     held_out = None
     left_out = [s for s in rec.sites if s not in res.sensors]
     if args.held_out:
@@ -212,7 +216,8 @@ def run_replay(args: argparse.Namespace) -> int:
                              f"({', '.join(rec.sites)})")
         full = built.fresh()
         held_out = held_out_errors(res.poses, replay_recording(rec, full, sensors=rec.sites, insoles=insoles,
-                                                               causal=causal).poses, left_out)
+                                                               causal=causal, every_frame=args.every_frame).poses,
+                                  left_out)
     seconds = time.perf_counter() - t0
     outputs = []
     motion = None
@@ -236,7 +241,8 @@ def run_replay(args: argparse.Namespace) -> int:
         "pelvis_odometry": poser.pelvis_odometry is not None,
         "recorded_sensors": list(rec.sites), "recorded_model": rec.metadata.get("model"),
         "calibrations": res.calibrations_used, "hub_frames": res.hub_frames,
-        "frames_filled": res.stats.get("frames_filled"), "resampler_restarts": res.stats.get("resampler_restarts"),
+        "frames_filled": res.stats.get("frames_filled"), "poses_skipped": res.stats.get("poses_skipped"),
+        "resampler_restarts": res.stats.get("resampler_restarts"),
         "step_p50_ms": res.stats.get("step_p50_ms"), "body_height_m": round(float(body.height), 3),
         **compare_to_recorded(rec, res.poses),
         **({"held_out": held_out} if held_out is not None else {}),

@@ -3,6 +3,7 @@
 (``sources``). ``docs/design.md`` draws the whole path."""
 
 from app.live.pipeline import (
+    POSE_SKIPPED_EVENT,
     RECALIBRATION_EVENT,
     CallbackSink,
     LivePose,
@@ -15,6 +16,6 @@ from app.live.runner import LivePipeline, close_sink
 from app.live.sources import FrameSource, ListSource, frames_from_signals
 
 __all__ = [
-    "RECALIBRATION_EVENT", "CallbackSink", "FrameSource", "ListSource", "LivePipeline", "LivePose", "Pipeline",
+    "POSE_SKIPPED_EVENT", "RECALIBRATION_EVENT", "CallbackSink", "FrameSource", "ListSource", "LivePipeline", "LivePose", "Pipeline",
     "PipelineStats", "Sink", "close_sink", "frames_from_signals", "stride_text",
 ]

@@ -41,6 +41,10 @@ RECALIBRATION_EVENT = "recalibration"
 """The event a pipeline sends its sinks with the first frame that goes back to the
 calibrator after a calibration was dropped: from then until the next calibration nothing
 is posed."""
+POSE_SKIPPED_EVENT = "pose skipped"
+"""The event a pipeline sends its sinks for each 20 Hz frame the live loop had no time to
+pose (``pass_over``), at that frame's time: a recording keeps them, so that a replay can
+leave out the same frames and give back the live reconstruction exactly."""
 _NR = N_SITES * 9  # packed rest payload: R_WB (13*9) | observed (13) | contacts (4) | insole present (1)
 
 
@@ -190,6 +194,9 @@ class Pipeline:
         self.causal = bool(causal)
         self.resampler = StreamingResampler(causal=self.causal)
         self._last_index: int | None = None
+        # replay: True for the times of 20 Hz frames that are to be left out, as live left
+        # them out (app.replay reads them from the recording's POSE_SKIPPED_EVENTs)
+        self.skip_pose: Callable[[float], bool] | None = None
         # a calibration was in use and has been dropped, and the first frame that went back
         # to the calibrator has not been announced yet (see _calibrating)
         self._had_calibration = False
@@ -350,11 +357,13 @@ class Pipeline:
                   newest: float | None = None, pose: bool = True) -> list[LivePose]:
         out = []
         for f20 in self.resampler.push(acc, rest, t):
-            if not pose:
+            t20 = f20.t if f20.t is not None else t
+            if not pose or (self.skip_pose is not None and self.skip_pose(t20)):
                 self.stats.poses_skipped += 1
+                if not pose:
+                    self._emit("on_event", t20, POSE_SKIPPED_EVENT, "")
                 continue
-            out.append(self._pose(f20.index, f20.t if f20.t is not None else t, t if newest is None else newest,
-                                  f20.acc, f20.rest, t_start))
+            out.append(self._pose(f20.index, t20, t if newest is None else newest, f20.acc, f20.rest, t_start))
         return out
 
     def _pose(self, index: int, t: float, t_newest: float, acc: np.ndarray, rest: np.ndarray,

@@ -135,3 +135,52 @@ def test_a_recalibration_pauses_the_replay_where_it_paused_live(tmp_path):
     # a recording from before the event (none in it): the old way, the stretch posed with the first calibration
     old = replay_recording(replace(r, events=[]), make_poser("floor", body=truth.body))
     assert sum(recal[0] <= lp.t <= t_cal2 for lp in old.poses) > 10
+
+
+def test_frames_live_had_no_time_for_are_left_out_again_so_the_replay_gives_back_live(tmp_path):
+    """Live, a loop that falls behind passes frames over (``Pipeline.pass_over``): their
+    20 Hz frames are never posed, and the autoregressive poser goes on from the frames it
+    did see. The recording keeps each skipped frame's time; a replay with no options leaves
+    out the same frames and gives back live exactly, ``every_frame`` poses them all."""
+    import itertools
+
+    from app.live import POSE_SKIPPED_EVENT, Pipeline, frames_from_signals
+    from app.recording import Recorder
+    from calibration import Calibrator, synthesize_session
+    from inference.signals.synthesis import NoiseModel
+    from sim_devices.motions import generate
+
+    from .conftest import REC_PROTO, REC_SITES
+
+    act = generate("walk", seconds=3.0, seed=2)
+    sig, truth = synthesize_session(act, REC_PROTO, noise=NoiseModel.typical(), rng=5, sites=REC_SITES)
+    frames = frames_from_signals(sig, t0=300.0)
+    ticks = itertools.count(0.0, 0.01)
+    path = tmp_path / "behind.h5"
+    rec = Recorder(path, REC_SITES, metadata={"model": "diffusion"}, flush_interval=0.2, clock=lambda: next(ticks))
+
+    def poser():
+        return make_poser("diffusion", body=truth.body, steps=[1], seed=0)
+
+    pipe = Pipeline(poser(), REC_SITES, calibrator=Calibrator(REC_SITES, schedule=REC_PROTO.schedule()), sinks=[rec])
+    live = []
+    for k, f in enumerate(frames):
+        if pipe.calibration is not None and k % 30 >= 24:  # behind for 0.1 s of every 0.5 s
+            pipe.pass_over(f)
+        else:
+            live += pipe.push(f)
+    pipe.close()
+    skipped = pipe.stats.poses_skipped
+    assert skipped > 5 and len(live) > 20
+
+    r = read_recording(path)
+    assert sum(kind == POSE_SKIPPED_EVENT for _, kind, _ in r.events) == skipped
+    again = replay_recording(r, poser())
+    assert again.stats["poses_skipped"] == skipped
+    assert np.allclose([lp.t for lp in again.poses], [lp.t for lp in live])
+    assert np.allclose(_rot(again.poses), _rot(live), atol=1e-5)
+    every = replay_recording(r, poser(), every_frame=True)
+    assert len(every.poses) == len(live) + skipped and every.stats["poses_skipped"] == 0
+    # the poser remembers: posing the skipped frames changes the frames after them
+    cmp = compare_to_recorded(r, every.poses)
+    assert cmp["vs_recorded_frames"] == len(live) and cmp["vs_recorded_ga_deg"] > 1e-3, cmp
