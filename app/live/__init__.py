@@ -16,6 +16,6 @@ from app.live.runner import LivePipeline, close_sink
 from app.live.sources import FrameSource, ListSource, frames_from_signals
 
 __all__ = [
-    "POSE_SKIPPED_EVENT", "RECALIBRATION_EVENT", "CallbackSink", "FrameSource", "ListSource", "LivePipeline", "LivePose", "Pipeline",
-    "PipelineStats", "Sink", "close_sink", "frames_from_signals", "stride_text",
+    "POSE_SKIPPED_EVENT", "RECALIBRATION_EVENT", "CallbackSink", "FrameSource", "ListSource", "LivePipeline",
+    "LivePose", "Pipeline", "PipelineStats", "Sink", "close_sink", "frames_from_signals", "stride_text",
 ]
