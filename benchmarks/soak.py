@@ -2,8 +2,9 @@
 
     .venv/bin/python benchmarks/soak.py --minutes 60 [--slice 5] [--json]
 
-The simulated suit (six sensors and insoles over their real transports: ptys, CAN, UDP)
-plays a walk at real rate into the hub, the pipeline and the shipped model, recording on
+An ``imucap demo`` session (``app.capture.demo``: six simulated sensors and insoles in a
+process of their own, over their real transports: ptys, CAN on loopback, UDP) plays a walk
+at real rate into the hub, the pipeline and the shipped model, recording on
 (the recording is deleted at the end unless --keep). Every --slice minutes one row: the
 process's resident memory, latency p50/p99 of that slice's poses, the hub's and the
 pipeline's queue depths, the frames dropped and filled in the slice, and the recording's
@@ -34,7 +35,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from app.demo_session import SUIT_PLACES, DemoConfig, DemoSession  # noqa: E402
+from app.capture.demo import DemoConfig, DemoRun  # noqa: E402
 from app.live import Sink  # noqa: E402
 
 
@@ -118,9 +119,6 @@ def main() -> int:
     ap.add_argument("--no-record", action="store_true", help="no recording (what the rest costs)")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--model", default="diffusion", help="diffusion | regressor | floor (no network) | PATH.pt")
-    ap.add_argument("--suit", default="thread", choices=SUIT_PLACES,
-                    help="the simulated suit inside this process (the figures in docs/robustness.md) or in a child "
-                         "process, as imucap demo runs it")
     ap.add_argument("--protocol", default="mixed", help="the suit's wire protocol(s), as imucap demo --protocol")
     ap.add_argument("--malloc", action="store_true",
                     help="per slice also glibc's heap totals (in use / free / mmapped, MB): a leak or fragmentation")
@@ -137,16 +135,18 @@ def main() -> int:
         tracemalloc.start(8)
     base_snapshot = None
     rec = Path(tempfile.mkdtemp(prefix="imucap-soak-")) / "soak.h5"
-    # a minute's walk that loops, calibration protocol included each time (headless=False is
-    # the window's looping session, without a window)
-    cfg = DemoConfig(motion="walk", insoles=True, protocol=args.protocol, seconds=60.0, headless=False,
-                     record=None if args.no_record else str(rec),
-                     model=args.model, suit=args.suit)
-    session = DemoSession(cfg)
+    # a minute's walk that loops, after the guided walk calibration
+    cfg = DemoConfig(motion="walk", insoles=True, protocol=args.protocol, seconds=60.0,
+                     record=None if args.no_record else str(rec), model=args.model)
+    demo = DemoRun(cfg)
+    session = demo.session
     lat = SliceLatency()
     session.pipeline.add_sink(lat)
     rows = []
-    session.start()
+    demo.start()
+    if not demo.run_for(0.0):
+        demo.stop()
+        raise SystemExit(f"soak: the session did not calibrate: {session.guided.status()}")
     t0 = time.monotonic()
     last = session.pipeline.stats.summary()
     try:
@@ -183,7 +183,7 @@ def main() -> int:
             print(json.dumps(rows[-1]) if args.json else "  ".join(f"{k}={v}" for k, v in rows[-1].items()),
                   flush=True)
     finally:
-        session.stop()
+        demo.stop()
         if not args.keep:
             rec.unlink(missing_ok=True)
     if len(rows) > 2:

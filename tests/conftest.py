@@ -47,7 +47,7 @@ def _one_torch_thread():
 # xdist group, so under `--dist loadgroup` they run one after another on one worker instead
 # of starving each other: a suit test lost a device's samples for whole seconds while the
 # other worker built a dataset.
-REALTIME_MODULES = {"sim_devices/test_suit.py", "sim_devices/test_suit_process.py", "drivers/test_batched.py",
+REALTIME_MODULES = {"sim_devices/test_suit.py", "drivers/test_batched.py",
                     "drivers/test_end_to_end.py",
                     "app/gui/test_main_window.py", "app/cli/test_demo.py", "app/capture/test_identify.py",
                     "app/cli/test_setup.py", "app/capture/test_capture_e2e.py",

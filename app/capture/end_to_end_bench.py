@@ -20,14 +20,10 @@ the one 5 samples *after* the time it stands for. And ``model``: the poser's tim
 Rounds alternate the modes (centred, low, centred, low, ...), each a fresh session
 (calibration included, not timed), so a load change during the run hits both.
 
-Where the suit runs (``suit``): "process" (the default) is how a user has it: the devices
-live in another process (``imucap devices simulate --setup``, its send log written to a file
-on exit; the monotonic clock is the machine's, so the times compare), and this process runs
-the capture session (``app.capture.session``) that opens their URLs and calibrates with the
-walk protocol; the suit's packet writing does not compete with the model for this
-process's interpreter lock. "thread" runs the demo's simulated suit inside this process, as
-``imucap demo`` does: 6 device threads beside the model, which is what an all-in-one demo
-pays.
+Each round is an ``imucap demo`` session (``app.capture.demo``): the devices live in another
+process (``imucap devices simulate --setup``, its send log written to a file on exit; the
+monotonic clock is the machine's, so the times compare), and this process runs the capture
+session that opens their URLs and calibrates with the guided walk, as a user has it.
 """
 
 from __future__ import annotations
@@ -42,9 +38,6 @@ from typing import Any
 import numpy as np
 
 from app.live import LivePose, Sink
-
-SUITS = ("process", "thread")  # as app.demo_session.SUIT_PLACES (a bench's suit runs where a demo's can)
-CALIBRATION_TIMEOUT_S = 120.0
 
 WARMUP_POSES = 20  # the first poses after calibration also pay for the model's first calls
 # a round runs past its seconds until this many poses after the warm-up (at most
@@ -115,37 +108,6 @@ def _pct(values: list[float], q: float) -> float | None:
     return round(float(np.percentile(values, q)), 2) if values else None
 
 
-def measure_mode(mode: str, seconds: float, model: str = "diffusion", protocol: str = "xbus",
-                 sensors: tuple[str, ...] | None = None, seed: int = 0, threads: int = 1,
-                 runtime: str = "auto") -> dict[str, Any]:
-    """One demo session in ``mode``: calibrate (untimed), then ``seconds`` of walking,
-    timed. Returns the raw per-pose latencies (ms) and the session's counters."""
-    from app.demo_session import DEFAULT_SENSORS, DemoConfig, DemoSession
-    from calibration import Protocol
-
-    protocol_cal = Protocol.fitted(4.0)
-    cfg = DemoConfig(motion="walk", sensors=tuple(sensors or DEFAULT_SENSORS), protocol=protocol,
-                     seconds=protocol_cal.prefix + seconds, model=model, seed=seed, headless=True,
-                     threads=threads, calibration_protocol=protocol_cal, latency=mode, runtime=runtime,
-                     suit="thread")  # the send logs are read off the twins in this process
-    session = DemoSession(cfg)
-    probe = LatencyProbe(tuple(session.cfg.sensors))
-    session.pipeline.add_sink(probe)  # first: the sessions add theirs in start()
-    try:
-        session.start()
-        assert session.suit is not None and session.hub is not None
-        for d in session.suit.devices.values():
-            d.sim.log_sends()
-        session.run_for(cfg.seconds, WARMUP_POSES + MIN_TIMED_POSES, timeout=cfg.seconds + POSE_PATIENCE_S)
-    finally:
-        session.stop()
-    hub = session.hub
-    assert hub is not None and session.suit is not None
-    logs = {site: d.sim.send_log or [] for site, d in session.suit.devices.items()}
-    return _summarise(mode, probe, logs, hub, session.pipeline.stats, session.pipeline.causal,
-                      session.model_label, session.poser.runtime, session.warning)
-
-
 def _summarise(mode: str, probe: LatencyProbe, logs: dict[str, list[tuple[int, float]]], hub: Any, stats: Any,
                causal: bool, model_label: str, runtime: str, warning: str | None) -> dict[str, Any]:
     """Per pose after the warm-up: newest sample's send (from the device's log) -> emission."""
@@ -167,68 +129,46 @@ def _summarise(mode: str, probe: LatencyProbe, logs: dict[str, list[tuple[int, f
     }
 
 
-def _bench_setup(folder: str, sensors: tuple[str, ...], model: str) -> str:
-    """A setup file for the suit in its own process: one Xbus device per site on a pty
-    (the demo's suit), the walk calibration (no table, own headings)."""
-    lines = ["[subject]", 'id = "bench"', "height = 1.75", "", "[sensors]"]
-    lines += [f'{s} = "xbus://{folder}/{s}-tty?baud=115200"' for s in sensors]
-    lines += ["", "[calibration]", 'protocol = "walk"', "", "[model]", f'name = "{model}"', ""]
-    path = os.path.join(folder, "bench-setup.toml")
-    with open(path, "w") as f:
-        f.write("\n".join(lines))
-    return path
-
-
 def _read_send_logs(path: str, names: tuple[str, ...]) -> dict[str, list[tuple[int, float]]]:
     with np.load(path) as z:
         return {n: list(zip(z[f"{n}/counter"].tolist(), z[f"{n}/t"].tolist())) for n in names}
 
 
-def measure_mode_process(mode: str, seconds: float, model: str = "diffusion", sensors: tuple[str, ...] | None = None,
-                         seed: int = 0, threads: int = 1) -> dict[str, Any]:
-    """One capture session in ``mode`` against a simulated suit in its own process:
-    calibrate (walk protocol, untimed), then ``seconds`` timed."""
-    from app.capture.session import CaptureOptions, CaptureSession
-    from app.capture.setup_file import load_setup
-    from app.capture.simulator_process import SimulatorProcess
-    from app.demo_session import DEFAULT_SENSORS
+def measure_mode(mode: str, seconds: float, model: str = "diffusion", sensors: tuple[str, ...] | None = None,
+                 seed: int = 0, threads: int = 1) -> dict[str, Any]:
+    """One demo session in ``mode`` (its Xbus devices in their own process): calibrate
+    (the guided walk, untimed), then ``seconds`` timed."""
+    from pathlib import Path
+
+    from app.capture.demo import DEFAULT_SENSORS, DemoConfig, DemoRun, demo_spec
 
     sites = tuple(sensors or DEFAULT_SENSORS)
+    cfg = DemoConfig(motion="walk", sensors=sites, protocol="xbus", seconds=seconds, model=model, seed=seed,
+                     threads=threads, latency=mode)
     with tempfile.TemporaryDirectory(prefix="imucap-bench-") as folder:
-        setup_path = _bench_setup(folder, sites, model)
+        spec = demo_spec(cfg, folder=Path(folder))
         log_path = os.path.join(folder, "sends.npz")
-        sim = SimulatorProcess(setup_path, "walk", seconds=seconds + CALIBRATION_TIMEOUT_S, seed=seed, lead_in=2.0,
-                               args=["--log-sends", log_path]).start()
-        session = None
+        spec.simulator.args += ["--log-sends", log_path]
+        spec.options.countdown = 1.0  # nobody to get into place
+        demo = DemoRun(cfg, spec)
+        probe = LatencyProbe(sites)
+        demo.pipeline.sinks.insert(0, probe)  # first: the emission time before any other sink's work
         try:
-            session = CaptureSession(load_setup(setup_path), CaptureOptions(countdown=1.0, threads=threads,
-                                                                             latency=mode))
-            probe = LatencyProbe(sites)
-            session.pipeline.sinks.insert(0, probe)  # first: the emission time before any other sink's work
-            session.start()
-            end = time.monotonic() + CALIBRATION_TIMEOUT_S
-            while session.calibration is None:
-                session.poll()
-                if time.monotonic() > end or session.guided.phase == "failed":
-                    raise RuntimeError(f"the bench's capture did not calibrate: {session.guided.status()}")
-                time.sleep(0.1)
-            time.sleep(seconds)
-            end = time.monotonic() + POSE_PATIENCE_S
-            while len(probe.records) < WARMUP_POSES + MIN_TIMED_POSES and time.monotonic() < end:
-                time.sleep(0.1)
+            demo.start()
+            if not demo.run_for(seconds, WARMUP_POSES + MIN_TIMED_POSES, timeout=seconds + POSE_PATIENCE_S) \
+                    and demo.session.calibration is None:
+                raise RuntimeError(f"the bench's capture did not calibrate: {demo.session.guided.status()}")
         finally:
-            if session is not None:
-                session.stop()
-            sim.stop()  # the child writes its send log on the way out
+            demo.stop()  # the simulator writes its send log on the way out
         logs = _read_send_logs(log_path, sites)
-    assert session.hub is not None
-    return _summarise(mode, probe, logs, session.hub, session.pipeline.stats, session.pipeline.causal,
-                      session.model_label, session.poser.runtime, session.warning)
+    s = demo.session
+    assert s.hub is not None
+    return _summarise(mode, probe, logs, s.hub, s.pipeline.stats, s.pipeline.causal, s.model_label,
+                      s.poser.runtime, s.warning)
 
 
-def run_end_to_end(seconds: float = 10.0, rounds: int = 2, model: str = "diffusion", protocol: str = "xbus",
-                   seed: int = 0, threads: int = 1, runtime: str = "auto",
-                   modes: tuple[str, ...] = ("centred", "low"), suit: str = "process") -> dict[str, Any]:
+def run_end_to_end(seconds: float = 10.0, rounds: int = 2, model: str = "diffusion", seed: int = 0,
+                   threads: int = 1, modes: tuple[str, ...] = ("centred", "low")) -> dict[str, Any]:
     """The `imucap bench --end-to-end` measurement; returns its JSON object: per mode
     ``<mode>_p50_ms``, ``<mode>_p99_ms`` (newest sample leaving its device -> pose to the
     sinks), ``<mode>_age_p50_ms``/``_p99_ms`` (from the time the pose stands for),
@@ -241,18 +181,11 @@ def run_end_to_end(seconds: float = 10.0, rounds: int = 2, model: str = "diffusi
         latency_settings(m)
     if rounds < 1 or seconds <= 0:
         raise ValueError("--rounds must be at least 1 and --seconds positive")
-    if suit not in SUITS:
-        raise ValueError(f"--suit must be one of {', '.join(SUITS)}, not {suit!r}")
-    if suit == "process" and protocol != "xbus":
-        raise ValueError("--suit process plays the demo's Xbus suit; other protocols run with --suit thread")
     runs: dict[str, list[dict[str, Any]]] = {m: [] for m in modes}
     t0 = time.monotonic()
     for _ in range(rounds):
         for m in modes:
-            if suit == "process":
-                runs[m].append(measure_mode_process(m, seconds, model, seed=seed, threads=threads))
-            else:
-                runs[m].append(measure_mode(m, seconds, model, protocol, seed=seed, threads=threads, runtime=runtime))
+            runs[m].append(measure_mode(m, seconds, model, seed=seed, threads=threads))
     out: dict[str, Any] = {}
     all_model: list[float] = []
     for m, rs in runs.items():
@@ -275,7 +208,7 @@ def run_end_to_end(seconds: float = 10.0, rounds: int = 2, model: str = "diffusi
     first = runs[modes[0]][0]
     warnings = sorted({r["warning"] for rs in runs.values() for r in rs if r["warning"]})
     out.update({
-        "runtime": first["runtime"], "threads": torch.get_num_threads(), "protocol": protocol, "suit": suit,
+        "runtime": first["runtime"], "threads": torch.get_num_threads(), "protocol": "xbus", "suit": "process",
         "rounds": rounds, "seconds_per_round": seconds, "wall_s": round(time.monotonic() - t0, 1),
         "load_avg_1min": round(os.getloadavg()[0], 2), "cpus": os.cpu_count(),
         **({"warnings": warnings} if warnings else {}),
@@ -283,4 +216,4 @@ def run_end_to_end(seconds: float = 10.0, rounds: int = 2, model: str = "diffusi
     return out
 
 
-__all__ = ["LatencyProbe", "SUITS", "measure_mode", "measure_mode_process", "run_end_to_end"]
+__all__ = ["LatencyProbe", "measure_mode", "run_end_to_end"]

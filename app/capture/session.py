@@ -77,6 +77,20 @@ class CaptureOptions:
     confidence: bool = False  # each pose with its per-segment spread (inference/poser/confidence.py)
 
 
+def session_spec(setup: Setup, options: CaptureOptions) -> dict[str, Any]:
+    """A capture's setup and options as plain data, device URLs by scheme only (their
+    paths and ports are the machine's)."""
+    return {
+        "sensors": {site: e.url.split(":", 1)[0] for site, e in setup.sensors.items()},
+        "insoles": None if setup.insoles is None else setup.insoles.split(":", 1)[0],
+        "subject_height_m": setup.subject.height_m, "model": setup.model, "steps": setup.steps,
+        "calibration": setup.calibration, "confidence": bool(options.confidence or setup.confidence),
+        "latency": options.latency, "threads": options.threads, "countdown_s": options.countdown,
+        "calibration_timeout_s": options.timeout, "record": options.record is not None,
+        "reuses_calibration": options.calibration is not None,
+    }
+
+
 class CaptureSession:
     """One capture of ``setup``'s devices. ``start()`` returns at once; ``stop()`` closes
     the devices and finalises the recording, whatever state the session is in."""
@@ -146,6 +160,11 @@ class CaptureSession:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+    def spec(self) -> dict[str, Any]:
+        """How this session was asked to run (``session_spec``): two front ends that run
+        the same capture give the same spec."""
+        return session_spec(self.setup, self.options)
 
     # ------------------------------------------------------------------ recording
     def metadata(self) -> dict[str, Any]:

@@ -159,9 +159,11 @@ class SimulatedSetup:
         """The motion played, with the monotonic time of its first frame and the activity's
         start: what ``imucap replay --truth`` scores a recording against."""
         tr = self.truth
+        sites = self.subject.setup.sites()
+        R_SB = self.signals.meta["R_SB"][[list(self.signals.sites).index(s) for s in sites]]
         return save_truth(path, tr.rot, tr.root, tr.fps, self.t0 if self.t0 is not None else 0.0,
                           float(self.signals.meta["activity_start"]), tr.body.height, tr.body.offsets,
-                          self.subject.setup.sites(), self.subject.setup.calibration)
+                          sites, self.subject.setup.calibration, R_SB=R_SB)
 
     def write_send_logs(self, path: str | Path) -> Path:
         """Per device, the wire counter and the monotonic time of every packet sent since
@@ -190,15 +192,19 @@ class SimulatedSetup:
 
 
 def save_truth(path: str | Path, rot: np.ndarray, root: np.ndarray, fps: float, t0: float, activity_start: float,
-               height: float, offsets: np.ndarray, sites: Sequence[str], protocol: str) -> Path:
+               height: float, offsets: np.ndarray, sites: Sequence[str], protocol: str,
+               R_SB: np.ndarray | None = None) -> Path:
     """Write a truth file (``read_truth``), atomically: segment orientations (T, 24, 3, 3) in
     the recording's world, the root, the session time of frame 0 (``t0``) and the time after
-    it from which the motion counts (``activity_start``: the calibration before it does not)."""
+    it from which the motion counts (``activity_start``: the calibration before it does not).
+    ``R_SB``: each site's sensor-to-bone rotation as the simulator strapped it (S, 3, 3), for
+    checking what a calibration recovered."""
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp.npz")
+    extra = {} if R_SB is None else {"R_SB": np.asarray(R_SB, np.float64)}
     np.savez_compressed(tmp, format=TRUTH_FORMAT, rot=np.asarray(rot, np.float32), root=np.asarray(root, np.float32),
                         fps=float(fps), t0=float(t0), activity_start=float(activity_start), height=float(height),
-                        offsets=np.asarray(offsets), sites=np.array(list(sites)), protocol=protocol)
+                        offsets=np.asarray(offsets), sites=np.array(list(sites)), protocol=protocol, **extra)
     tmp.replace(path)
     return path
 
@@ -212,6 +218,8 @@ class Truth:
     activity_start: float
     height: float
     offsets: np.ndarray
+    sites: tuple[str, ...] = ()
+    R_SB: np.ndarray | None = None  # (S, 3, 3) per site of ``sites``, when the simulator wrote it
 
     def frame_at(self, t: np.ndarray) -> np.ndarray:
         """Index of the truth frame at monotonic session time(s) ``t`` (clipped)."""
@@ -231,4 +239,6 @@ def read_truth(path: str | Path) -> Truth:
         if "format" not in z or str(z["format"]) != TRUTH_FORMAT:
             raise ValueError(f"{path}: not an imucap truth file (written by 'imucap devices simulate --truth')")
         return Truth(z["rot"].astype(np.float64), z["root"].astype(np.float64), float(z["fps"]), float(z["t0"]),
-                     float(z["activity_start"]), float(z["height"]), z["offsets"].astype(np.float64))
+                     float(z["activity_start"]), float(z["height"]), z["offsets"].astype(np.float64),
+                     tuple(str(s) for s in z["sites"]) if "sites" in z else (),
+                     z["R_SB"].astype(np.float64) if "R_SB" in z else None)

@@ -24,6 +24,7 @@ import time
 from collections import deque
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from app.capture.setup_file import Setup, save_setup
 
@@ -58,6 +59,12 @@ class SimulatorProcess:
         self._lines: queue.Queue[str | None] = queue.Queue()
         self._threads: list[threading.Thread] = []
         self._folder: tempfile.TemporaryDirectory[str] | None = None
+
+    def spec(self) -> dict[str, Any]:
+        """What the simulated subject does, as plain data (file arguments by name only:
+        their paths are the machine's)."""
+        return {"motion": self.motion, "activity_s": self.seconds, "seed": self.seed, "noise": self.noise,
+                "lead_in_s": self.lead_in, "options": [a for a in self.args if a.startswith("--")]}
 
     # ------------------------------------------------------------------ lifecycle
     def command(self, setup_path: str | os.PathLike) -> list[str]:

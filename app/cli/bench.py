@@ -6,7 +6,7 @@ values) measured in the same run, so the two figures share the machine's load.
     imucap bench [--json] [--frames N] [--paper-frames N] [--threads N] [--model SPEC]
                  [--steps K] [--random-weights] [--no-paper] [--mirror/--no-mirror] [--no-onnx]
     imucap bench --sizes L/D/FF[,...] [--json] [--frames N] [--model SPEC] [--no-onnx]
-    imucap bench --end-to-end [--json] [--seconds S] [--rounds R] [--model SPEC] [--suit process|thread]
+    imucap bench --end-to-end [--json] [--seconds S] [--rounds R] [--model SPEC]
 
 ``onnx_p50_ms``/``onnx_p99_ms``: the same loop with the model call through ONNX Runtime
 (when installed; what live sessions then use), right after the torch figures.
@@ -267,9 +267,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "(app/capture/end_to_end_bench.py)")
     p.add_argument("--seconds", type=float, default=10.0, help="--end-to-end: timed seconds per mode and round")
     p.add_argument("--rounds", type=int, default=2, help="--end-to-end: rounds of both modes, alternating")
-    p.add_argument("--suit", default="process", choices=("process", "thread"),
-                   help="--end-to-end: the simulated suit in its own process (as real sensors are) or as threads "
-                        "in this one (as in imucap demo)")
     p.set_defaults(func=run)
 
 
@@ -277,7 +274,7 @@ def run(args: argparse.Namespace) -> int:
     if args.end_to_end:
         from app.capture.end_to_end_bench import run_end_to_end
 
-        res = run_end_to_end(args.seconds, args.rounds, args.model, threads=args.threads, suit=args.suit)
+        res = run_end_to_end(args.seconds, args.rounds, args.model, threads=args.threads)
         print(json.dumps(res) if args.json else "\n".join(f"{k}: {v}" for k, v in res.items()))
         sys.stdout.flush()
         return 0

@@ -1,31 +1,30 @@
 """`imucap demo`: the product's main job with no hardware.
 
-A simulated suit replays a synthesized session through the real drivers and transports
-(pty, CAN, HID socket, UDP), the hub puts it on the 60 Hz grid, the session is calibrated
-from its own protocol (sensors on the table, strap on, T-pose: calibration.protocol),
-and the live poser reconstructs the body from the chosen sensors at 20 Hz.
+The demo is a capture like any other (``app.capture.demo``): a setup whose devices are
+simulated, in a process of their own, worn by a simulated subject who follows the walk
+calibration and then the activity; imucap opens their URLs through the real drivers and
+transports (pty, CAN on loopback, HID socket, UDP), calibrates with the guided steps and
+reconstructs the body at 20 Hz. The window and ``--headless`` build the very same session
+from one spec; headless, it also scores the poses against the motion the simulator played.
 
     imucap demo [--motion walk|jog|squat|lunge|jump|arm_raises|stand | --file MOTIONFILE]
-                [--sensors SITE,...] [--insoles] [--protocol xbus|bno08x-rvc|xsens-can|dualsense|mixed]
+                [--sensors SITE,...] [--insoles] [--protocol xbus|bno08x-rvc|xsens-can|dualsense|mixed|...]
                 [--seconds N] [--record FILE.h5] [--model SPEC] [--steps K] [--latency centred|low] [--headless --json]
                 [--stream lsl,vmc,vrchat [--stream-host HOST]]
 
-``--seconds N``: headless, the whole session lasts N s, calibration included (a short N
-gets a proportionally shorter protocol); with the window, the activity's length: the
-simulated subject's clip (the walk calibration's moves, then the activity) loops, and the
-calibration made once in the window's wizard holds across the loops.
+``--seconds N``: the activity after the calibration (default 20): the simulated subject's
+clip, looped. Headless, the run ends N s after the calibration took effect (the guided
+walk takes 10-15 s before it).
 
 ``--frames N`` (headless): after the N s, run on until N poses were made, for at most
 20 times the seconds, so a script that needs N poses gets them on a busy machine too.
 
 ``--headless --json`` prints one JSON object: frames, fps, latency_p50_ms/p99_ms, per-site
-packets/errors/gaps, calibration_residual_deg, ga_deg against the synthesized truth,
-model, steps (and more, see ``DemoSession.result``; with ``--stream``, what each stream sent).
-Without weights for the default model the floor baseline runs instead and the output says
-so loudly.
-
-The simulated suit runs in a process of its own (``--suit thread``: inside this one), as
-real sensors are outside imucap: its packet writing does not compete with the model.
+packets/errors/gaps (``sites``), calibration_residual_deg, calibration_error_deg (the
+recovered straps against the drawn ones), ga_deg against the simulated motion, model, steps,
+the session's ``spec`` (and more, see ``DemoRun.result``; with ``--stream``, what each stream
+sent). Without weights for the default model the floor baseline runs instead and the output
+says so loudly. The exit code is 1 when the calibration failed or ``--frames`` was not reached.
 
 ``--stream lsl,vmc,vrchat`` also sends the live body to other programs (a lab recorder,
 an avatar app, VRChat), to this machine unless ``--stream-host`` names another: see
@@ -38,16 +37,8 @@ import argparse
 import json
 import os
 import sys
-from pathlib import Path
 
-from app.demo_session import (
-    DEFAULT_SENSORS,
-    FRAMES_PATIENCE,
-    PROTOCOL_CHOICES,
-    SUIT_PLACES,
-    DemoConfig,
-    DemoSession,
-)
+from app.capture.demo import DEFAULT_SENSORS, FRAMES_PATIENCE, PROTOCOL_CHOICES, DemoConfig, DemoRun
 from app.streams import add_stream_arguments, parse_stream_spec, sinks_from_args
 
 
@@ -62,8 +53,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help=f"comma separated sites (default the paper's six: {','.join(DEFAULT_SENSORS)})")
     p.add_argument("--insoles", action="store_true", help="add pressure insoles (contacts)")
     p.add_argument("--protocol", default="xbus", choices=PROTOCOL_CHOICES, help="wire protocol of the sensors")
-    p.add_argument("--seconds", type=float, default=None,
-                   help="headless: session length incl. calibration (default 20); window: clip length (default 60)")
+    p.add_argument("--seconds", type=float, default=20.0,
+                   help="the activity after the calibration, in s (default 20; the clip loops in the window)")
     p.add_argument("--frames", type=int, default=0,
                    help="headless: after --seconds, run on until this many poses were made (a busy machine makes "
                         "fewer a second), for at most 20x --seconds; exit 1 if they were not reached")
@@ -81,9 +72,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "it, larger where the model guessed; coloured in the window, in the recording, on LSL "
                         "(docs/confidence.md); costs ~40 %% more per frame")
     add_stream_arguments(p)
-    p.add_argument("--suit", default="process", choices=SUIT_PLACES,
-                   help="where the simulated suit runs: its own process, as real sensors are outside imucap "
-                        "(default), or threads of this one (--headless only)")
     p.add_argument("--headless", action="store_true", help="no window")
     p.add_argument("--json", action="store_true", help="headless: print one JSON object")
     p.add_argument("--screenshot", help="with the window: save it to this PNG after --quit-after seconds")
@@ -95,32 +83,27 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def config_from_args(args: argparse.Namespace) -> DemoConfig:
     from inference.body.skeleton import parse_sites
-    from sim_devices.motions import KINDS
 
-    if args.file is None and args.motion not in KINDS:
-        raise ValueError(f"unknown motion {args.motion!r}; known: {', '.join(KINDS)}")
-    if args.file is not None and not Path(args.file).exists():
-        raise FileNotFoundError(f"motion file {args.file} not found")
-    seconds = args.seconds if args.seconds is not None else (20.0 if args.headless else 60.0)
     parse_stream_spec(args.stream)  # a bad --stream fails here; the sinks open when the session starts
     return DemoConfig(
         motion=args.motion, file=args.file, sensors=tuple(parse_sites(args.sensors)), insoles=args.insoles,
-        protocol=args.protocol, seconds=seconds, model=args.model, steps=args.steps, seed=args.seed,
+        protocol=args.protocol, seconds=args.seconds, model=args.model, steps=args.steps, seed=args.seed,
         record=args.record, noise=not args.no_noise, headless=args.headless, threads=args.threads,
-        latency=args.latency, confidence=args.confidence, suit=args.suit, frames=args.frames,
+        latency=args.latency, confidence=args.confidence, frames=args.frames,
     )
 
 
 def run(args: argparse.Namespace) -> int:
+    from app.capture.demo import check_config
+
     if args.json and not args.headless:
         raise ValueError("--json needs --headless")
     if args.frames and not args.headless:
         raise ValueError("--frames needs --headless")
-    if args.suit != "process" and not args.headless:
-        raise ValueError("--suit thread needs --headless: the window's simulated devices run in a process of their own")
     if args.frames < 0:
         raise ValueError("--frames must be positive")
     cfg = config_from_args(args)
+    check_config(cfg)
     if not cfg.headless:
         if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY") or os.environ.get("QT_QPA_PLATFORM")):
             # Qt would abort the process with a page about platform plugins; say what to do instead
@@ -133,38 +116,40 @@ def run(args: argparse.Namespace) -> int:
         return run_gui(cfg)
     cfg.streams = sinks_from_args(args)
     try:
-        session = DemoSession(cfg)
+        demo = DemoRun(cfg)
     except BaseException:
         for s in cfg.streams:
             s.close()
         raise
-    if session.warning:
-        print(session.warning, file=sys.stderr)
+    if demo.warning:
+        print(demo.warning, file=sys.stderr)
     if not args.json:
         print(f"imucap demo: {cfg.motion if not cfg.file else cfg.file}, sensors {','.join(cfg.sensors)}"
-              f"{' + insoles' if cfg.insoles else ''} over {cfg.protocol}, model {session.model_label}, "
-              f"{cfg.seconds:g} s", file=sys.stderr)
+              f"{' + insoles' if cfg.insoles else ''} over {cfg.protocol}, model {demo.model_label}, "
+              f"{cfg.seconds:g} s after the walk calibration", file=sys.stderr)
     try:
-        session.start()
-        reached = session.run_for(cfg.seconds, cfg.frames)
+        demo.start()
+        reached = demo.run_for(cfg.seconds, cfg.frames)
     finally:
-        session.stop()
-    res = session.result()
-    if not reached:
+        demo.stop()
+    res = demo.result()
+    if not res["calibrated"]:
+        print(f"imucap demo: the calibration did not finish: {res['calibration_status']}", file=sys.stderr)
+    elif not reached:
         print(f"imucap demo: {res['frames']} of the {cfg.frames} poses asked were made in "
               f"{FRAMES_PATIENCE * cfg.seconds:g} s: the machine is too busy", file=sys.stderr)
     if args.json:
-        print(json.dumps(res))
+        print(json.dumps(res, default=str))
     else:
         for k, v in res.items():
-            if k != "sites":
+            if k not in ("sites", "events", "spec"):
                 print(f"{k}: {v}")
         for site, st in res["sites"].items():
             print(f"  {site}: {st}")
-        if session.warning:
-            print(session.warning)
+        if demo.warning:
+            print(demo.warning)
     sys.stdout.flush()
-    return 0 if reached else 1
+    return 0 if reached and res["calibrated"] else 1
 
 
 __all__ = ["register", "run"]

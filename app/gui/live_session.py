@@ -94,6 +94,12 @@ class LiveSession:
         if live.max_lag != want:
             live.max_lag = want
 
+    def spec(self) -> dict[str, Any]:
+        """How the capture and its simulator (if any) were asked to run: the headless demo's
+        ``DemoSpec.describe()`` for the window's demo."""
+        sim = self.simulation
+        return {"session": self.session.spec(), "simulator": sim.spec() if hasattr(sim, "spec") else None}
+
     def stop(self) -> Path | None:
         path = self.record_path if self.session.recorder is not None else None
         try:

@@ -7,32 +7,20 @@ what a real capture does: the calibration wizard, the live view, recording, repl
 
 from __future__ import annotations
 
-from pathlib import Path
-
-from app.capture.session import CaptureOptions
-from app.demo_session import DemoConfig
+from app.capture.demo import DemoConfig, demo_spec
 from app.gui.main import MainWindow, run_window
 
 
 def start_demo(win: MainWindow, cfg: DemoConfig) -> None:
-    """Show the demo suit's setup and start it: model, simulated devices, capture."""
-    from app.capture.twins import simulated_setup
-
-    setup = simulated_setup(tuple(cfg.sensors), cfg.protocol, cfg.insoles, model=cfg.model, steps=cfg.steps,
-                            recordings=Path("recordings").resolve())
-    win.model.load(setup)
-    for url in setup.urls().values():
+    """Show the demo's setup and start its capture: the same spec as the headless demo
+    (``app.capture.demo.demo_spec``), run by the window's live session."""
+    spec = demo_spec(cfg)
+    win.model.load(spec.setup)
+    for url in spec.setup.urls().values():
         win.model.add_device(url, f"simulated {cfg.protocol}", "simulated")
-    options = CaptureOptions(record=Path(cfg.record) if cfg.record else None, sinks=list(cfg.streams),
-                             threads=cfg.threads, latency=cfg.latency, confidence=cfg.confidence)
-
-    def make_simulation():
-        from app.gui.simulated import start_simulation
-
-        return start_simulation(setup, cfg.file or cfg.motion, seconds=cfg.seconds, seed=cfg.seed, noise=cfg.noise)
-
     win.tabs.setCurrentIndex(2)  # the calibration wizard first, then the live view by itself
-    win._start(setup, None, None, options=options, make_simulation=make_simulation)
+    # the simulator starts on the worker that builds the session (synthesis takes seconds)
+    win._start(spec.setup, None, None, options=spec.options, make_simulation=spec.simulator.start)
 
 
 def run_gui(cfg: DemoConfig) -> int:

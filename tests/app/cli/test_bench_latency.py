@@ -17,13 +17,11 @@ MODE_KEYS = ("p50_ms", "p99_ms", "age_p50_ms", "age_p99_ms", "model_p50_ms", "po
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("suit", ["thread", "process"])
-def test_end_to_end_json_has_both_modes_from_one_run(capsys, suit):
-    code = main(["bench", "--end-to-end", "--json", "--seconds", "1.5", "--rounds", "1", "--threads", "1",
-                 "--suit", suit])
+def test_end_to_end_json_has_both_modes_from_one_run(capsys):
+    code = main(["bench", "--end-to-end", "--json", "--seconds", "1.5", "--rounds", "1", "--threads", "1"])
     assert code == 0
     res = json.loads(capsys.readouterr().out)
-    assert res["suit"] == suit
+    assert res["suit"] == "process"  # the demo's devices, in their own process
     for mode in ("centred", "low"):
         for k in MODE_KEYS:
             assert f"{mode}_{k}" in res
@@ -35,21 +33,21 @@ def test_end_to_end_json_has_both_modes_from_one_run(capsys, suit):
         p50, p99 = res[f"{mode}_p50_ms"], res[f"{mode}_p99_ms"]
         assert (p50 is None) == (res[f"{mode}_poses"] == 0)
         assert p50 is None or (0 < p50 <= p99)  # ordered and positive, whatever the load
-    if suit == "process":  # the send logs crossed the process boundary and matched
-        assert res["centred_poses"] > 0 and res["low_poses"] > 0
+    # the send logs crossed the process boundary and matched
+    assert res["centred_poses"] > 0 and res["low_poses"] > 0
 
 
 def test_end_to_end_rounds_alternate_the_modes(monkeypatch):
     order = []
 
-    def fake(mode, seconds, model, protocol, **kw):
+    def fake(mode, seconds, model, **kw):
         order.append(mode)
         return {"mode": mode, "e2e_ms": [10.0, 20.0] if mode == "low" else [80.0], "age_ms": [12.0],
                 "model_ms": [5.0], "poses": 3, "timed": 2, "unmatched": 0, "dropped": 0, "hub_frames_skipped": 0,
                 "hub_wait_ms": 10.0, "acc_filter": "causal", "model": "m", "runtime": "torch", "warning": None}
 
     monkeypatch.setattr(e2e, "measure_mode", fake)
-    res = e2e.run_end_to_end(seconds=1.0, rounds=3, suit="thread")
+    res = e2e.run_end_to_end(seconds=1.0, rounds=3)
     assert order == ["centred", "low"] * 3
     assert res["low_p50_ms"] == 15.0 and res["centred_p50_ms"] == 80.0 and res["low_poses"] == 6
 

@@ -1,6 +1,7 @@
-"""`imucap demo --headless --json`: the contract (DESIGN.md), a few seconds of a simulated
-suit through the real drivers, hub, calibration and poser. A tiny random model stands in
-for the shipped weights so the test does not depend on training."""
+"""`imucap demo --headless --json`: the contract (DESIGN.md), a capture of simulated devices
+in their own process through the real drivers, hub, guided calibration and poser, scored
+against the motion the simulator played. A tiny random model stands in for the shipped
+weights so the test does not depend on training."""
 
 from __future__ import annotations
 
@@ -10,8 +11,8 @@ import numpy as np
 import pytest
 import torch
 
+from app.capture.demo import DemoConfig, DemoRun, demo_spec
 from app.cli.main import main
-from app.demo_session import assignment_for
 from app.recording import read_recording
 from inference.features.layout import N_FEATURES
 from inference.model.config import ModelConfig
@@ -28,14 +29,6 @@ def tiny_model(tmp_path_factory):
     return path
 
 
-def test_the_suit_can_run_inside_the_demo_process_too(tiny_model, capsys):
-    rc = main(["demo", "--headless", "--json", "--seconds", "5", "--frames", "11", "--model", str(tiny_model),
-               "--threads", "1", "--sensors", "pelvis,r_shank", "--protocol", "mixed", "--suit", "thread"])
-    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
-    assert rc == 0 and out["suit"] == "thread" and out["calibration_status"] == "calibrated"
-    assert out["frames"] > 10 and all(st["packets"] > 100 for st in out["sites"].values())
-
-
 def test_headless_json_contract(tiny_model, tmp_path, capsys):
     rec = tmp_path / "demo.h5"
     # a frame budget, not the clock: a busy machine makes fewer poses in the 6 s, and the demo runs on for them
@@ -48,16 +41,19 @@ def test_headless_json_contract(tiny_model, tmp_path, capsys):
         assert key in out, key
     assert out["frames"] >= 30 and out["steps"] == 3 and out["model"].startswith("diffusion 1/32/64")
     assert out["calibration_status"] == "calibrated"
-    assert out["suit"] == "process"  # the simulated devices in a child process, as real ones are outside
+    assert out["suit"] == "process" and out["calibrated"]  # the simulated devices in a child process
+    assert out["spec"]["session"]["calibration"] == "walk"  # the guided steps, as with real sensors
     assert out["calibration_residual_deg"] < 2.0
-    assert out["calibration_error_deg"] < 2.0  # recovered strap rotations vs the drawn ones, through 3 drivers
+    # recovered strap rotations vs the drawn ones, through 3 drivers: the guided walk finds each
+    # sensor's heading from its swing (tests/calibration/test_walk.py holds segments to 3 deg)
+    assert out["calibration_error_deg"] < 5.0
     assert out["ga_deg"] is not None and np.isfinite(out["ga_deg"])
     assert out["latency_p99_ms"] >= out["latency_p50_ms"] > 0
     assert set(out["sites"]) == {"pelvis", "l_wrist", "r_shank"}
     for site, st in out["sites"].items():
         assert st["packets"] > 100 and st["errors"] >= 0 and st["gaps"] >= 0, site
-    assert [out["sites"][s]["protocol"] for s in ("pelvis", "l_wrist", "r_shank")] == ["xbus", "xsens-can",
-                                                                                      "bno08x-rvc"]
+    assert [out["sites"][s]["protocol"] for s in ("pelvis", "l_wrist", "r_shank")] == ["xbus", "bno08x-rvc",
+                                                                                      "xsens-can"]
     r = read_recording(rec)
     assert r.metadata["steps"] == 3 and r.metadata["sensors"] == ["pelvis", "l_wrist", "r_shank"]
     assert r.metadata["mirror"] is False  # the tiny file says nothing; replays need to know
@@ -69,16 +65,33 @@ def test_headless_json_contract(tiny_model, tmp_path, capsys):
     assert r.n_frames > 200
 
 
-def test_assignment_and_bad_arguments(capsys):
-    a = assignment_for(("pelvis", "head", "l_wrist", "r_wrist", "l_foot"), "mixed", True)
-    assert a == {"pelvis": "xbus", "head": "xsens-can", "l_wrist": "bno08x-rvc", "r_wrist": "dualsense",
-                 "l_foot": "xbus", "insoles": "moticon-udp"}
+def test_bad_arguments_are_one_line_errors(capsys):
     assert main(["demo", "--headless", "--json", "--sensors", "pelvis,elbow"]) == 2
     assert "unknown sensor site" in capsys.readouterr().err
     assert main(["demo", "--headless", "--motion", "moonwalk"]) == 2
-    capsys.readouterr()
-    assert main(["demo", "--suit", "thread"]) == 2  # the window's devices always run in their own process
-    assert "--suit thread needs --headless" in capsys.readouterr().err
+    assert "unknown motion" in capsys.readouterr().err
+    assert main(["demo", "--headless", "--seconds", "0"]) == 2
+    assert "--seconds must be positive" in capsys.readouterr().err
+
+
+def test_both_front_ends_build_the_demo_from_one_spec(tmp_path):
+    """The window's demo and the headless one are one capture: the same setup (sites,
+    protocols, subject, model, the walk calibration), the same options (latency,
+    confidence, threads, countdown) and the same simulated subject. The window runs
+    ``demo_spec``'s session (tests/app/gui/test_main_window.py compares what it ran)."""
+    cfg = DemoConfig(sensors=("pelvis", "l_wrist", "r_shank"), protocol="mixed", insoles=True, latency="low",
+                     confidence=True, seconds=12.0, seed=3)
+    a = demo_spec(cfg, folder=tmp_path / "a")
+    b = demo_spec(DemoConfig(**{**cfg.__dict__, "headless": False}), folder=tmp_path / "b")
+    assert a.describe() == b.describe()
+    d = a.describe()
+    assert d["session"]["sensors"] == {"pelvis": "xbus", "l_wrist": "bno08x-rvc", "r_shank": "xsens-can"}
+    assert d["session"]["insoles"] == "moticon-udp" and d["session"]["calibration"] == "walk"
+    assert d["session"]["latency"] == "low" and d["session"]["confidence"] is True
+    assert d["simulator"] == {"motion": "walk", "activity_s": 12.0, "seed": 3, "noise": True, "lead_in_s": 4.0,
+                              "options": ["--truth"]}
+    # the devices are not the same: each build has its own files and ports
+    assert a.setup.urls()["pelvis"] != b.setup.urls()["pelvis"]
 
 
 def test_headless_demo_with_confidence(tiny_model, tmp_path, capsys):
@@ -99,17 +112,15 @@ def test_headless_demo_with_confidence(tiny_model, tmp_path, capsys):
 
 
 def test_a_frame_budget_the_machine_cannot_meet_fails_loudly(tiny_model, capsys):
-    from app.demo_session import DemoConfig, DemoSession
-
-    # the wait is a parameter of run_for, so the refusal is checked without 80 s of waiting
-    session = DemoSession(DemoConfig(seconds=4.0, headless=True, model=str(tiny_model), sensors=("pelvis",),
-                                     threads=1, suit="thread"))
+    # the wait is a parameter of run_for, so the refusal is checked without minutes of waiting
+    demo = DemoRun(DemoConfig(seconds=2.0, model=str(tiny_model), sensors=("pelvis", "r_shank"), threads=1))
     try:
-        session.start()
-        assert session.run_for(4.0, poses=100_000, timeout=6.0) is False
-        assert session.session_time() >= 4.0 and 0 < session.pipeline.stats.poses < 100_000
+        demo.start()
+        assert demo.run_for(2.0, poses=100_000, timeout=4.0) is False
+        assert demo.session.calibration is not None and 0 < demo.session.watch.poses < 100_000
     finally:
-        session.stop()
+        demo.stop()
+    assert not demo.spec.simulator.running
     capsys.readouterr()
     assert main(["demo", "--frames", "10"]) == 2
     assert "--frames needs --headless" in capsys.readouterr().err

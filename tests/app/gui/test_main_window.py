@@ -27,7 +27,7 @@ pytest.importorskip("OpenGL")
 
 from PySide6 import QtCore  # noqa: E402
 
-from app.demo_session import DemoConfig  # noqa: E402
+from app.capture.demo import DemoConfig, demo_spec  # noqa: E402
 from app.recording import read_recording  # noqa: E402
 from tests.app.gui.helpers import grab_view, shown_window, skeleton_pixels, wait, window_state  # noqa: E402
 
@@ -39,9 +39,13 @@ def test_demo_window(qtbot, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # the demo records into ./recordings
     win = shown_window(qtbot, tmp_path)
     try:
-        start_demo(win, DemoConfig(motion="walk", protocol="xbus", seconds=40.0, headless=False, threads=1))
+        cfg = DemoConfig(motion="walk", protocol="xbus", seconds=40.0, headless=False, threads=1)
+        start_demo(win, cfg)
         state = lambda: window_state(win)  # noqa: E731
         wait(qtbot, lambda: win.session is not None, 120, "the demo session to start", state)
+        # the window ran the headless demo's session: the same spec (imucap demo --headless builds it so)
+        assert win.session.spec() == demo_spec(DemoConfig(**{**cfg.__dict__, "headless": True}),
+                                               folder=tmp_path / "headless").describe()
         assert win.tabs.currentWidget() is win.calibration_panel
         wait(qtbot, lambda: win.session.calibrated, 120, "the wizard to calibrate", state)
         wait(qtbot, lambda: win.tabs.currentWidget() is win.live_panel, 5, "the live tab after calibrating")
