@@ -9,6 +9,8 @@
 - ``moticon-udp://127.0.0.1:9999?weight_kg=75``
 - ``movella-dot://D4:22:CD:00:01:27`` (bleak; ``?ble=DIR`` a simulated DOT's socket folder)
 - ``ximu3://udp/8000?ip=...&send_port=9000``, ``ximu3://tcp/HOST:PORT``, ``ximu3://serial/PATH``
+- ``vmc-in://127.0.0.1:39540?head=SERIAL&l_hand=SERIAL&r_hand=SERIAL`` (VR devices as VMC
+  protocol device messages; one device, several sites: ``drivers/vmc/device.py``)
 
 Every URL accepts ``id=<name>`` (the device id samples carry) and
 ``reconnect=0`` to turn the automatic reconnect off.
@@ -21,7 +23,7 @@ from typing import Any
 from .base import CounterTracker, Device, DeviceEvent, DeviceGone, DeviceStats, Sample, Unwrapper
 from .urls import DeviceURL, build_url, parse_url
 
-SCHEMES = ("xbus", "bno08x-rvc", "xsens-can", "dualsense", "moticon-udp", "movella-dot", "ximu3")
+SCHEMES = ("xbus", "bno08x-rvc", "xsens-can", "dualsense", "moticon-udp", "movella-dot", "ximu3", "vmc-in")
 
 
 def make_device(url: str, **kw: Any) -> Device:
@@ -80,6 +82,10 @@ def make_device(url: str, **kw: Any) -> Device:
         from .ximu3.driver import Ximu3Device
 
         return Ximu3Device.from_url(u.netloc, u.path, u.params, **common)
+    if u.scheme == "vmc-in":
+        from .vmc.device import VmcInDevice
+
+        return VmcInDevice.from_url(u.netloc, u.params, **common)
     raise ValueError(f"unknown device scheme {u.scheme!r} (known: {', '.join(SCHEMES)})")
 
 
