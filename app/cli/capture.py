@@ -207,6 +207,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_stream_arguments(p)
     p.add_argument("--screenshot", help="with a window: save it to this PNG after --quit-after seconds")
     p.add_argument("--quit-after", type=float, default=0.0)
+    p.add_argument("--window-stats", metavar="FILE.json", default=None,
+                   help="with --quit-after: write what the window itself cost (GUI thread CPU, draws/s, draw and "
+                        "status times, timer lag; app/gui/gui_cost.py)")
     p.add_argument("--view", choices=("desk", "outdoor"), default="desk",
                    help="with a window: outdoor = large numbers on black for a runner glancing from a distance")
     p.set_defaults(func=run)

@@ -21,6 +21,7 @@ from app.capture.session import CaptureOptions, CaptureSession, SessionEvent
 from app.capture.setup_file import Setup, SetupError, Subject
 from app.gui.calibration_panel import CalibrationPanel
 from app.gui.devices_panel import DevicesPanel
+from app.gui.gui_cost import GuiCost
 from app.gui.live_panel import LivePanel
 from app.gui.live_session import LiveSession
 from app.gui.outdoor_view import OutdoorView
@@ -112,6 +113,7 @@ class MainWindow(QtWidgets.QMainWindow):
         QtGui.QShortcut(QtGui.QKeySequence("Space"), self, activated=self._space_key)
 
         # --- timers
+        self.cost = GuiCost()  # what the window itself takes (--window-stats)
         self.loop_lag = 0.0  # how late the view timer arrives, smoothed (s)
         self._draw_tick = self._drawn_at = time.monotonic()
         self._slow_ticks = 0
@@ -411,12 +413,14 @@ class MainWindow(QtWidgets.QMainWindow):
         late = max(now - self._draw_tick - self.view_timer.interval() / 1000.0, 0.0)
         self._draw_tick = now
         self.loop_lag = 0.8 * self.loop_lag + 0.2 * late
+        self.cost.lag_ms.append(late * 1e3)
         if now - self._drawn_at < min(MAX_DRAW_GAP_S, 4.0 * self.loop_lag):
             return
         live = self.session
         panel = self.outdoor if self.tabs.currentWidget() is self.outdoor else self.live_panel
         if live is not None and live.body is not None and panel.show_pose(live.latest(), live.body):
             self._drawn_at = now
+            self.cost.draw_ms.append((time.monotonic() - now) * 1e3)
 
     def _status(self) -> None:
         """10 Hz: events (devices lost and back first: they are the alarms) and the
@@ -424,6 +428,13 @@ class MainWindow(QtWidgets.QMainWindow):
         live = self.session
         if live is None:
             return
+        t0 = time.monotonic()
+        try:
+            self._status_now(live)
+        finally:
+            self.cost.status_ms.append((time.monotonic() - t0) * 1e3)
+
+    def _status_now(self, live: LiveSession) -> None:
         for ev in live.poll():
             self._event(ev)
         err = live.error
@@ -533,6 +544,11 @@ def run_window(setup_window, args: Any = None) -> int:
     quit_after = float(getattr(args, "quit_after", 0) or 0)
     if quit_after:
         def finish() -> None:
+            stats = getattr(args, "window_stats", None)
+            if stats:
+                shown = win.outdoor.frames_shown + win.live_panel.frames_shown
+                live = win.session
+                win.cost.write(stats, shown, {"pipeline": live.perf() if live is not None else None})
             shot = getattr(args, "screenshot", None)
             if shot:
                 Path(shot).parent.mkdir(parents=True, exist_ok=True)

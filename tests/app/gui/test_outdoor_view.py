@@ -11,6 +11,7 @@ Run under Xvfb: ``xvfb-run -a .venv/bin/pytest -m gui tests/app/gui/test_outdoor
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -100,9 +101,16 @@ def test_numbers_bars_and_record_button(qtbot):
 @pytest.mark.slow
 def test_demo_opens_on_the_outdoor_view(tmp_path):
     shot = Path(os.environ.get("IMUCAP_SCREENSHOT", tmp_path / "outdoor.png")).resolve()
+    stats = tmp_path / "window.json"
     out = subprocess.run([*CLI, "demo", "--view", "outdoor", "--seconds", "60", "--screenshot", str(shot),
-                          "--quit-after", "45"], cwd=tmp_path, capture_output=True, text=True, timeout=240)
+                          "--quit-after", "45", "--window-stats", str(stats)], cwd=tmp_path, capture_output=True,
+                         text=True, timeout=240)
     assert out.returncode == 0, out.stderr[-2000:]
+    # what the window itself cost, as benchmarks/window_live.py reads it
+    cost = json.loads(stats.read_text())
+    assert cost["frames_shown"] > 20 and cost["draws_per_s"] > 0 and cost["draw_p50_ms"] > 0
+    assert 0 < cost["gui_thread_cores"] <= cost["process_cores"] and cost["wall_s"] >= 45
+    assert cost["pipeline"]["frames"] > 0
     from PySide6 import QtGui
 
     rgb = image_array(QtGui.QImage(str(shot)))
