@@ -26,6 +26,14 @@ class GuiCost:
     draw_ms: deque[float] = field(default_factory=lambda: deque(maxlen=20_000))
     status_ms: deque[float] = field(default_factory=lambda: deque(maxlen=20_000))
     lag_ms: deque[float] = field(default_factory=lambda: deque(maxlen=20_000))
+    first_draw: float | None = None
+    last_draw: float | None = None
+
+    def drew(self, t: float, ms: float) -> None:
+        self.draw_ms.append(ms)
+        if self.first_draw is None:
+            self.first_draw = t
+        self.last_draw = t
 
     def summary(self, frames_shown: int) -> dict[str, Any]:
         """Call on the GUI thread (its CPU time is read there)."""
@@ -34,8 +42,12 @@ class GuiCost:
         def pct(values: deque[float], q: float) -> float | None:
             return round(float(np.percentile(values, q)), 2) if values else None
 
+        # the rate while the live view was drawing (not over the start-up and the calibration)
+        span = (self.last_draw - self.first_draw) if self.first_draw is not None and self.last_draw else 0.0
+        n = len(self.draw_ms)
         return {
-            "wall_s": round(wall, 2), "frames_shown": frames_shown, "draws_per_s": round(frames_shown / wall, 2),
+            "wall_s": round(wall, 2), "frames_shown": frames_shown,
+            "draws_per_s": round((n - 1) / span, 2) if n > 1 and span > 0 else None,
             "gui_thread_cores": round((time.thread_time() - self.thread0) / wall, 3),
             "process_cores": round((time.process_time() - self.process0) / wall, 3),
             "draw_p50_ms": pct(self.draw_ms, 50), "draw_p99_ms": pct(self.draw_ms, 99),

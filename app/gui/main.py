@@ -420,7 +420,7 @@ class MainWindow(QtWidgets.QMainWindow):
         panel = self.outdoor if self.tabs.currentWidget() is self.outdoor else self.live_panel
         if live is not None and live.body is not None and panel.show_pose(live.latest(), live.body):
             self._drawn_at = now
-            self.cost.draw_ms.append((time.monotonic() - now) * 1e3)
+            self.cost.drew(now, (time.monotonic() - now) * 1e3)
 
     def _status(self) -> None:
         """10 Hz: events (devices lost and back first: they are the alarms) and the

@@ -31,6 +31,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from pythonosc.osc_bundle import OscBundle
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message import OscMessage
 from pythonosc.osc_message_builder import OscMessageBuilder
@@ -137,8 +138,8 @@ class DevicePose:
     quat: np.ndarray
 
 
-def encode_frame(poses: Iterable[DevicePose], sender_time: float | None = None, *, local: bool = False,
-                 ok: bool = True) -> bytes:
+def frame_bundle(poses: Iterable[DevicePose], sender_time: float | None = None, *, local: bool = False,
+                 ok: bool = True) -> OscBundle:
     """One OSC bundle as a bridge sends it per frame: ``/VMC/Ext/T`` (when ``sender_time``
     is given), a device message per pose, ``/VMC/Ext/OK 1``."""
     b = OscBundleBuilder(IMMEDIATELY)
@@ -152,7 +153,13 @@ def encode_frame(poses: Iterable[DevicePose], sender_time: float | None = None, 
         m = OscMessageBuilder(address=OK_ADDRESS)
         m.add_arg(1, OscMessageBuilder.ARG_TYPE_INT)
         b.add_content(m.build())
-    return b.build().dgram
+    return b.build()
+
+
+def encode_frame(poses: Iterable[DevicePose], sender_time: float | None = None, *, local: bool = False,
+                 ok: bool = True) -> bytes:
+    """``frame_bundle`` as a datagram."""
+    return frame_bundle(poses, sender_time, local=local, ok=ok).dgram
 
 
 # --- decode ---------------------------------------------------------------------------------------------
