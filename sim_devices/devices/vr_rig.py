@@ -1,0 +1,214 @@
+"""A simulated VR rig: headset, two hand controllers and (optionally) a waist tracker that a
+VR-to-VMC bridge would report from SteamVR, sent as VMC protocol device messages (OSC
+bundles over UDP, python-osc's client) to a ``vmc-in://`` receiver on loopback.
+
+In its own process: ``python -m sim_devices.vr_rig_process`` (``sim_devices/vr_rig_process.py``:
+that module picks the motion, which a module of ``sim_devices.devices`` may not, as
+``sim_devices.motions`` sits above the devices).
+
+Where the points sit on the body (``tracked_points``), fractions of body height H so a
+smaller body carries them where a smaller person would:
+- headset: the midpoint between the eyes, where OpenVR puts an HMD's pose; 0.05 H ahead
+  of and 0.07 H above the head joint, which puts it at 0.936 H standing, the eye height
+  of Drillis & Contini (1966), the table ``inference.body.body`` takes its ratios from.
+  Orientation: the head segment's.
+- controllers (the grip offset): the grip pose's origin inside the fist, 0.6 of the way
+  from the wrist to the knuckles along the hand bone and 0.02 H (3.5 cm at 1.75 m) to the
+  palm side; orientation the hand segment's turned by ``GRIP_PITCH_DEG`` = 30 deg about the
+  hand's lateral axis (our Y in the T-pose), an assumed tilt of a handle in the fist. Both
+  are what calibration must find for a real controller (docs/vr_input.md).
+- waist tracker: the pelvis sensor site (the sacrum, ``Body.site_offsets``), the pelvis
+  orientation.
+
+Tracking error and latency (``TrackingNoise``), consumer SteamVR / Quest class:
+- position: white jitter of 1 mm per axis plus a slow wander of 2 mm per axis
+  (first-order Gauss-Markov, 2 s correlation time): together about 3.9 mm RMS in 3D. Jost
+  et al. 2019 (J. Biomech. 97:109379, HTC Vive controllers against a robot and an optical
+  reference) found 0.6-0.7 mm for robot-driven translations and 3.97 +- 3.37 mm during human
+  movement.
+- orientation: white jitter of 0.3 deg per axis (about 0.5 deg RMS); the same study found
+  0.46-0.66 deg mean error in rotated angle.
+- latency 15 ms, the pose sent at t being the body's at t - 15 ms. Warburton et al. 2022
+  (Behav. Res. Methods 55:3658, motion-to-photon of Vive, Rift, Rift S, Index controllers)
+  measured 21-42 ms at the onset of a movement, falling to 2-13 ms once the runtime's
+  prediction has caught up; 15 ms sits between.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from pythonosc.udp_client import UDPClient
+
+from drivers.urls import build_url
+from drivers.vmc import protocol as vmc
+from drivers.vmc.device import DEFAULT_PORT
+from inference.body.motion import Motion
+from inference.body.rotations import axis_angle_to_matrix, matrix_to_quat, quat_exp, quat_multiply
+from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX
+
+from .base import DeviceFaults, SimDevice
+from .can_loopback import is_loopback
+
+HMD_OFFSET_H = (0.05, 0.0, 0.07)  # head segment frame, x body height: between the eyes
+GRIP_ALONG = 0.6  # of the wrist -> knuckles bone
+GRIP_PALM_H = 0.02  # x body height, to the palm side (-Z of the hand in the T-pose)
+GRIP_PITCH_DEG = 30.0
+EYE_HEIGHT_RATIO = 0.936  # Drillis & Contini: eye height / body height; headset height -> H
+
+ROLES: dict[str, str] = {"head": "hmd", "l_hand": "con", "r_hand": "con", "pelvis": "tra"}
+DEFAULT_SERIALS: dict[str, str] = {"head": "SIM-HMD", "l_hand": "SIM-CON-L", "r_hand": "SIM-CON-R",
+                                   "pelvis": "SIM-TRK-WAIST"}
+DEFAULT_SITES: tuple[str, ...] = ("head", "l_hand", "r_hand")
+
+
+@dataclass(frozen=True)
+class TrackingNoise:
+    """Tracking error and latency of a consumer headset (module docstring for the sources)."""
+
+    jitter_m: float = 0.001  # white, per axis
+    wander_m: float = 0.002  # Gauss-Markov, per axis
+    wander_tau_s: float = 2.0
+    jitter_deg: float = 0.3  # white, per axis
+    latency_s: float = 0.015
+
+    @property
+    def position_rms_3d_m(self) -> float:
+        return math.sqrt(3.0 * (self.jitter_m ** 2 + self.wander_m ** 2))
+
+
+NO_NOISE = TrackingNoise(0.0, 0.0, 2.0, 0.0, 0.0)
+
+
+def grip_rotation(pitch_deg: float = GRIP_PITCH_DEG) -> np.ndarray:
+    """Controller frame in the hand segment's frame: a turn about the hand's lateral axis."""
+    return axis_angle_to_matrix(np.array([0.0, math.radians(pitch_deg), 0.0]))
+
+
+def tracked_points(motion: Motion, sites: tuple[str, ...] = DEFAULT_SITES) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per site, the device's position (T, 3) and orientation (T, 4, w x y z) over the motion."""
+    J = motion.joints()
+    Rm = motion.rot
+    body = motion.body
+    H = float(body.height)
+    out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for site in sites:
+        if site == "head":
+            k = SEGMENT_INDEX["head"]
+            p = J[:, k] + Rm[:, k] @ (np.array(HMD_OFFSET_H) * H)
+            Rd = Rm[:, k]
+        elif site in ("l_hand", "r_hand"):
+            k = SEGMENT_INDEX[site]
+            knuckles = body.offsets[SEGMENT_INDEX[site[0] + "_fingers"]]
+            local = GRIP_ALONG * knuckles + np.array([0.0, 0.0, -GRIP_PALM_H * H])
+            p = J[:, k] + Rm[:, k] @ local
+            Rd = Rm[:, k] @ grip_rotation()
+        elif site == "pelvis":
+            p = motion.sites(J)[:, SITE_INDEX["pelvis"]]
+            Rd = Rm[:, SEGMENT_INDEX["pelvis"]]
+        else:
+            raise ValueError(f"no VR device for site {site!r} (known: {', '.join(ROLES)})")
+        q = matrix_to_quat(Rd)
+        d = np.sum(q[1:] * q[:-1], axis=-1)  # a continuous sign, so interpolation never crosses the double cover
+        q[1:] *= np.cumprod(np.where(d < 0, -1.0, 1.0))[:, None]
+        out[site] = (np.ascontiguousarray(p), q)
+    return out
+
+
+class TrackedSource:
+    """The devices' clean poses as functions of time, looping over the clip (linear for
+    positions, normalised linear for quaternions between frames a few ms apart)."""
+
+    def __init__(self, motion: Motion, sites: tuple[str, ...] = DEFAULT_SITES) -> None:
+        self.sites = tuple(sites)
+        self.fps = float(motion.fps)
+        self.points = tracked_points(motion, self.sites)
+        self.n = motion.n_frames
+        self.duration = self.n / self.fps
+        self.height = float(motion.body.height)
+
+    def at(self, t: float) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        x = (t % self.duration) * self.fps
+        i0 = int(x) % self.n
+        i1 = min(i0 + 1, self.n - 1)
+        w = x - int(x)
+        out = {}
+        for site, (P, Q) in self.points.items():
+            q = (1 - w) * Q[i0] + w * Q[i1]
+            out[site] = ((1 - w) * P[i0] + w * P[i1], q / np.linalg.norm(q))
+        return out
+
+
+class _Datagram:
+    """Bytes where python-osc's client wants a bundle (only ``dgram`` is read): a corrupted one."""
+
+    def __init__(self, dgram: bytes) -> None:
+        self.dgram = dgram
+
+
+class SimVrRig(SimDevice):
+    """The rig as one device thread: every 1/rate s one bundle with ``/VMC/Ext/T`` (device
+    time, s), one device message per site and ``/VMC/Ext/OK``, to ``host:port`` (loopback)."""
+
+    protocol = "vmc-in"
+
+    def __init__(self, source: TrackedSource, rate: float = 72.0, faults: DeviceFaults | None = None,
+                 name: str = "vr", host: str = "127.0.0.1", port: int = DEFAULT_PORT,
+                 serials: dict[str, str] | None = None, noise: TrackingNoise | None = None) -> None:
+        super().__init__(source, rate, faults, name)
+        if not is_loopback(host):
+            raise ValueError(f"a simulated VR rig sends to a loopback address (127.0.0.1, ::1), not {host!r}")
+        if not 60.0 <= rate <= 120.0:
+            raise ValueError(f"a VR runtime reports poses at 60-120 Hz, not {rate:g}")
+        self.host, self.port = host, int(port)
+        self.serials = {s: (serials or {}).get(s, DEFAULT_SERIALS[s]) for s in source.sites}
+        self.noise = noise or TrackingNoise()
+        self._wander: dict[str, np.ndarray] | None = None
+        self._last_t: float | None = None
+        self._client: UDPClient | None = None
+
+    @property
+    def url(self) -> str:
+        return build_url("vmc-in", f"{self.host}:{self.port}", **self.serials, id=self.name)
+
+    def _open_transport(self) -> None:
+        self._client = UDPClient(self.host, self.port)
+
+    def _close_transport(self) -> None:
+        c, self._client = self._client, None
+        if c is not None:
+            c.close()
+
+    def poses(self, t: float) -> list[vmc.DevicePose]:
+        """What the runtime reports at session time ``t``: the body at ``t - latency``, with
+        the tracking error of each device."""
+        nz = self.noise
+        clean = self.source.at(max(0.0, t - nz.latency_s))
+        if self._wander is None:  # the wander starts in its stationary spread
+            self._wander = {s: self.rng.normal(0.0, nz.wander_m, 3) for s in clean}
+        dt = 0.0 if self._last_t is None else max(0.0, t - self._last_t)
+        self._last_t = t
+        a = math.exp(-dt / nz.wander_tau_s) if nz.wander_tau_s > 0 else 0.0
+        out = []
+        for site, (p, q) in clean.items():
+            w = self._wander[site]
+            w[:] = a * w + math.sqrt(1.0 - a * a) * self.rng.normal(0.0, nz.wander_m, 3)
+            pos = p + w + self.rng.normal(0.0, nz.jitter_m, 3)
+            rot = quat_multiply(q, quat_exp(self.rng.normal(0.0, math.radians(nz.jitter_deg), 3)))
+            out.append(vmc.DevicePose(ROLES[site], self.serials[site], pos, rot))
+        return out
+
+    def _make_packet(self, t: float, device_t: float, counter: int) -> Any:
+        return vmc.frame_bundle(self.poses(t), sender_time=device_t)
+
+    def _corrupt(self, packet: Any) -> Any:
+        return _Datagram(super()._corrupt(packet.dgram))
+
+    def _send(self, packet: Any) -> None:
+        if self._client is None:
+            raise OSError("socket closed")
+        self._client.send(packet)
+
