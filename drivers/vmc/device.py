@@ -4,8 +4,8 @@
 that address (a VR-to-VMC bridge on this machine sends there; ``0.0.0.0`` receives from
 another PC, which is the user's choice to make) and maps each OpenVR serial number to a
 body site. Messages of serials the URL does not name are counted (``unmapped``) and their
-serials kept in ``serials_seen`` (serial -> hmd/con/tra), so ``imucap devices probe`` tells
-a user which serials to write into the URL.
+serials kept in ``serials_seen`` (serial -> hmd/con/tra): what a probe can show a user to
+write into the URL.
 
 One device serves several sites, which no other driver does. The smallest fit with the
 ``Device`` API: every sample is one site's pose, ``Sample.quat`` its orientation (device ->
