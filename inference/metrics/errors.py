@@ -9,6 +9,8 @@
   orientation kept), mean Euclidean distance over the 23 non-root joints, cm.
 - Jitter ratio: mean norm of the third finite difference of *global* joint positions
   times fps^3 (m/s^3) of the prediction, divided by the same of the ground truth.
+- The three-point papers' metrics (AGRoL, HAD): MPJRE, MPJPE, MPJVE, jitter, hand, upper,
+  lower and root PE, head-anchored on SMPL's 22 body joints; definitions in ``vr``.
 - RE at 2/5/10 s: || (r_true[t+h] - r_true[t]) - (r_pred[t+h] - r_pred[t]) || on the
   horizontal (x, y) root path, averaged over every start point t with t+h inside the clip.
 
@@ -26,12 +28,21 @@ import numpy as np
 from inference.body.body import local_from_global
 from inference.body.rotations import matrix_angle_between
 from inference.body.skeleton import METRIC_EXCLUDED, N_SEGMENTS, SEGMENT_INDEX
+from inference.metrics import vr
 from inference.metrics.plausibility import implausible_frames
 
 EVAL_SEGMENTS: tuple[int, ...] = tuple(
     i for i in range(N_SEGMENTS) if i not in {SEGMENT_INDEX[s] for s in METRIC_EXCLUDED}
 )
 RE_SECONDS: tuple[int, ...] = (2, 5, 10)
+# the three-point papers' figures: key (with the papers' unit) -> (ClipMetrics sum
+# attribute, scale from the sum's SI unit, ClipMetrics count attribute)
+VR_METRICS: dict[str, tuple[str, float, str]] = {
+    "mpjre_deg": ("mpjre_sum", 1.0, "pos_n"), "mpjpe_cm": ("mpjpe_sum", 100.0, "pos_n"),
+    "mpjve_cms": ("mpjve_sum", 100.0, "vel_n"), "jitter_1e2m_s3": ("jerk_pred_sum", 0.01, "jerk_n"),
+    "hand_pe_cm": ("hand_pe_sum", 100.0, "pos_n"), "upper_pe_cm": ("upper_pe_sum", 100.0, "pos_n"),
+    "lower_pe_cm": ("lower_pe_sum", 100.0, "pos_n"), "root_pe_cm": ("root_pe_sum", 100.0, "pos_n"),
+}
 
 
 def global_angle_error(R_pred: np.ndarray, R_true: np.ndarray) -> np.ndarray:
@@ -101,6 +112,21 @@ class ClipMetrics:
     # (24,) per segment, the sum over frames of its global angle error (deg): which segment
     # carries the error (``segment_errors``)
     seg_sum: np.ndarray | None = None
+    # the three-point papers' metrics (``vr``, head-anchored): per-frame sums over pos_n
+    # frames (deg; metres), MPJVE over vel_n frame pairs (m/s), jerk over jerk_n samples
+    # (m/s^3). Zero counts (clips scored before these existed) give None, not 0.
+    pos_n: int = 0
+    mpjre_sum: float = 0.0
+    mpjpe_sum: float = 0.0
+    hand_pe_sum: float = 0.0
+    upper_pe_sum: float = 0.0
+    lower_pe_sum: float = 0.0
+    root_pe_sum: float = 0.0
+    vel_n: int = 0
+    mpjve_sum: float = 0.0
+    jerk_n: int = 0
+    jerk_pred_sum: float = 0.0
+    jerk_true_sum: float = 0.0
 
     def summary(self) -> dict:
         """This clip's own figures (same keys as ``summarize``)."""
@@ -125,6 +151,7 @@ def evaluate_clip(name: str, R_pred: np.ndarray, root_pred: np.ndarray, j_pred: 
         jpe_sum=float(joint_position_error(j_pred, j_true).sum()),
         jitter_pred_sum=float(jp.sum()), jitter_true_sum=float(jt.sum()), jitter_n=int(jp.shape[0]),
     )
+    _add_vr(cm, R_pred, j_pred, R_true, j_true, fps)
     for s in re_seconds:
         e = root_error(root_pred, root_true, s, fps)
         if e is not None:
@@ -133,8 +160,27 @@ def evaluate_clip(name: str, R_pred: np.ndarray, root_pred: np.ndarray, j_pred: 
     return cm
 
 
+def _add_vr(cm: ClipMetrics, R_pred: np.ndarray, j_pred: np.ndarray, R_true: np.ndarray, j_true: np.ndarray,
+            fps: float) -> None:
+    """The three-point papers' sums of one clip, head-anchored as the papers place the body."""
+    dist = vr.joint_distances(j_pred, j_true, "head")  # (T, 22) m
+    cm.pos_n = int(dist.shape[0])
+    cm.mpjre_sum = float(vr.mpjre(R_pred, R_true).sum())
+    cm.mpjpe_sum = float(dist.mean(axis=1).sum())
+    for attr, joints in (("hand_pe_sum", vr.HAND_JOINTS), ("upper_pe_sum", vr.UPPER_JOINTS),
+                         ("lower_pe_sum", vr.LOWER_JOINTS), ("root_pe_sum", (vr.ROOT_JOINT,))):
+        setattr(cm, attr, float(dist[:, list(joints)].mean(axis=1).sum()))
+    ve = vr.mpjve(j_pred, j_true, fps, "head")
+    cm.vel_n, cm.mpjve_sum = int(ve.shape[0]), float(ve.sum())
+    jk_p = vr.mean_jerk(vr.head_anchored(j_pred, j_true), fps)
+    cm.jerk_n, cm.jerk_pred_sum = int(jk_p.shape[0]), float(jk_p.sum())
+    cm.jerk_true_sum = float(vr.mean_jerk(j_true, fps).sum())
+
+
 def summarize(clips: list[ClipMetrics], re_seconds: tuple[int, ...] = RE_SECONDS) -> dict:
-    """Pooled figures: clips, frames, ga_deg, la_deg, jpe_cm, jitter_ratio, re<s>_m.
+    """Pooled figures: clips, frames, ga_deg, la_deg, jpe_cm, jitter_ratio, re<s>_m, and the
+    three-point papers' mpjre_deg, mpjpe_cm, mpjve_cms, jitter_1e2m_s3 (the prediction's;
+    jitter_true_1e2m_s3 the truth's), hand_pe_cm, upper_pe_cm, lower_pe_cm, root_pe_cm.
     Any figure without data (no frames, no clip long enough, a truth with no jitter) is
     None."""
     frames = sum(c.frames for c in clips)
@@ -157,6 +203,9 @@ def summarize(clips: list[ClipMetrics], re_seconds: tuple[int, ...] = RE_SECONDS
     for s in re_seconds:
         n = sum(c.re_n.get(s, 0) for c in clips)
         out[f"re{s}_m"] = mean(sum(c.re_sum.get(s, 0.0) for c in clips), n)
+    for key, (attr, scale, count) in VR_METRICS.items():
+        out[key] = mean(sum(getattr(c, attr) for c in clips), sum(getattr(c, count) for c in clips), scale)
+    out["jitter_true_1e2m_s3"] = mean(sum(c.jerk_true_sum for c in clips), sum(c.jerk_n for c in clips), 0.01)
     return out
 
 
@@ -174,9 +223,12 @@ def segment_errors(clips: list[ClipMetrics]) -> dict[str, float] | None:
     return {name: round(float(v), 2) for name, v in zip(SEGMENTS, total)}
 
 
-# per-frame metrics a paired comparison can pool: key -> (ClipMetrics sum attribute, scale)
-_FRAME_METRICS: dict[str, tuple[str, float]] = {"ga_deg": ("ga_sum", 1.0), "la_deg": ("la_sum", 1.0),
-                                                "jpe_cm": ("jpe_sum", 100.0)}
+# per-sample metrics a paired comparison can pool: key -> (ClipMetrics sum attribute, scale,
+# ClipMetrics count attribute the sum is over)
+_FRAME_METRICS: dict[str, tuple[str, float, str]] = {
+    "ga_deg": ("ga_sum", 1.0, "frames"), "la_deg": ("la_sum", 1.0, "frames"), "jpe_cm": ("jpe_sum", 100.0, "frames"),
+    **VR_METRICS,
+}
 
 
 @dataclass(frozen=True)
@@ -208,7 +260,8 @@ class PairedDifference:
 
 def paired_difference(a: list[ClipMetrics], b: list[ClipMetrics], metric: str = "ga_deg",
                       confidence: float = 0.95, n_resamples: int = 4000, seed: int = 0) -> PairedDifference:
-    """A - B on a frame-pooled metric (ga_deg, la_deg, jpe_cm), with a percentile bootstrap
+    """A - B on a frame-pooled metric (ga_deg, la_deg, jpe_cm, or one of ``VR_METRICS``,
+    pooled over its own samples: MPJVE's frame pairs, jitter's), with a percentile bootstrap
     interval over clips (scipy.stats.bootstrap, paired: a resample draws whole clips for both
     models at once). A and B must be the same clips in the same order."""
     from scipy.stats import bootstrap
@@ -218,12 +271,14 @@ def paired_difference(a: list[ClipMetrics], b: list[ClipMetrics], metric: str = 
                          f"not {metric!r}")
     if [c.name for c in a] != [c.name for c in b] or [c.frames for c in a] != [c.frames for c in b]:
         raise ValueError("paired_difference needs the same clips (names and frames) in the same order")
-    if not a or sum(c.frames for c in a) == 0:
-        raise ValueError("paired_difference needs at least one clip with frames")
-    attr, scale = _FRAME_METRICS[metric]
+    attr, scale, count = _FRAME_METRICS[metric]
+    if [getattr(c, count) for c in a] != [getattr(c, count) for c in b]:
+        raise ValueError(f"paired_difference: {metric} was scored on different samples of the same clips")
+    if not a or sum(getattr(c, count) for c in a) == 0:
+        raise ValueError(f"paired_difference needs at least one clip with {metric} samples")
     sa = np.array([getattr(c, attr) for c in a], np.float64) * scale
     sb = np.array([getattr(c, attr) for c in b], np.float64) * scale
-    fr = np.array([c.frames for c in a], np.float64)
+    fr = np.array([getattr(c, count) for c in a], np.float64)
 
     def pooled(xa, xb, f, axis=-1):
         n = f.sum(axis=axis)
@@ -241,7 +296,7 @@ def paired_difference(a: list[ClipMetrics], b: list[ClipMetrics], metric: str = 
 
 
 __all__ = [
-    "EVAL_SEGMENTS", "RE_SECONDS", "global_angle_error", "local_angle_error", "joint_position_error", "jitter",
-    "root_error", "ClipMetrics", "evaluate_clip", "summarize", "segment_errors", "PairedDifference",
+    "EVAL_SEGMENTS", "RE_SECONDS", "VR_METRICS", "global_angle_error", "local_angle_error", "joint_position_error",
+    "jitter", "root_error", "ClipMetrics", "evaluate_clip", "summarize", "segment_errors", "PairedDifference",
     "paired_difference",
 ]
