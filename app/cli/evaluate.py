@@ -10,8 +10,9 @@ live poser and score the result against the truth (GA, LA, JPE, jitter, RE2/5/10
 Signals carry the sensor noise model (white noise, bias, orientation error; calibrated,
 so no mounting/heading rotation) unless --no-noise. With --json, stdout holds exactly one
 JSON object (clips, frames, ga_deg, la_deg, jpe_cm, jitter_ratio, re2_m, re5_m, re10_m,
-model, sensors, insoles, steps, ...); progress goes to stderr. A metric that needs a
-longer clip than any given is null.
+model, sensors, insoles, steps, ...; and the three-point papers' mpjre_deg, mpjpe_cm,
+mpjve_cms, jitter_1e2m_s3, hand/upper/lower/root_pe_cm: inference/metrics/vr.py); progress
+goes to stderr. A metric that needs a longer clip than any given is null.
 
 --data takes files, folders and the held-out sets by name (inference/training/splits.py,
 ``HELD_OUT_SETS``): @dg (HDM05 actor dg), @sad (Bandai's held-out style), @cmu-val (the CMU
@@ -26,7 +27,7 @@ each left-out segment is compared with what its own sensor measured: key ``held_
 same for that model under ``against.held_out``. --sensors does not apply to it.
 
 --against SPEC scores a second model on the same clips, sensors and noise, and adds
-``against``: its figures and, for GA, LA and JPE, --model minus it with a percentile
+``against``: its figures and, for GA, LA, JPE and the papers' metrics, --model minus it with a percentile
 bootstrap interval over clips (a lead whose interval holds 0 is not settled by the clips).
 
 --report FILE.md also evaluates the standard table (6 sites, 6 sites + insoles, 3 sites
@@ -220,7 +221,7 @@ def run(args: argparse.Namespace) -> int:
         report_markdown,
     )
     from inference.evaluation.subjects import per_subject, per_subject_markdown
-    from inference.metrics.errors import paired_difference, segment_errors
+    from inference.metrics.errors import VR_METRICS, paired_difference, segment_errors
     from inference.model.diffusion import parse_steps
     from inference.poser.models import default_steps, mirror_for, noise_mode_for, resolve_model
     from inference.signals.resample import FPS_MODEL
@@ -317,10 +318,11 @@ def run(args: argparse.Namespace) -> int:
     if args.against is not None:
         other, other_clips = one(args.against, sites, args.insoles, label=f"{args.against} {','.join(sites)}")
         mine, theirs = [c.metrics for c in clips], [c.metrics for c in other_clips]
-        diffs = {m: paired_difference(mine, theirs, m, seed=args.seed) for m in ("ga_deg", "la_deg", "jpe_cm")}
+        diffs = {m: paired_difference(mine, theirs, m, seed=args.seed)
+                 for m in ("ga_deg", "la_deg", "jpe_cm", *VR_METRICS)}
         result["against"] = {
             **{k: other[k] for k in ("model", "kind", "steps", "mirror", "ga_deg", "la_deg", "jpe_cm",
-                                     "jitter_ratio", "re2_m", "re5_m", "re10_m")},
+                                     "jitter_ratio", "re2_m", "re5_m", "re10_m", *VR_METRICS, "jitter_true_1e2m_s3")},
             "differences": {m: d.as_dict() for m, d in diffs.items()},
             "segments": segment_errors(theirs),
             "per_clip": [{"name": c.name, **c.metrics.summary()} for c in other_clips],
