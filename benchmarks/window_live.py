@@ -60,7 +60,7 @@ def run_window(tmp: Path, k: int, seconds: float) -> dict:
     if done.returncode != 0 or not rec.exists() or not stats.exists():
         raise RuntimeError(f"the window demo failed (rc {done.returncode}): {done.stderr.strip()[-300:]}")
     window = json.loads(stats.read_text())
-    window.pop("pipeline", None)
+    window.pop("pipeline", None)  # the recording's figures stand for the session
     return {**figures(rec), "window": window}
 
 
@@ -71,7 +71,12 @@ def run_headless(tmp: Path, k: int, seconds: float) -> dict:
     if done.returncode != 0 or not rec.exists():
         raise RuntimeError(f"the headless demo failed (rc {done.returncode}): {done.stderr.strip()[-300:]}")
     out = json.loads(done.stdout.strip().splitlines()[-1])
-    return {**figures(rec), "fps": out["fps"], "ga_deg": out["ga_deg"]}
+    return {**figures(rec), "fps": out["fps"], "ga_deg": out["ga_deg"], "hub": out["hub"]}
+
+
+def hub_text(front: dict) -> str:
+    hub = front.get("window", {}).get("hub") or front.get("hub") or {}
+    return f"hub wait {hub.get('wait_ms')} ms (max {hub.get('wait_max_ms')})" if hub else ""
 
 
 def busy(n: int) -> list[subprocess.Popen]:
@@ -111,9 +116,9 @@ def main() -> int:
                     print(f"load {load} run {k}: window p50/p99 {w['latency_p50_ms']}/{w['latency_p99_ms']} ms, "
                           f"not posed {w['not_posed']}/{w['poses'] + w['not_posed']}, "
                           f"{w['window']['draws_per_s']} draws/s, draw p50 {w['window']['draw_p50_ms']} ms, "
-                          f"GUI thread {w['window']['gui_thread_cores']} core | headless p50/p99 "
+                          f"GUI thread {w['window']['gui_thread_cores']} core, {hub_text(w)} | headless p50/p99 "
                           f"{h['latency_p50_ms']}/{h['latency_p99_ms']} ms, not posed {h['not_posed']}/"
-                          f"{h['poses'] + h['not_posed']} | ratio p50 {row['latency_p50_ratio']} "
+                          f"{h['poses'] + h['not_posed']}, {hub_text(h)} | ratio p50 {row['latency_p50_ratio']} "
                           f"p99 {row['latency_p99_ratio']}", flush=True)
     if args.json:
         print(json.dumps({"seconds": args.seconds, "runs": rows}))

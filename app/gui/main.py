@@ -37,6 +37,10 @@ from app.live_gait import GaitSink
 TABS = ("Setup", "Devices", "Calibration", "Live", "Recordings", "Replay", "Outdoor")
 ALARM_KINDS = ("device_lost", "device_silent")
 MAX_DRAW_GAP_S = 0.25  # a congested window still redraws the skeleton at least 4 times a second
+# the live loop is behind when its poses come this late (smoothed; the headless demo's p99 on
+# an idle 2-core machine is ~90 ms): the view then redraws at MAX_DRAW_GAP_S, because with
+# software GL a redraw costs the model's threads CPU they are short of (benchmarks/window_live.py)
+BEHIND_MS = 150.0
 
 
 def default_settings() -> QtCore.QSettings:
@@ -115,6 +119,7 @@ class MainWindow(QtWidgets.QMainWindow):
         # --- timers
         self.cost = GuiCost()  # what the window itself takes (--window-stats)
         self.loop_lag = 0.0  # how late the view timer arrives, smoothed (s)
+        self.pose_lag_ms = 0.0  # how late the live poses come, smoothed (BEHIND_MS)
         self._draw_tick = self._drawn_at = time.monotonic()
         self._slow_ticks = 0
         self.view_timer = QtCore.QTimer(self)
@@ -408,17 +413,22 @@ class MainWindow(QtWidgets.QMainWindow):
         """The newest pose into the view, as often as the event loop keeps up: every redraw
         of a GL view recomposes the window (a round trip to the display server), so when
         the timer itself arrives late (a busy machine, software GL) the view is redrawn
-        less often rather than leaving no time for the alarms and the buttons."""
+        less often rather than leaving no time for the alarms and the buttons; and when the
+        poses themselves come late (the model short of CPU), the view gives way to it."""
         now = time.monotonic()
         late = max(now - self._draw_tick - self.view_timer.interval() / 1000.0, 0.0)
         self._draw_tick = now
         self.loop_lag = 0.8 * self.loop_lag + 0.2 * late
         self.cost.lag_ms.append(late * 1e3)
-        if now - self._drawn_at < min(MAX_DRAW_GAP_S, 4.0 * self.loop_lag):
-            return
         live = self.session
+        lp = live.latest() if live is not None else None
+        if lp is not None and lp.latency_ms is not None:
+            self.pose_lag_ms = 0.9 * self.pose_lag_ms + 0.1 * lp.latency_ms
+        gap = MAX_DRAW_GAP_S if self.pose_lag_ms > BEHIND_MS else min(MAX_DRAW_GAP_S, 4.0 * self.loop_lag)
+        if now - self._drawn_at < gap:
+            return
         panel = self.outdoor if self.tabs.currentWidget() is self.outdoor else self.live_panel
-        if live is not None and live.body is not None and panel.show_pose(live.latest(), live.body):
+        if live is not None and live.body is not None and panel.show_pose(lp, live.body):
             self._drawn_at = now
             self.cost.drew(now, (time.monotonic() - now) * 1e3)
 
@@ -548,7 +558,13 @@ def run_window(setup_window, args: Any = None) -> int:
             if stats:
                 shown = win.outdoor.frames_shown + win.live_panel.frames_shown
                 live = win.session
-                win.cost.write(stats, shown, {"pipeline": live.perf() if live is not None else None})
+                hub = live.session.hub if live is not None else None
+                win.cost.write(stats, shown, {
+                    "pipeline": live.perf() if live is not None else None,
+                    # the grid's wait for late samples (it grows when they keep coming late)
+                    "hub": None if hub is None else {"wait_ms": round(hub.latency * 1e3, 1), "late": hub.stats.late,
+                                                     "wait_raised": hub.stats.latency_raised,
+                                                     "wait_max_ms": round(hub.stats.latency_max * 1e3, 1)}})
             shot = getattr(args, "screenshot", None)
             if shot:
                 Path(shot).parent.mkdir(parents=True, exist_ok=True)
