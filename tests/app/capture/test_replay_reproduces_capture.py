@@ -1,7 +1,8 @@
 """A replay with no options gives back the live reconstruction of a capture, frame for frame.
 
 Simulated devices in another process (`imucap devices simulate --setup`), `imucap capture
---headless --record` with confidence on, in the centred and the low-latency mode. The
+--record` with confidence on, headless and with its window (under the test run's X server),
+in the centred and the low-latency mode. The
 recording's metadata says how its poser ran (steps, seed, mirror, root, filter), written
 from the poser that was built; `imucap replay REC` with no options and the window's
 Re-run (``app.gui.replay_panel.rerun``, the code behind the button) read it back and get
@@ -29,7 +30,7 @@ SITES = ("pelvis", "head", "l_wrist", "r_wrist", "l_shank", "r_shank")
 
 
 
-def capture(tmp: Path, latency: str) -> Path:
+def capture(tmp: Path, latency: str, window: bool = False) -> Path:
     setup = tmp / "setup.toml"
     setup.write_text("\n".join([
         "[subject]", 'id = "sim-replay"', "height = 1.72", "", "[sensors]",
@@ -45,20 +46,26 @@ def capture(tmp: Path, latency: str) -> Path:
         for line in sim.stdout:
             if line.startswith("simulating"):
                 break
-        cap = subprocess.run([*CLI, "capture", "--setup", str(setup), "--headless", "--record", str(rec),
-                              "--latency", latency, "--seconds", "28", "--countdown", "1", "--json"],
+        front = ["--quit-after", "28"] if window else ["--headless", "--seconds", "28", "--json"]
+        cap = subprocess.run([*CLI, "capture", "--setup", str(setup), "--record", str(rec), "--latency", latency,
+                              "--countdown", "1", *front],
                              stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=180, env=env)
     finally:
         sim.stdin.close()
         sim.wait(30)
     assert cap.returncode == 0, cap.stderr[-3000:]
-    assert json.loads(cap.stdout.strip().splitlines()[-1])["calibrated"], cap.stderr[-2000:]
+    if not window:
+        assert json.loads(cap.stdout.strip().splitlines()[-1])["calibrated"], cap.stderr[-2000:]
+    assert read_recording(rec).calibrations, cap.stderr[-2000:]
     return rec
 
 
+@pytest.mark.parametrize("front", ["headless", "window"])
 @pytest.mark.parametrize("latency", ["centred", "low"])
-def test_replay_with_no_options_and_the_windows_rerun_give_back_the_live_poses(tmp_path, latency):
-    path = capture(tmp_path, latency)
+def test_replay_with_no_options_and_the_windows_rerun_give_back_the_live_poses(tmp_path, latency, front):
+    if front == "window" and not os.environ.get("DISPLAY"):
+        pytest.skip("the window needs a display: scripts/test.sh runs the tests under xvfb-run")
+    path = capture(tmp_path, latency, window=front == "window")
     rec = read_recording(path)
     meta = rec.metadata
     # the file says how it ran, from the poser that was built
