@@ -18,6 +18,11 @@ Stillness live: each sensor's angular speed from consecutive orientations, smoot
 ~0.2 s; a still step starts holding when every sensor is below ``still_dps`` and restarts
 when one exceeds ``moved_dps``. The window found is then checked by the same stillness
 measures as offline calibration.
+
+A walk also shows in the acceleration: a trunk sensor turns at 20-40 deg/s in a normal walk,
+under ``move_dps``, but its free acceleration swings by ~2 m/s^2 (spread over the last 0.5 s).
+A move step starts, and goes on, when either measure says walking (``move_acc``), so a setup
+of the pelvis alone, or the pelvis and the head, is walked through like any other.
 """
 
 from __future__ import annotations
@@ -85,7 +90,7 @@ class GuidedCalibration:
     or ``failed`` (``error`` says why and what to do; ``redo`` starts a step again)."""
 
     def __init__(self, sites: Sequence[str], protocol: str = "walk", countdown: float = 3.0, timeout: float = 20.0,
-                 still_dps: float = 20.0, moved_dps: float = 35.0, move_dps: float = 45.0,
+                 still_dps: float = 20.0, moved_dps: float = 35.0, move_dps: float = 45.0, move_acc: float = 1.0,
                  limits: StillnessLimits | None = None, fps: float = 60.0, origin: float | None = None) -> None:
         if protocol not in PROTOCOLS:
             raise ValueError(f"unknown calibration protocol {protocol!r}; choose {' or '.join(PROTOCOLS)}")
@@ -95,6 +100,7 @@ class GuidedCalibration:
         self.countdown_s = countdown
         self.timeout = timeout
         self.still_dps, self.moved_dps, self.move_dps = still_dps, moved_dps, move_dps
+        self.move_acc = move_acc  # m/s^2: free-acceleration spread (0.5 s) that reads as walking
         self.limits = limits or StillnessLimits()
         self.fps = fps
         self.reset(origin)
@@ -110,6 +116,8 @@ class GuidedCalibration:
         self._data: dict[str, tuple[np.ndarray, ...]] = {}  # per completed step: quat, free_acc, acc, gyro, present
         self._t_last: float | None = origin
         self._recent: list[tuple[float, np.ndarray]] = []
+        self._acc_recent: list[tuple[float, np.ndarray]] = []
+        self._acc_spread = np.full(len(self.sites), np.nan)
         self._speed = np.zeros(len(self.sites))
         self._enter(0, origin)
 
@@ -195,6 +203,7 @@ class GuidedCalibration:
                              nan3 if acc is None else np.asarray(acc, float),
                              nan3 if gyro is None else np.asarray(gyro, float), ok))
         self._update_speed(t, quat, ok)
+        self._update_acc_spread(t, self._frames[-1][2], ok)
         self._t_last = t
         if self._phase_t is None:
             self._phase_t = self._step_t = t
@@ -214,6 +223,27 @@ class GuidedCalibration:
             return
         ang = np.rad2deg(matrix_angle_between(quat_to_matrix(self._recent[-1][1][both]), quat_to_matrix(old[both])))
         self._speed[both] = ang / dt
+
+    def _update_acc_spread(self, t: float, free_acc: np.ndarray, ok: np.ndarray) -> None:
+        """Per sensor, the spread of the free acceleration over the last 0.5 s (root of the
+        summed per-axis variances; NaN for a sensor that gives none): a bias does not count,
+        a gait's swing does."""
+        self._acc_recent.append((t, np.where(ok[:, None], free_acc, np.nan)))
+        while len(self._acc_recent) > 2 and t - self._acc_recent[0][0] > 0.5:
+            self._acc_recent.pop(0)
+        if len(self._acc_recent) < 5:
+            return
+        a = np.stack([x for _, x in self._acc_recent])  # (n, S, 3)
+        seen = np.isfinite(a).all(-1).sum(0) >= 5
+        with np.errstate(invalid="ignore"):
+            spread = np.sqrt(np.nansum(np.nanvar(a[:, seen], axis=0), axis=-1)) if seen.any() else np.zeros(0)
+        self._acc_spread[:] = np.nan
+        self._acc_spread[seen] = spread
+
+    def _walking(self) -> np.ndarray:
+        """(S,) sensors whose acceleration says the body is walking."""
+        with np.errstate(invalid="ignore"):
+            return np.nan_to_num(self._acc_spread, nan=0.0) > self.move_acc
 
     def _advance(self, t: float) -> Calibration | None:
         step = self.step
@@ -240,14 +270,14 @@ class GuidedCalibration:
                 self.message = ""
                 return self._next(t)
         elif self.phase == "waiting_move":
-            if np.median(self._speed) > self.move_dps:
+            if np.median(self._speed) > self.move_dps or self._walking().any():
                 # the window starts half a second before: still, so the velocity starts at zero
                 self.phase, self._move_from = "moving", max(i - int(0.5 * self.fps), 0)
         elif self.phase == "moving":
-            if np.all(self._speed < self.still_dps):
+            if np.all(self._speed < self.still_dps) and not self._walking().any():
                 self.phase, self._hold_from = "settling", i
         elif self.phase == "settling":
-            if fast.any():
+            if fast.any() or self._walking().any():
                 self.phase, self._hold_from = "moving", None
             elif t - self._frames[self._hold_from][0] >= step.seconds:
                 self._data[step.name] = self._arrays(self._move_from, i + 1)

@@ -172,3 +172,29 @@ def test_bursts_of_missing_frames_in_the_walk(session):
     cal, _ = calibrate_walk(SITES, sig.quat, windows_of(sig), free_acc=sig.free_acc, fps=sig.fps, present=present)
     err = segment_errors(cal, sig, truth)
     assert cal.valid.all() and err.max() < 3.0, dict(zip(SITES, err.round(2)))
+
+
+@pytest.mark.parametrize("sites", [("pelvis",), ("pelvis", "head")])
+def test_guided_walk_with_trunk_sensors_only(sites):
+    """A trunk sensor turns at 20-40 deg/s in a walk, under the 45 deg/s that starts the
+    walk step; its acceleration swings by ~2 m/s^2 and starts it instead."""
+    act = generate("walk", seconds=5, seed=1)
+    walk = generate("walk", seconds=6, seed=0)
+    sig, truth = synthesize_walk_session(act, walk, WalkProtocol(), noise=NoiseModel.typical(), rng=3, sites=sites)
+    g = GuidedCalibration(sites, "walk")
+    speeds = []
+    for i in range(len(sig.quat)):
+        g.push(i / sig.fps, sig.quat[i], sig.free_acc[i])
+        speeds.append(float(np.max(g._speed)))
+        if g.phase in ("done", "failed"):
+            break
+    assert g.done, g.status()
+    assert max(speeds) < g.move_dps  # the angular speed alone would never have started the walk
+    assert segment_errors(g.calibration, sig, truth, sites).max() < 3.0
+    # without free acceleration (a sensor that gives none) the walk is not seen: the old rule
+    g2 = GuidedCalibration(sites, "walk", timeout=8.0)
+    for i in range(len(sig.quat)):
+        g2.push(i / sig.fps, sig.quat[i], None)
+        if g2.phase in ("done", "failed"):
+            break
+    assert g2.phase == "failed" and "walk: no movement" in g2.error
