@@ -133,6 +133,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         demo.start()
         reached = demo.run_for(cfg.seconds, cfg.frames)
+    except RuntimeError as exc:  # the simulator or the pipeline stopped: one line, not a traceback
+        print(f"imucap demo: {exc}", file=sys.stderr)
+        return 1
     finally:
         demo.stop()
     res = demo.result()

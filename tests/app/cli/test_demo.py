@@ -124,3 +124,14 @@ def test_a_frame_budget_the_machine_cannot_meet_fails_loudly(tiny_model, capsys)
     capsys.readouterr()
     assert main(["demo", "--frames", "10"]) == 2
     assert "--frames needs --headless" in capsys.readouterr().err
+
+
+def test_simulated_devices_that_die_end_the_demo_with_one_line(tiny_model):
+    demo = DemoRun(DemoConfig(seconds=2.0, model=str(tiny_model), sensors=("pelvis", "r_shank"), threads=1))
+    try:
+        demo.start()
+        demo.spec.simulator.proc.kill()
+        with pytest.raises(RuntimeError, match="the simulated devices stopped"):
+            demo.run_for(2.0)
+    finally:
+        demo.stop()
