@@ -561,10 +561,7 @@ def run_window(setup_window, args: Any = None) -> int:
                 hub = live.session.hub if live is not None else None
                 win.cost.write(stats, shown, {
                     "pipeline": live.perf() if live is not None else None,
-                    # the grid's wait for late samples (it grows when they keep coming late)
-                    "hub": None if hub is None else {"wait_ms": round(hub.latency * 1e3, 1), "late": hub.stats.late,
-                                                     "wait_raised": hub.stats.latency_raised,
-                                                     "wait_max_ms": round(hub.stats.latency_max * 1e3, 1)}})
+                    "hub": None if hub is None else hub.wait_status()})
             shot = getattr(args, "screenshot", None)
             if shot:
                 Path(shot).parent.mkdir(parents=True, exist_ok=True)

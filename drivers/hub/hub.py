@@ -180,6 +180,12 @@ class Hub:
                 self.stats.queued_dropped[name] = tr.dropped
             tr.queue.extend(samples)
 
+    def wait_status(self) -> dict[str, Any]:
+        """The grid's wait for late samples now, how many samples came late, how often and
+        how far the wait grew for them: what a session reports beside its latency."""
+        return {"wait_ms": round(self.latency * 1e3, 1), "late": self.stats.late,
+                "wait_raised": self.stats.latency_raised, "wait_max_ms": round(self.stats.latency_max * 1e3, 1)}
+
     def status(self) -> dict[str, dict[str, Any]]:
         """Per device, for a status panel: packets decoded, errors, gaps, lost packets,
         queue drops, reconnects, battery (None if unknown)."""
