@@ -18,10 +18,11 @@ fi
 XVFB=(xvfb-run -a -s "-screen 0 1280x1024x24")
 # two passes: everything else on both cores, then the real-time cross-process tests alone
 # (tests/conftest.py, SOLO_MODULES); pytest's 5 means "nothing collected" for a pass
+# each pass has a ceiling too (pytest-timeout covers a test, not a worker that never exits)
 rc=0
-"${XVFB[@]}" .venv/bin/python -m pytest -n 2 --dist loadgroup -q -m "not solo" "$@" || rc=$?
+timeout -k 30 2400 "${XVFB[@]}" .venv/bin/python -m pytest -n 2 --dist loadgroup -q -m "not solo" "$@" || rc=$?
 [ "$rc" = 5 ] && rc=0
 rc2=0
-"${XVFB[@]}" .venv/bin/python -m pytest -q -m solo "$@" || rc2=$?
+timeout -k 30 1200 "${XVFB[@]}" .venv/bin/python -m pytest -q -m solo "$@" || rc2=$?
 [ "$rc2" = 5 ] && rc2=0
 [ "$rc" = 0 ] && [ "$rc2" = 0 ]
