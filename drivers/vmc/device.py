@@ -14,14 +14,12 @@ world, our frame) and ``Sample.extra`` its ``site``, ``position`` (3,) m, ``seri
 carries one. Beside the sample stream, ``pose(site)`` gives the latest pose of a site with
 its session time of arrival, for a consumer that polls.
 
-What the hub (``drivers/hub``) needs next to take it (not done here):
-- a device of ``kind == "tracked"`` under one name in ``Hub(devices)``, whose samples it
-  routes by ``extra["site"]`` into one ring per tracked site (position 3 + quat 4) instead
-  of treating the device's name as an IMU site (today any kind but ``"insoles"`` is);
-- a tracked part of ``HubFrame`` (``tracked_sites``, positions (P, 3), quats (P, 4),
-  present (P,)), filled by hold or by lerp + slerp like the IMU quaternions;
-- one clock model per device on ``device_time`` (all sites share the sender's clock), and
-  the setup file a key for the URL (e.g. ``[tracked] vr = "vmc-in://..."``).
+Each sample also carries the IMU channels its pose implies (``free_acc``, ``acc``,
+``gyro``: ``implied_imu.py``, from a short fit over the site's last poses), so the hub,
+the calibration and the model read a tracked site as they read an IMU at it. The hub
+(``drivers/hub``) takes the device under one name, reads it once and routes its samples
+by ``extra["site"]`` into one ring per site, named by ``site_names`` (``MODEL_SITES``:
+the model's sensor site each tracked point stands for).
 """
 
 from __future__ import annotations
@@ -39,9 +37,15 @@ import numpy as np
 from ..base import Device, DeviceGone, Sample
 from ..urls import build_url
 from . import protocol as vmc
+from .implied_imu import ImpliedImu
 
 # the body sites a VR device can stand for: the three-point set, a waist tracker, feet trackers
 TRACKED_SITES: tuple[str, ...] = ("head", "l_hand", "r_hand", "pelvis", "l_foot", "r_foot")
+# the model's sensor site (inference.body.skeleton.SITES) a tracked point stands for: a controller
+# held in the fist moves with the hand, whose sensor site is the wrist's (the grip's offset from
+# it is a fixed mounting the calibration finds, as an IMU strap's)
+MODEL_SITES: dict[str, str] = {"head": "head", "l_hand": "l_wrist", "r_hand": "r_wrist", "pelvis": "pelvis",
+                               "l_foot": "l_foot", "r_foot": "r_foot"}
 DEFAULT_PORT = 39540  # the VMC performer's usual receiving port (protocol.vmc.info)
 _MAX_DATAGRAMS = 512  # per wake-up: a bridge sends one bundle per frame, 90 Hz at most
 
@@ -94,6 +98,7 @@ class VmcInDevice(Device):
         self._forms: dict[str, set[bool]] = {}
         self._latest: dict[str, TrackedPose] = {}
         self._latest_lock = threading.Lock()
+        self._implied = {site: ImpliedImu() for site in self.serials}
         self.serials_seen: dict[str, str] = {}
         self.unmapped = 0
 
@@ -111,6 +116,11 @@ class VmcInDevice(Device):
     @property
     def sites(self) -> tuple[str, ...]:
         return tuple(self.serials)
+
+    @property
+    def site_names(self) -> dict[str, str]:
+        """Each of ``sites`` -> the model's sensor site it stands for (the hub's site name)."""
+        return {s: MODEL_SITES[s] for s in self.serials}
 
     def describe(self) -> str:
         host = f"[{self.host}]" if self._family == socket.AF_INET6 else self.host
@@ -138,6 +148,8 @@ class VmcInDevice(Device):
         self._sock = s
         self._pending.clear()
         self._forms.clear()
+        for imu in self._implied.values():
+            imu.reset()
 
     def _close(self) -> None:
         s, self._sock = self._sock, None
@@ -184,7 +196,11 @@ class VmcInDevice(Device):
             pose = TrackedPose(site, p.serial, p.kind, p.position, p.quat, now, p.sender_time)
             with self._latest_lock:
                 self._latest[site] = pose
+            imu = self._implied[site].update(now if p.sender_time is None else p.sender_time, p.position, p.quat)
             self._pending.append(Sample(now, p.sender_time, self.device_id, None, quat=p.quat,
+                                        free_acc=None if imu is None else imu.free_acc,
+                                        acc=None if imu is None else imu.acc,
+                                        gyro=None if imu is None else imu.gyro,
                                         extra={"site": site, "position": p.position, "serial": p.serial,
                                                "kind": p.kind}))
 
