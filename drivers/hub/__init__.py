@@ -30,6 +30,10 @@ Why each piece exists:
   *after* a grid time, so it waits for the next sample of every site; holding
   only needs the sample at or before it to have been read, a few milliseconds
   (the low-latency mode, docs/latency.md).
+- A device of kind ``tracked`` (a VR rig, ``drivers/vmc``) is one device and several
+  sites: read once, on one clock model (its sites share the sender's clock), its samples
+  routed by ``extra["site"]`` into a ring per site (``Track.site_rings``), each a site of
+  the frame like an IMU's.
 - Each frame says which sample of each site went into it last (``sample_t``,
   ``sample_counter``), so a latency measurement starts at a real sample.
 - ``latency`` (how far behind now the grid runs) and ``max_latency`` (how far it

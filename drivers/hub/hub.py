@@ -38,7 +38,7 @@ import numpy as np
 
 from drivers.base import Device, DeviceEvent, Sample
 from drivers.hub import grid as grid_values
-from drivers.hub.grid import Interpolation
+from drivers.hub.grid import Interpolation, Ring
 from drivers.hub.readers import Readers, Track
 
 
@@ -87,8 +87,12 @@ class Hub:
     """Merge ``devices`` (name -> opened or unopened device) onto a ``rate`` Hz grid.
 
     Names are sensor sites; a device whose samples carry insole channels
-    (``extra['force']``) feeds the insole part of the frame instead. interpolation: how
-    to interpolate to the grid (``grid.Interpolation``; None: hold the latest sample).
+    (``extra['force']``) feeds the insole part of the frame instead, and a device of kind
+    ``"tracked"`` (a VR rig, ``drivers/vmc``) stands for several sites: its samples are
+    routed by ``extra['site']`` to one site each (named by the device's ``site_names``),
+    which the frames carry like IMU sites, in the device's order at the device's place.
+    interpolation: how to interpolate to the grid (``grid.Interpolation``; None: hold the
+    latest sample).
     """
 
     def __init__(
@@ -128,6 +132,16 @@ class Hub:
         self.clock = clock
         self.on_event = on_event
         self.tracks = {n: Track(n, d, queue_size, history=512) for n, d in devices.items()}
+        taken: dict[str, str] = {}
+        for n, tr in self.tracks.items():
+            for site in tr.site_rings or (n,):
+                if site in taken:
+                    raise ValueError(f"site {site} is given twice: by device {taken[site]} and by device {n}")
+                taken[site] = n
+        self._site_rings: dict[str, tuple[Ring, deque[tuple[float, float]]]] = {}
+        for n, tr in self.tracks.items():
+            self._site_rings.update({s: (r, tr.site_gaps[s]) for s, r in tr.site_rings.items()} if tr.site_rings
+                                    else {n: (tr.ring, tr.gap_spans)})
         self.insole_names: set[str] = {n for n, d in devices.items() if d.kind == "insoles"}
         self.stats = HubStats()
         self._stop = threading.Event()
@@ -244,8 +258,24 @@ class Hub:
                     worst = max(worst, now - st)
             if imu:
                 tr.ring.extend(imu_t, imu)
+                if tr.site_rings:
+                    self._route(tr, imu_t, imu)
             if worst > self.latency:
                 self._late(worst, now)
+
+    @staticmethod
+    def _route(tr: Track, ts: list[float], samples: list[Sample]) -> None:
+        """A tracked device's samples into their sites' rings (a site the device does not
+        name is passed over: the device counts those itself)."""
+        by: dict[str, tuple[list[float], list[Sample]]] = {}
+        for t, s in zip(ts, samples, strict=True):
+            site = tr.site_of.get(s.extra.get("site", ""))
+            if site is not None:
+                b = by.setdefault(site, ([], []))
+                b[0].append(t)
+                b[1].append(s)
+        for site, (t_site, s_site) in by.items():
+            tr.site_rings[site].extend(t_site, s_site)
 
     def _late(self, age: float, now: float) -> None:
         """A sample ``age`` s old reached the hub after its frame's time had passed."""
@@ -275,7 +305,17 @@ class Hub:
 
     @property
     def sites(self) -> tuple[str, ...]:
-        return tuple(n for n in self.tracks if n not in self.insole_names)
+        out: list[str] = []
+        for n, tr in self.tracks.items():
+            if tr.site_rings:
+                out += tr.site_rings
+            elif n not in self.insole_names:
+                out.append(n)
+        return tuple(out)
+
+    def _ring(self, site: str) -> tuple[Ring, deque[tuple[float, float]]]:
+        """A site's ring and counter gaps: its device's, or its tracked device's for that site."""
+        return self._site_rings[site]
 
     def poll(self, now: float | None = None) -> list[HubFrame]:
         """All grid frames that are due (``now - latency``), oldest first."""
@@ -319,8 +359,8 @@ class Hub:
         G = grid.size
         lost: dict[str, int] = {}
         for name in sites:
-            tr = self.tracks[name]
-            if tr.lost_pending:
+            tr = self.tracks.get(name)
+            if tr is not None and tr.lost_pending:
                 lost[name] = tr.lost_pending
                 tr.lost_pending = 0
         if self.interpolation is not None and self.interpolation.per_stream is not None:
@@ -367,8 +407,9 @@ class Hub:
         """Grid values site by site (``grid.per_stream``), through the interpolation's
         per-stream resampler when it has one, else held: the reference of ``_interp_all``."""
         per = self.interpolation.per_stream if self.interpolation is not None else None
-        return grid_values.per_stream([self.tracks[n].ring for n in sites], [self.tracks[n].gap_spans for n in sites],
-                                      grid, self.staleness, self.fill_gap, per)
+        rings = [self._ring(n) for n in sites]
+        return grid_values.per_stream([r for r, _ in rings], [g for _, g in rings], grid, self.staleness,
+                                      self.fill_gap, per)
 
     def _hold_all(self, sites: tuple[str, ...], grid: np.ndarray) -> tuple[np.ndarray, ...]:
         """Latest-sample hold for every site at once: ``_interp_all`` with no site interpolated."""
@@ -377,8 +418,9 @@ class Hub:
     def _interp_all(self, sites: tuple[str, ...], grid: np.ndarray,
                     interpolation: Interpolation | None) -> tuple[np.ndarray, ...]:
         """Grid values of every site at once (``grid.batched``)."""
-        return grid_values.batched([self.tracks[n].ring for n in sites], [self.tracks[n].gap_spans for n in sites],
-                                   grid, self.staleness, self.fill_gap, interpolation)
+        rings = [self._ring(n) for n in sites]
+        return grid_values.batched([r for r, _ in rings], [g for _, g in rings], grid, self.staleness, self.fill_gap,
+                                   interpolation)
 
     def _trim(self) -> None:
         """Forget gap spans that are older than anything a future frame can ask for."""

@@ -26,7 +26,14 @@ from drivers.hub.grid import Ring
 class Track:
     """One device in the hub: the queue its reader fills (under ``lock``), and on the
     consumer side its clock model, its ring of samples on the session clock, its insole
-    samples and the counter gaps not yet past the grid."""
+    samples and the counter gaps not yet past the grid.
+
+    A device of kind ``"tracked"`` (a VR rig: one device, several body sites) has one ring
+    per site besides (``site_rings``, by the hub's site name; ``site_of`` maps the device's
+    own site name in ``Sample.extra["site"]`` to it): the hub's grid reads those, while
+    ``ring`` keeps every sample of the device, so whatever asks a track when it last heard
+    from its device (a silent-device check) asks it the same way for every kind. One
+    clock model serves all its sites: they share the sender's clock."""
 
     def __init__(self, name: str, device: Device, queue_size: int, history: int) -> None:
         self.name = name
@@ -41,6 +48,14 @@ class Track:
         self.insole: deque[tuple[float, np.ndarray, np.ndarray]] = deque(maxlen=history)
         self.gap_spans: deque[tuple[float, float]] = deque(maxlen=64)
         self.lost_pending = 0
+        self.site_of: dict[str, str] = {}
+        self.site_rings: dict[str, Ring] = {}
+        self.site_gaps: dict[str, deque[tuple[float, float]]] = {}
+        if device.kind == "tracked":
+            names = getattr(device, "site_names", None) or {s: s for s in device.sites}  # type: ignore[attr-defined]
+            self.site_of = dict(names)
+            self.site_rings = {n: Ring(history) for n in self.site_of.values()}
+            self.site_gaps = {n: deque(maxlen=64) for n in self.site_of.values()}
         self.thread: threading.Thread | None = None
         self.last_event: DeviceEvent | None = device.events[-1] if device.events else None
 
