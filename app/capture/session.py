@@ -83,6 +83,8 @@ def session_spec(setup: Setup, options: CaptureOptions) -> dict[str, Any]:
     return {
         "sensors": {site: e.url.split(":", 1)[0] for site, e in setup.sensors.items()},
         "insoles": None if setup.insoles is None else setup.insoles.split(":", 1)[0],
+        **({"tracked": {n: {"scheme": e.url.split(":", 1)[0], "sites": list(e.sites)}
+                        for n, e in setup.tracked.items()}} if setup.tracked else {}),
         "subject_height_m": setup.subject.height_m, "model": setup.model, "steps": setup.steps,
         "calibration": setup.calibration, "confidence": bool(options.confidence or setup.confidence),
         "latency": options.latency, "threads": options.threads, "countdown_s": options.countdown,
@@ -173,6 +175,7 @@ class CaptureSession:
             "source": "capture", "subject": {"id": s.subject.id, "height_m": s.subject.height_m,
                                              "notes": s.subject.notes},
             "setup": {"sites": {k: e.url for k, e in s.sensors.items()}, "insoles": s.insoles,
+                      **({"tracked": {n: e.url for n, e in s.tracked.items()}} if s.tracked else {}),
                       "calibration": s.calibration, "file": str(s.path) if s.path else None},
             "sensors": list(self.sites), "insoles": s.insoles is not None, "model": self.model_label,
             "app_version": APP_VERSION,

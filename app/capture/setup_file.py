@@ -35,6 +35,7 @@ TABLE_KEYS: dict[str, tuple[str, ...]] = {
     "subject": ("id", "height", "notes"),
     "sensors": SITES,
     "insoles": ("url",),
+    "tracked": (),  # name = URL of a VR rig (any name that is not a site): its sites come from the URL
     "model": ("name", "steps", "confidence"),
     "calibration": ("protocol",),
     "recording": ("folder",),
@@ -46,6 +47,7 @@ URL_EXAMPLES: dict[str, str] = {
     "xsens-can": "xsens-can://socketcan/can0?id_offset=0x100",
     "dualsense": "dualsense://",
     "moticon-udp": "moticon-udp://127.0.0.1:9999",
+    "vmc-in": "vmc-in://127.0.0.1:39540?head=SERIAL&l_hand=SERIAL&r_hand=SERIAL",
 }
 
 
@@ -74,6 +76,17 @@ class SensorEntry:
 
 
 @dataclass
+class TrackedEntry:
+    """A VR rig (``[tracked]``): one device, several of the model's sites (``sites``, in the
+    URL's order, as the hub names them: ``drivers.vmc.device.MODEL_SITES``)."""
+
+    name: str
+    url: str
+    sites: tuple[str, ...]
+    line: int | None = field(default=None, compare=False)
+
+
+@dataclass
 class Subject:
     id: str
     height_m: float
@@ -92,13 +105,18 @@ class Setup:
     # relative = relative to the setup file's folder; load_setup resolves it against that folder
     recordings: Path = DEFAULT_RECORDINGS
     path: Path | None = None
+    tracked: dict[str, TrackedEntry] = field(default_factory=dict)
 
     def sites(self) -> tuple[str, ...]:
-        return tuple(self.sensors)
+        """The model's sites the devices observe, in the order the hub's frames hold them:
+        the IMU sites, then each tracked device's sites."""
+        return tuple(self.sensors) + tuple(s for e in self.tracked.values() for s in e.sites)
 
     def urls(self) -> dict[str, str]:
-        """Every device to open, by name: the sites, then ``insoles`` when there are some."""
+        """Every device to open, by name: the sites, the tracked devices, then ``insoles``
+        when there are some."""
         out = {site: e.url for site, e in self.sensors.items()}
+        out.update({name: e.url for name, e in self.tracked.items()})
         if self.insoles:
             out["insoles"] = self.insoles
         return out
@@ -129,8 +147,8 @@ def parse_setup(text: str, path: Path | None = None) -> Setup:
 
 
 def url_problem(url: Any, kind: str = "imu") -> tuple[str, str] | None:
-    """(problem, what to do) when ``url`` cannot name a device of ``kind`` ("imu" or
-    "insoles"), else None. Checks only what the URL says; nothing is opened, so a setup
+    """(problem, what to do) when ``url`` cannot name a device of ``kind`` ("imu",
+    "insoles" or "tracked"), else None. Checks only what the URL says; nothing is opened, so a setup
     can be checked on a laptop away from the sensors."""
     import drivers
 
@@ -155,6 +173,11 @@ def url_problem(url: Any, kind: str = "imu") -> tuple[str, str] | None:
     except (ValueError, TypeError) as exc:
         return f"{url!r}: {exc}", f"fix the URL, e.g. {URL_EXAMPLES[u.scheme]}"
     if device.kind != kind:
+        if device.kind == "tracked":
+            return (f"{url!r} is a VR rig (tracked points), not {'insoles' if kind == 'insoles' else 'an IMU'}",
+                    'put it under [tracked] as vr = "..."')
+        if kind == "tracked":
+            return (f"{url!r} is not a VR rig", f"a rig is {URL_EXAMPLES['vmc-in']}; put IMUs under [sensors]")
         if kind == "insoles":
             return (f"{url!r} is an IMU, not insoles",
                     f"insoles are {URL_EXAMPLES['moticon-udp']}; put IMUs under [sensors]")
@@ -195,7 +218,7 @@ def _missing_part(u: DeviceURL) -> str | None:
 
 
 def _example_for(kind: str) -> str:
-    return URL_EXAMPLES["moticon-udp"] if kind == "insoles" else URL_EXAMPLES["xbus"]
+    return URL_EXAMPLES[{"insoles": "moticon-udp", "tracked": "vmc-in"}.get(kind, "xbus")]
 
 
 def _one_line(text: str) -> str:
@@ -222,13 +245,15 @@ class _Parser:
 
     def parse(self) -> Setup:
         data = self._load()
+        self._tables = {k for k, v in data.items() if isinstance(v, dict) and v}
         self._check_layout(data)
         subject = self._subject(data.get("subject"))
         sensors = self._sensors(data.get("sensors"))
         insoles = self._insoles(data.get("insoles"))
-        self._check_one_device_per_site(sensors, insoles)
+        tracked = self._tracked(data.get("tracked"), sensors)
+        self._check_one_device_per_site(sensors, insoles, tracked)
         model, steps = self._model(data.get("model", {}))
-        return Setup(subject=subject, sensors=sensors, insoles=insoles, model=model, steps=steps,
+        return Setup(subject=subject, sensors=sensors, insoles=insoles, tracked=tracked, model=model, steps=steps,
                      confidence=self._confidence(data.get("model", {})),
                      calibration=self._calibration(data.get("calibration", {})),
                      recordings=self._recordings(data.get("recording", {})), path=self.path)
@@ -277,7 +302,7 @@ class _Parser:
             if not isinstance(value, dict):
                 raise self.error(f"{name} must be a table", f"write it as [{name}] followed by key = value lines",
                                  self.where.line_of((), name))
-            if name != "sensors":
+            if name not in ("sensors", "tracked"):
                 self._check_keys(name, value, TABLE_KEYS[name])
 
     def _check_keys(self, table: str, value: dict[str, Any], allowed: tuple[str, ...]) -> None:
@@ -324,6 +349,8 @@ class _Parser:
 
     def _sensors(self, table: dict[str, Any] | None) -> dict[str, SensorEntry]:
         example = f'pelvis = "{URL_EXAMPLES["xbus"]}"'
+        if not table and "tracked" in self._tables:
+            return {}  # a VR rig alone observes sites too
         if not table:
             raise self.error("no sensors", f"add a [sensors] table with site = device URL lines, e.g. {example}",
                              self.line("sensors"))
@@ -376,8 +403,15 @@ class _Parser:
             raise self.error(f"insoles: {problem[0]}", problem[1], self.line("insoles", "url"))
         return url
 
-    def _check_one_device_per_site(self, sensors: dict[str, SensorEntry], insoles: str | None) -> None:
+    def _tracked(self, table: dict[str, Any] | None, sensors: dict[str, SensorEntry]) -> dict[str, TrackedEntry]:
+        from app.capture.setup_tracked import parse_tracked
+
+        return parse_tracked(self, table, sensors)
+
+    def _check_one_device_per_site(self, sensors: dict[str, SensorEntry], insoles: str | None,
+                                   tracked: dict[str, TrackedEntry] | None = None) -> None:
         named = [(e.site, e.url, e.line) for e in sensors.values()]
+        named += [(e.name, e.url, e.line) for e in (tracked or {}).values()]
         if insoles:
             named.append(("insoles", insoles, self.line("insoles", "url")))
         named.sort(key=lambda n: n[2] or 0)
@@ -525,6 +559,10 @@ def _dump(setup: Setup, base: Path | None) -> str:
         f"# URLs: {', '.join(URL_EXAMPLES[k] for k in ('xbus', 'bno08x-rvc', 'xsens-can', 'dualsense'))}",
     ]
     lines += [f"{site.ljust(width)} = {_sensor_value(e)}" for site, e in setup.sensors.items()]
+    if setup.tracked:
+        lines += ["", "[tracked]", "# a VR rig: name = \"vmc-in://HOST:PORT?head=SERIAL&l_hand=SERIAL&r_hand=SERIAL\"",
+                  "# (controllers stand for the wrists' sites; a site is given once, here or under [sensors])"]
+        lines += [f"{name} = {_quote(e.url)}" for name, e in setup.tracked.items()]
     lines += ["", "# pressure insoles streaming to this host:port (Moticon); delete the table when there are none"]
     if setup.insoles:
         lines += ["[insoles]", f"url = {_quote(setup.insoles)}"]

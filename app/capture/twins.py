@@ -69,6 +69,17 @@ def simulation_problem(url: str) -> str | None:
         return None if is_loopback(host) else f"{host} is not a loopback address"
     if u.scheme == "movella-dot":
         return None if u.get("ble") else "a real DOT over Bluetooth (a simulated one is movella-dot://ADDRESS?ble=DIR)"
+    if u.scheme == "vmc-in":
+        from drivers.vmc.device import split_netloc
+
+        try:
+            host, port = split_netloc(u.netloc)
+        except ValueError as exc:
+            return str(exc)
+        if not is_loopback(host):
+            return (f"{host} is not a loopback address: a simulated VR rig sends to this machine only "
+                    f"(vmc-in://127.0.0.1:{port}?...)")
+        return None
     if u.scheme == "ximu3":
         if u.netloc != "udp":
             return f"an x-IMU3 over {u.netloc} (a simulated one is ximu3://udp/PORT, on loopback)"
@@ -137,4 +148,10 @@ def twin_setup(setup: Setup, folder: Path) -> Setup:
     insoles = setup.insoles
     if insoles is not None and simulation_problem(insoles) is not None:
         insoles = f"moticon-udp://127.0.0.1:{free_udp_port()}"
-    return dataclasses.replace(setup, sensors=sensors, insoles=insoles, path=None)
+    tracked = {}
+    for name, entry in setup.tracked.items():
+        url = entry.url
+        if simulation_problem(url) is not None:  # a rig on another PC: the same serials, on loopback
+            url = "vmc-in://127.0.0.1:{}?{}".format(free_udp_port(), url.partition("?")[2])
+        tracked[name] = dataclasses.replace(entry, url=url)
+    return dataclasses.replace(setup, sensors=sensors, insoles=insoles, tracked=tracked, path=None)
