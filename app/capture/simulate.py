@@ -32,6 +32,11 @@ from sim_devices.devices import DeviceFaults, SimDevice, make_sim_device
 
 INSOLES = "insoles"
 TRUTH_FORMAT = "imucap-truth"
+# A simulated VR rig reports in its own frame, as a runtime does: its origin where the room
+# setup put it (on the floor, away from where the subject stands) and its forward turned from
+# the subject's; the capture's calibration has to find that turn as it finds an IMU's heading.
+VR_FRAME_YAW_DEG = 35.0
+VR_FRAME_ORIGIN = (1.2, -0.8, 0.0)
 
 
 @dataclass
@@ -80,13 +85,18 @@ class SimulatedSubject:
         return sig, truth
 
 
-def sim_device_for(url: str, name: str, signals: SiteSignals, faults: DeviceFaults) -> SimDevice:
+def sim_device_for(url: str, name: str, signals: SiteSignals, faults: DeviceFaults, motion: Motion | None = None,
+                   tracking: bool = True) -> SimDevice:
     """The simulated device that answers at ``url`` (its scheme decides the protocol);
-    ``ValueError`` naming the URL when no simulator can serve it (``twins.simulation_problem``)."""
+    ``ValueError`` naming the URL when no simulator can serve it (``twins.simulation_problem``).
+    A VR rig (``vmc-in``) plays ``motion``'s tracked points (with consumer tracking error and
+    latency when ``tracking``), the same motion and clock as the IMUs' signals."""
     problem = simulation_problem(url)
     if problem is not None:
         raise ValueError(f"{name} = {url}: {problem}")
     u = parse_url(url)
+    if u.scheme == "vmc-in":
+        return sim_rig_for(url, name, motion, faults, tracking)
     kw: dict[str, Any] = {}
     if u.scheme in ("xbus", "bno08x-rvc"):
         Path(u.path).parent.mkdir(parents=True, exist_ok=True)  # e.g. /tmp/imucap-sim of the example setup
@@ -113,6 +123,38 @@ def sim_device_for(url: str, name: str, signals: SiteSignals, faults: DeviceFaul
     return make_sim_device(u.scheme, signals, name, faults=faults, name=name, **kw)
 
 
+def sim_rig_for(url: str, name: str, motion: Motion | None, faults: DeviceFaults, tracking: bool) -> SimDevice:
+    """The simulated VR rig sending to a ``vmc-in`` URL's port: its sites and serials, the
+    rig's frame turned and moved from the motion's (``VR_FRAME_YAW_DEG``)."""
+    import drivers
+    from sim_devices.devices.vr_rig import NO_NOISE, SimVrRig, TrackedSource, TrackingNoise
+
+    if motion is None:
+        raise ValueError(f"{name} = {url}: a simulated VR rig plays a motion, and none was given")
+    dev = drivers.make_device(url)  # its sites and serials; nothing is bound
+    source = TrackedSource(motion, dev.sites, VR_FRAME_YAW_DEG, VR_FRAME_ORIGIN)  # type: ignore[attr-defined]
+    return SimVrRig(source, 72.0, faults, name=name, host=dev.host, port=dev.port,  # type: ignore[attr-defined]
+                    serials=dev.serials, noise=TrackingNoise() if tracking else NO_NOISE)  # type: ignore[attr-defined]
+
+
+def rig_sensor_to_bone(motion: Motion, url: str) -> np.ndarray:
+    """(P, 3, 3) each rig device's frame in its site's segment at the motion's first frame
+    (a controller in the fist turns with the hand, so against the forearm it holds only
+    while the wrist does)."""
+    import drivers
+    from inference.body.rotations import quat_to_matrix
+    from inference.body.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX
+    from sim_devices.devices.vr_rig import tracked_points
+
+    dev = drivers.make_device(url)
+    points = tracked_points(motion, dev.sites)  # type: ignore[attr-defined]
+    out = []
+    for site, model_site in dev.site_names.items():  # type: ignore[attr-defined]
+        R_WS = quat_to_matrix(points[site][1][0])
+        out.append(R_WS.T @ motion.rot[0, SITE_SEGMENT_INDEX[SITE_INDEX[model_site]]])
+    return np.stack(out)
+
+
 class SimulatedSetup:
     """The running simulation: devices started, truth known."""
 
@@ -125,7 +167,7 @@ class SimulatedSetup:
             cuts = [(u.at + act0, u.seconds) for u in unplug or [] if u.device == name]
             f = DeviceFaults(clock_offset=50.0 * (k + 1), drift_ppm=(-1) ** k * 15.0 * (k + 1), disconnects=cuts,
                              seed=subject.seed + k)
-            self.devices[name] = sim_device_for(url, name, sig, f)
+            self.devices[name] = sim_device_for(url, name, sig, f, truth, tracking=subject.noise != NoiseModel())
         missing = [u.device for u in unplug or [] if u.device not in self.devices]
         if missing:
             raise ValueError(f"--unplug: no device {missing[0]!r} in the setup ({', '.join(self.devices)})")
@@ -161,6 +203,8 @@ class SimulatedSetup:
         tr = self.truth
         sites = self.subject.setup.sites()
         R_SB = self.signals.meta["R_SB"][[list(self.signals.sites).index(s) for s in sites]]
+        for entry in self.subject.setup.tracked.values():  # a rig's devices sit as tracked_points puts them
+            R_SB[[sites.index(s) for s in entry.sites]] = rig_sensor_to_bone(tr, entry.url)
         return save_truth(path, tr.rot, tr.root, tr.fps, self.t0 if self.t0 is not None else 0.0,
                           float(self.signals.meta["activity_start"]), tr.body.height, tr.body.offsets,
                           sites, self.subject.setup.calibration, R_SB=R_SB)

@@ -120,12 +120,24 @@ def tracked_points(motion: Motion, sites: tuple[str, ...] = DEFAULT_SITES) -> di
 
 class TrackedSource:
     """The devices' clean poses as functions of time, looping over the clip (linear for
-    positions, normalised linear for quaternions between frames a few ms apart)."""
+    positions, normalised linear for quaternions between frames a few ms apart).
 
-    def __init__(self, motion: Motion, sites: tuple[str, ...] = DEFAULT_SITES) -> None:
+    ``frame_yaw_deg``, ``frame_origin``: the VR system's own frame in the motion's world
+    (a turn about the vertical and a floor-level offset: where the room setup put its
+    origin and its forward); the poses are sent in that frame, as a runtime sends them."""
+
+    def __init__(self, motion: Motion, sites: tuple[str, ...] = DEFAULT_SITES, frame_yaw_deg: float = 0.0,
+                 frame_origin: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
         self.sites = tuple(sites)
         self.fps = float(motion.fps)
         self.points = tracked_points(motion, self.sites)
+        if frame_yaw_deg or any(frame_origin):
+            # world -> VR frame: p_vr = Rz(-yaw) (p - origin), q_vr = q_z(-yaw) q
+            half = -math.radians(frame_yaw_deg) / 2.0
+            qz = np.array([math.cos(half), 0.0, 0.0, math.sin(half)])
+            Rz = axis_angle_to_matrix(np.array([0.0, 0.0, -math.radians(frame_yaw_deg)]))
+            self.points = {s: ((P - np.asarray(frame_origin)) @ Rz.T, quat_multiply(qz, Q))
+                           for s, (P, Q) in self.points.items()}
         self.n = motion.n_frames
         self.duration = self.n / self.fps
         self.height = float(motion.body.height)
