@@ -109,6 +109,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--sensors", default="pelvis,head,l_wrist,r_wrist,l_shank,r_shank",
                    help="comma separated sensor sites (default: the paper's 6)")
     p.add_argument("--insoles", action="store_true", help="also observe the 4 foot contacts (pressure insoles)")
+    p.add_argument("--points", default="", metavar="POINTS",
+                   help="tracked VR points too (head,l_hand,r_hand[,pelvis]), read as the live vmc-in chain reads "
+                        "them: each stands for a model site (a controller for the wrist; app/tracked_eval.py); "
+                        "--sensors none for the points alone")
     p.add_argument("--steps", default=None,
                    help="diffusion steps: K (evenly spaced), 'paper' (10D list) or a list 1000,500,0; "
                         "default: the model's own")
@@ -227,7 +231,18 @@ def run(args: argparse.Namespace) -> int:
     from inference.signals.resample import FPS_MODEL
 
     set_torch_threads(args.threads)
-    sites = parse_sites(args.sensors)
+    sites = [] if args.sensors.strip().lower() in ("", "none") else parse_sites(args.sensors)
+    given, points = None, []
+    if args.points:
+        from app.tracked_eval import check_sites, parse_points, tracked_signals
+
+        points = parse_points(args.points)
+        check_sites(sites, points)
+        if args.report or args.confidence_report or REAL in map(str, args.data):
+            raise ValueError("--points scores the sets given; it takes no --report, --confidence-report or @real")
+        given = tracked_signals(points)
+    elif not sites:
+        raise ValueError("--sensors none needs --points: nothing would be observed")
     if args.limit is not None and args.limit < 1:
         raise ValueError("--limit must be at least 1")
     steps = parse_steps(args.steps) if args.steps is not None else None
@@ -291,9 +306,9 @@ def run(args: argparse.Namespace) -> int:
                                           stride_scale=args.stride_scale,
                                           pelvis_odometry="default" if args.pelvis_odometry else None,
                                           causal=causal, confidence=confidence and kind == "diffusion",
-                                          lanes=lanes)
+                                          lanes=lanes, given=given)
         summary.update({
-            "model": str(spec), "kind": kind, "sensors": list(set_sites),
+            "model": str(spec), "kind": kind, "sensors": list(set_sites), "points": list(points),
             "insoles": insoles, "steps": _steps_label(st, kind), "step_list": st if kind == "diffusion" else None,
             "noise": bool(noise is not None), "seed": args.seed, "smoothing": args.smoothing,
             "inpaint_noise": noise_mode_for(model, args.inpaint_noise) if kind == "diffusion" else None,

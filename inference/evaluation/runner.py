@@ -89,12 +89,20 @@ def face_forward(motion: Motion) -> Motion:
     return replace(motion, rot=Rz @ motion.rot, root=root)
 
 
+# signals of sites that are not IMUs (tracked points, app/tracked_eval.py): (aligned motion, seed)
+# -> site -> (quat (T, 4) bone -> world, free acceleration (T, 3) world, unsmoothed) at 60 Hz
+GivenSignals = Callable[[Motion, int], dict[str, tuple[np.ndarray, np.ndarray]]]
+
+
 def clip_input(motion: Motion, sites: Sequence[str], insoles: bool = False, noise: NoiseModel | None = None,
-               seed: int = 0, align: bool = True, causal: bool = False) -> ClipInput:
+               seed: int = 0, align: bool = True, causal: bool = False,
+               given: GivenSignals | None = None) -> ClipInput:
     """Synthesize a motion's signals at `sites` and turn them into 20 Hz features and
     masks the way the live pipeline does (module docstring), plus the 20 Hz truth.
     ``align`` first turns the clip to face +X at its start (``face_forward``); ``causal``:
-    the trailing acceleration filter of the low-latency live mode."""
+    the trailing acceleration filter of the low-latency live mode; ``given``: further
+    sites whose 60 Hz signals come from elsewhere (a tracked point read as the live chain
+    reads it), resampled and masked like the IMU sites."""
     sites = parse_sites(list(sites))
     if align:
         motion = face_forward(motion)
@@ -102,10 +110,23 @@ def clip_input(motion: Motion, sites: Sequence[str], insoles: bool = False, nois
     rot = kin.rot[::STEP]
     T = rot.shape[0]
     feats = np.zeros((T, N_FEATURES))
+    raws, quats = [], []
     if sites:
         sig = synthesize(motion, noise, rng=seed, sites=tuple(sites))
-        raw = sig.meta["free_acc_raw"]  # unsmoothed, as a device streams it
-        acc20, quat20 = downsample(raw, sig.quat, causal)
+        raws.append(sig.meta["free_acc_raw"])  # unsmoothed, as a device streams it
+        quats.append(sig.quat)
+    if given is not None:
+        extra = given(motion, seed)
+        clash = sorted(set(extra) & set(sites))
+        if clash:
+            raise ValueError(f"site(s) {', '.join(clash)} given both as IMU and from elsewhere")
+        sites = sites + parse_sites(list(extra))
+        raws.append(np.stack([a for _, a in extra.values()], axis=1))
+        quats.append(np.stack([q for q, _ in extra.values()], axis=1))
+    if sites:
+        n = min(len(r) for r in raws)
+        raw = np.concatenate([r[:n] for r in raws], axis=1)
+        acc20, quat20 = downsample(raw, np.concatenate([q[:n] for q in quats], axis=1), causal)
         R = quat_to_matrix(quat20)
         for k, s in enumerate(sites):
             seg = SEGMENT_INDEX[SITE_SEGMENT[s]]
@@ -181,6 +202,7 @@ def evaluate_motions(
     confidence: ConfidenceSettings | bool | None = None,
     lanes: int = DEFAULT_LANES,
     causal: bool = False,
+    given: GivenSignals | None = None,
 ) -> tuple[dict, list[ClipResult]]:
     """Evaluate one model and sensor set over motions; returns (pooled summary, per-clip
     results). ``keep`` retains reconstructions (for exports) instead of only metrics;
@@ -190,10 +212,12 @@ def evaluate_motions(
     ``pelvis_odometry`` and ``confidence``. ``lanes`` clips share each model call
     (``batched.reconstruct_many``: each clip's answer is its frame-by-frame one); 1 runs
     them one after the other. ``causal``: the signals through the low-latency mode's trailing
-    acceleration filter (docs/latency.md)."""
+    acceleration filter (docs/latency.md); ``given``: sites whose signals come from elsewhere
+    (``clip_input``)."""
     from tqdm import tqdm
 
-    inputs = [clip_input(m, sites, insoles, noise, clip_seed(seed, m.name), causal=causal) for m in motions]
+    inputs = [clip_input(m, sites, insoles, noise, clip_seed(seed, m.name), causal=causal, given=given)
+              for m in motions]
     total = sum(i.features.shape[0] for i in inputs)
     posers = [clip_poser(model, inp, steps, clip_seed(seed, inp.name), smoothing, contact_detector, inpaint_noise,
                          mirror, stride_scale, pelvis_odometry, confidence) for inp in inputs]
