@@ -1,20 +1,23 @@
 """The IMU reading a tracked pose implies, so that the rest of the chain (hub, calibration,
 resampler, model) reads a VR headset or controller as it reads an IMU at that site.
 
-Per site, a short causal window of the last poses (``WINDOW_S`` = 80 ms, at least
+Per site, a short causal window of the last poses (``WINDOW_S`` = 150 ms, at least
 ``MIN_SAMPLES`` of them) gives:
 
 - ``free_acc`` (world, Z up, gravity removed, m/s^2): twice the quadratic coefficient of a
   least-squares fit of position against time, per axis. Why a fit and not a second
   difference: the tracking jitter (1 mm per axis, white) makes a second difference at
-  72 Hz ~13 m/s^2 per axis of noise; a quadratic through the ~7 poses of 80 ms (the
-  window reaches back to the first pose at or before its start) brings it to ~1.1 m/s^2,
-  which the live resampler's 11-frame average smooths further. A longer window would lag
-  more and round off a step's heel strike. The fit uses the sender's times
-  (``/VMC/Ext/T``) when the bundle has them, else arrival times, so an uneven arrival
-  (bundles read in one wake-up share one arrival stamp) does not bend the curve; poses
-  at one time are merged by the fit, not divided by a zero interval. The price: the
-  estimate is that of the window's middle, ~40 ms behind the pose it is sent with.
+  72 Hz ~13 m/s^2 per axis of noise; a quadratic through the 12 poses of 150 ms (the
+  window reaches back to the first pose at or before its start) brings it to ~0.3 m/s^2
+  per axis (~0.5 in 3D). Why 150 ms and not the 80 ms first tried (1.1 per axis, ~2 in
+  3D): the guided calibration reads a free-acceleration spread above 1 m/s^2 over 0.5 s
+  as walking (``calibration/guided.py``), so with 80 ms a standing subject's controllers
+  kept the walk step from ever ending. The fit uses the sender's times (``/VMC/Ext/T``)
+  when the bundle has them, else arrival times, so an uneven arrival (bundles read in one
+  wake-up share one arrival stamp) does not bend the curve; poses at one time are merged
+  by the fit, not divided by a zero interval. The price: the estimate is that of the
+  window's middle, ~75 ms behind the pose it is sent with (the live resampler's
+  11-frame average spans 183 ms).
 - ``acc`` (sensor frame, specific force, m/s^2): ``R^T (free_acc + g up)``, what an
   accelerometer strapped to the device reads (a still device reads +9.81 on its up axis,
   as ``drivers.base.Sample`` says of every driver).
@@ -38,7 +41,7 @@ import numpy as np
 
 from .._math import G
 
-WINDOW_S = 0.08  # s of poses per fit: 6 samples at 72 Hz, 7 at 90 Hz
+WINDOW_S = 0.15  # s of poses per fit: with the one before it, 12 poses at 72 Hz
 MIN_SAMPLES = 4
 MIN_SPAN_S = 0.03  # s the window's times must span (4 bundles at 120 Hz do)
 MAX_GAP_S = 0.1  # s between two poses beyond which the window starts over

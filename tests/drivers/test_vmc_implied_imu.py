@@ -32,7 +32,7 @@ def test_a_circle_at_known_speed_reads_v2_over_r_toward_the_centre():
     imu = ImpliedImu()
     out = [imu.update(ti, pi, UP) for ti, pi in zip(t, p, strict=True)]
     assert all(o is None for o in out[:3]) and all(o is not None for o in out[6:])
-    lag = 0.04  # the fit's estimate is the window's middle
+    lag = 0.075  # the fit's estimate is the window's middle
     for k in range(20, 200, 17):
         a = out[k].free_acc
         assert np.linalg.norm(a) == pytest.approx(v * v / r, rel=0.02)
@@ -70,7 +70,7 @@ def test_uneven_times_noise_and_gaps():
     a = np.array([o.free_acc for ti, pi in zip(t, p, strict=True) if (o := imu.update(ti, pi, UP)) is not None])
     mag = np.linalg.norm(a[:, :2], axis=-1)
     assert np.mean(mag) == pytest.approx(v * v / r, rel=0.1)
-    assert 0.5 < np.std(a[:, 2]) < 2.0  # ~1.1 m/s^2 per axis of the 1 mm jitter (module docstring)
+    assert 0.15 < np.std(a[:, 2]) < 0.6  # ~0.3 m/s^2 per axis of the 1 mm jitter (module docstring)
     # a gap beyond MAX_GAP_S starts over: nothing implied across it
     assert imu.update(t[-1] + 0.5, p[-1], UP) is None
     # poses at one time (arrival stamps of one wake-up) are merged, never divided by zero
