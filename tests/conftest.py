@@ -62,7 +62,7 @@ REALTIME_MODULES = {"sim_devices/test_suit.py", "drivers/test_batched.py",
 # test on the second core the capture's walk calibration put a CAN wrist 10-20 deg off.
 # scripts/test.sh runs these alone, after the parallel pass.
 SOLO_MODULES = {"app/capture/test_capture_e2e.py", "test_readme.py", "app/capture/test_replay_reproduces_capture.py",
-                "app/capture/test_capture_wireless.py"}
+                "app/capture/test_capture_wireless.py", "app/capture/test_capture_vr.py"}
 
 
 def pytest_collection_modifyitems(config, items):
