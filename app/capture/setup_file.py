@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from app.capture.setup_lines import Locator
+from app.capture.setup_tracked import TrackedEntry, parse_tracked
 from drivers.urls import DeviceURL
 from inference.body.skeleton import SITES
 
@@ -73,17 +74,6 @@ class SensorEntry:
     serial: str | None = None
     label: str | None = None
     line: int | None = field(default=None, compare=False)  # where it was written, for later messages
-
-
-@dataclass
-class TrackedEntry:
-    """A VR rig (``[tracked]``): one device, several of the model's sites (``sites``, in the
-    URL's order, as the hub names them: ``drivers.vmc.device.MODEL_SITES``)."""
-
-    name: str
-    url: str
-    sites: tuple[str, ...]
-    line: int | None = field(default=None, compare=False)
 
 
 @dataclass
@@ -404,9 +394,7 @@ class _Parser:
         return url
 
     def _tracked(self, table: dict[str, Any] | None, sensors: dict[str, SensorEntry]) -> dict[str, TrackedEntry]:
-        from app.capture.setup_tracked import parse_tracked
-
-        return parse_tracked(self, table, sensors)
+        return parse_tracked(self, table, sensors, url_problem, URL_EXAMPLES["vmc-in"])
 
     def _check_one_device_per_site(self, sensors: dict[str, SensorEntry], insoles: str | None,
                                    tracked: dict[str, TrackedEntry] | None = None) -> None:

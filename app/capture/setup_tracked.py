@@ -8,18 +8,29 @@ is observed by one device: under ``[sensors]`` or by one rig, never both.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
 
-from app.capture.setup_file import URL_EXAMPLES, SensorEntry, TrackedEntry, url_problem
 from inference.body.skeleton import SITES
 
-if TYPE_CHECKING:
-    from app.capture.setup_file import _Parser
+
+@dataclass
+class TrackedEntry:
+    """A VR rig (``[tracked]``): one device, several of the model's sites (``sites``, in the
+    URL's order, as the hub names them: ``drivers.vmc.device.MODEL_SITES``)."""
+
+    name: str
+    url: str
+    sites: tuple[str, ...]
+    line: int | None = field(default=None, compare=False)
 
 
-def parse_tracked(parser: _Parser, table: dict[str, Any] | None,
-                  sensors: dict[str, SensorEntry]) -> dict[str, TrackedEntry]:
-    """The ``[tracked]`` table's rigs; the first problem as the parser's one-line error."""
+def parse_tracked(parser: Any, table: dict[str, Any] | None, sensors: dict[str, Any],
+                  url_problem: Callable[[Any, str], tuple[str, str] | None], example: str) -> dict[str, TrackedEntry]:
+    """The ``[tracked]`` table's rigs; the first problem as the setup parser's one-line error
+    (``parser``: ``setup_file._Parser``; ``url_problem`` and ``example`` are that module's,
+    passed in so that this one does not import it back)."""
     import drivers
 
     out: dict[str, TrackedEntry] = {}
@@ -28,7 +39,7 @@ def parse_tracked(parser: _Parser, table: dict[str, Any] | None,
         line = parser.line("tracked", name)
         if name in SITES or name == "insoles":
             raise parser.error(f"[tracked] {name}: a tracked device is named for itself, not for a site",
-                               f'name it e.g. vr = "{URL_EXAMPLES["vmc-in"]}"', line)
+                               f'name it e.g. vr = "{example}"', line)
         url = parser._text("tracked", name, value, line).strip()
         problem = url_problem(url, "tracked")
         if problem is not None:
