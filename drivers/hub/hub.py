@@ -229,7 +229,7 @@ class Hub:
             imu: list[Sample] = []
             last_imu = tr.ring.last_t()
             for s in batch:
-                st = tr.clock.update(s.device_time, s.t) if s.device_time is not None else s.t
+                st = (tr.clock.update(s.device_time, s.t) if s.device_time is not None else s.t) - tr.age
                 insole = "force" in s.extra
                 if insole:
                     self.insole_names.add(tr.name)

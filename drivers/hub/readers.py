@@ -48,6 +48,9 @@ class Track:
         self.insole: deque[tuple[float, np.ndarray, np.ndarray]] = deque(maxlen=history)
         self.gap_spans: deque[tuple[float, float]] = deque(maxlen=64)
         self.lost_pending = 0
+        # s a sample's content is older than its stamp (a VR runtime's tracking latency,
+        # ``vmc-in://...&latency_ms=``): the hub dates it that much earlier
+        self.age = float(getattr(device, "pose_age", 0.0) or 0.0)
         self.site_of: dict[str, str] = {}
         self.site_rings: dict[str, Ring] = {}
         self.site_gaps: dict[str, deque[tuple[float, float]]] = {}

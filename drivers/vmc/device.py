@@ -68,13 +68,15 @@ class VmcInDevice(Device):
     """Receives VMC device messages on ``host:port`` for the sites in ``serials``
     (site -> OpenVR serial). ``prefer_local``: of a serial sent in both forms, use
     ``/Pos/Local`` (the spec's "device raw scale") rather than ``/Pos``; a serial sent in one
-    form only is used in that form."""
+    form only is used in that form. ``latency_ms``: how much older a pose is than its bundle
+    (the runtime's tracking latency, when known): the hub dates the samples that much
+    earlier (``pose_age``), so they line up with IMUs that have none."""
 
     scheme = "vmc-in"
     kind = "tracked"
 
     def __init__(self, host: str, port: int, serials: dict[str, str], *, prefer_local: bool = False,
-                 **kw: Any) -> None:
+                 latency_ms: float = 0.0, **kw: Any) -> None:
         super().__init__(kw.pop("device_id", None) or "vr", **kw)
         unknown = sorted(set(serials) - set(TRACKED_SITES))
         if unknown:
@@ -91,6 +93,10 @@ class VmcInDevice(Device):
         self.host, self.port = host, int(port)
         self.serials = dict(serials)
         self.prefer_local = prefer_local
+        if not 0.0 <= latency_ms <= 500.0:
+            raise ValueError(f"vmc-in URL: latency_ms={latency_ms:g} is not a tracking latency (0-500 ms)")
+        self.latency_ms = float(latency_ms)
+        self.pose_age = self.latency_ms / 1000.0  # s: read by the hub (drivers/hub/readers.py: Track)
         self._site_of = by_serial
         self._family = socket.AF_INET6 if ipaddress.ip_address(host).version == 6 else socket.AF_INET
         self._sock: socket.socket | None = None
@@ -106,12 +112,16 @@ class VmcInDevice(Device):
     def from_url(cls, netloc: str, params: dict[str, str], **kw: Any) -> VmcInDevice:
         host, port = split_netloc(netloc)
         serials = {k: v for k, v in params.items() if k in TRACKED_SITES}
-        other = sorted(set(params) - set(TRACKED_SITES) - {"id", "reconnect", "local"})
+        other = sorted(set(params) - set(TRACKED_SITES) - {"id", "reconnect", "local", "latency_ms"})
         if other:
             raise ValueError(f"vmc-in URL: unknown parameter(s) {', '.join(other)} "
-                             f"(sites: {', '.join(TRACKED_SITES)}; local=1 prefers /Pos/Local)")
+                             f"(sites: {', '.join(TRACKED_SITES)}; local=1 prefers /Pos/Local; latency_ms=MS)")
         local = params.get("local", "0").lower() in ("1", "true", "yes", "on")
-        return cls(host, port, serials, prefer_local=local, **kw)
+        try:
+            latency = float(params.get("latency_ms", "0"))
+        except ValueError:
+            raise ValueError(f"vmc-in URL: latency_ms={params['latency_ms']!r} is not a number") from None
+        return cls(host, port, serials, prefer_local=local, latency_ms=latency, **kw)
 
     @property
     def sites(self) -> tuple[str, ...]:
@@ -125,7 +135,8 @@ class VmcInDevice(Device):
     def describe(self) -> str:
         host = f"[{self.host}]" if self._family == socket.AF_INET6 else self.host
         return build_url("vmc-in", f"{host}:{self.port}", **self.serials,
-                         local=1 if self.prefer_local else None)
+                         local=1 if self.prefer_local else None,
+                         latency_ms=f"{self.latency_ms:g}" if self.latency_ms else None)
 
     def pose(self, site: str) -> TrackedPose | None:
         """The latest pose of ``site`` (None before the first), whichever thread reads."""

@@ -106,3 +106,36 @@ def test_a_site_given_by_two_devices_is_refused():
     imu = make_device(f"ximu3://udp/{free_udp_port()}?ip=127.0.0.1")  # built, not opened
     with pytest.raises(ValueError, match="site head is given twice: by device head and by device vr"):
         Hub({"head": imu, "vr": a})
+
+
+def test_a_rigs_latency_dates_its_samples_earlier():
+    """Two receivers of the same bundles, one told the runtime's latency: its samples are
+    dated that much earlier, the other's as they came."""
+    pa, pb = free_udp_port(), free_udp_port()
+    a = make_device(f"vmc-in://127.0.0.1:{pa}?head=HMD")
+    b = make_device(f"vmc-in://127.0.0.1:{pb}?r_hand=CON-R&latency_ms=30")
+    assert b.pose_age == 0.03 and "latency_ms=30" in b.describe()
+    hub = Hub({"a": a, "b": b}, latency=0.08)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    hub.start()
+    try:
+        t0 = time.monotonic()
+        for k in range(150):
+            bundle = vmc.encode_frame(poses(k / 72.0), sender_time=5.0 + k / 72.0)
+            tx.sendto(bundle, ("127.0.0.1", pa))
+            tx.sendto(bundle, ("127.0.0.1", pb))
+            time.sleep(max(0.0, t0 + (k + 1) / 72.0 - time.monotonic()))
+        end = time.monotonic() + 10.0
+        while time.monotonic() < end and min(len(hub.tracks[n].ring) for n in "ab") < 150:
+            hub.poll()
+            time.sleep(0.02)
+        hub.poll()
+    finally:
+        hub.stop()
+        tx.close()
+    ta = hub.tracks["a"].site_rings["head"].last(100)[:, 0]
+    tb = hub.tracks["b"].site_rings["r_wrist"].last(100)[:, 0]
+    assert np.isfinite(ta).all() and np.isfinite(tb).all()
+    assert np.median(ta - tb) == pytest.approx(0.030, abs=0.004)
+    with pytest.raises(ValueError, match="latency_ms"):
+        make_device(f"vmc-in://127.0.0.1:{pa}?head=H&latency_ms=fast")
