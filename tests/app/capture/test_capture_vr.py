@@ -15,8 +15,11 @@ from __future__ import annotations
 
 import json
 import os
+import queue
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -33,8 +36,9 @@ CLI = [sys.executable, "-m", "app.cli.main"]
 GA_BOUND_DEG = 12.0
 TRACKED_SEGMENT_BOUND_DEG = 3.0  # head and forearms at replay's lag: measured 0.4-1.2 deg
 # each observed segment at the truth's own clock (the rig's 15 ms latency given in its URL):
-# head and forearms measured 0.41-0.72 deg, shanks 1.06-1.67
-AT_CLOCK_BOUND_DEG = {"head": 1.5, "l_forearm": 1.5, "r_forearm": 1.5, "l_shank": 3.0, "r_shank": 3.0}
+# head and forearms measured 0.40-0.89 deg, shanks 0.65-2.11 on a quiet machine, and up to 1.35
+# and 2.92 beside other jobs (load 4 on 2 cores); ~1.5x the latter
+AT_CLOCK_BOUND_DEG = {"head": 2.0, "l_forearm": 2.0, "r_forearm": 2.0, "l_shank": 4.5, "r_shank": 4.5}
 
 
 def write_setup(tmp: Path) -> Path:
@@ -75,14 +79,23 @@ def captured(tmp_path_factory):
                             "--truth", str(truth), "--lead-in", "15", "--seed", "1"],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     cap = None
+    lines: queue.Queue[str | None] = queue.Queue()
+
+    def read_stdout() -> None:
+        for line in sim.stdout:
+            lines.put(line)
+        lines.put(None)
+
+    threading.Thread(target=read_stdout, daemon=True).start()
     try:
-        lines = []
-        for line in sim.stdout:  # ends when the child does: a failed start is not waited on forever
-            lines.append(line)
-            if line.startswith("simulating"):
-                break
-        assert lines and lines[-1].startswith("simulating") and truth.exists(), "".join(lines)
-        duration = float(lines[-1].split()[1])
+        seen: list[str] = []
+        deadline = time.monotonic() + 180.0  # synthesis of the session on a busy machine
+        while not (seen and seen[-1].startswith("simulating")):
+            line = lines.get(timeout=max(0.1, deadline - time.monotonic()))  # queue.Empty past the deadline
+            assert line is not None, "".join(seen) + sim.stderr.read()[-2000:]
+            seen.append(line)
+        assert truth.exists(), "".join(seen)
+        duration = float(seen[-1].split()[1])
         rec = tmp / "rec.h5"
         cap = subprocess.run([*CLI, "capture", "--setup", str(setup), "--headless", "--record", str(rec),
                               "--seconds", f"{duration - 4.0:.1f}", "--json", "--countdown", "1"],
