@@ -36,7 +36,8 @@ from drivers.vmc.device import MODEL_SITES
 from drivers.vmc.implied_imu import ImpliedImu
 from inference.body.motion import Motion
 from inference.body.rotations import matrix_to_quat, quat_multiply, quat_to_matrix
-from inference.body.skeleton import SEGMENT_INDEX, SITE_SEGMENT
+from inference.body.skeleton import SEGMENT_INDEX, SEGMENTS, SITE_SEGMENT
+from inference.body.tracked import POINT_SEGMENTS, TRACKED_POINTS, point_features, presence
 from inference.signals.synthesis import FPS_SIGNAL
 from sim_devices.devices.vr_rig import ROLES, SimVrRig, TrackedSource, TrackingNoise
 
@@ -81,6 +82,63 @@ def _nlerp(q: np.ndarray, t_src: np.ndarray, t: np.ndarray) -> np.ndarray:
     return out / np.linalg.norm(out, axis=-1, keepdims=True)
 
 
+def _rig_poses(motion: Motion, points: Sequence[str], seed: int, noise: TrackingNoise,
+               rate: float) -> tuple[Motion, np.ndarray, np.ndarray, dict[str, tuple[list, list]]]:
+    """The rig's noisy poses of ``points`` over ``motion``: (the 60 Hz motion, its grid, the
+    rig's send times, point -> (positions, quaternions) per send)."""
+    m60 = motion.resample(FPS_SIGNAL)
+    grid = np.arange(m60.n_frames) / FPS_SIGNAL
+    rig = SimVrRig(TrackedSource(m60, tuple(points)), rate=rate, noise=noise)
+    rig.rng = np.random.default_rng(seed)
+    t_rig = np.arange(int(np.floor(grid[-1] * rate)) + 1) / rate
+    poses: dict[str, tuple[list, list]] = {p: ([], []) for p in points}
+    site_of_serial = {rig.serials[p]: p for p in points}
+    for t in t_rig:
+        for pose in rig.poses(float(t)):
+            pos, quat = poses[site_of_serial[pose.serial]]
+            pos.append(np.asarray(pose.position, float))
+            quat.append(np.asarray(pose.quat, float))
+    return m60, grid, t_rig, poses
+
+
+def _onto_segment(q_dev: np.ndarray, R_seg0: np.ndarray) -> np.ndarray:
+    """Device orientations (T, 4) turned into their segment's, matched on the first frame
+    (a calibration in the standing start)."""
+    q_db = matrix_to_quat(quat_to_matrix(q_dev[0]).T @ R_seg0)
+    q = quat_multiply(q_dev, np.broadcast_to(q_db, q_dev.shape))
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def tracked_points_input(points: Sequence[str], noise: TrackingNoise | None = None, rate: float = RIG_RATE):
+    """For a model that reads tracked points (``ModelConfig.points``): a callable (motion,
+    seed) -> (segment name -> quaternion (T, 4) of the segment the point sits on, the
+    position input (T, 16)) on the motion's 60 Hz frames, for
+    ``inference.evaluation.runner.clip_input(tracked=...)``: the rig's noisy poses as
+    ``tracked_signals`` takes them, each point's orientation for its own segment (a
+    controller for the hand) and its position for ``inference.body.tracked.point_features``."""
+    points = parse_points(points)
+    if "head" not in points:
+        raise ValueError("--points for a model with a position input needs the headset (head): "
+                         "the positions are read against it")
+    noise = noise or TrackingNoise()
+    flags = presence(points)
+
+    def signals(motion: Motion, seed: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        m60, grid, t_rig, poses = _rig_poses(motion, points, seed, noise, rate)
+        pos = np.zeros((len(grid), len(TRACKED_POINTS), 3))
+        segs: dict[str, np.ndarray] = {}
+        for k, name in enumerate(TRACKED_POINTS):
+            if name not in poses:
+                continue
+            P, Q = (np.stack(v) for v in poses[name])
+            pos[:, k] = np.stack([np.interp(grid, t_rig, P[:, a]) for a in range(3)], axis=-1)
+            seg = POINT_SEGMENTS[k]
+            segs[SEGMENTS[seg]] = _onto_segment(_nlerp(Q, t_rig, grid), m60.rot[0, seg])
+        return segs, point_features(pos, flags)
+
+    return signals
+
+
 def tracked_signals(points: Sequence[str], noise: TrackingNoise | None = None, rate: float = RIG_RATE,
                     ) -> TrackedSignals:
     """A callable (motion, seed) -> model site -> (quat (T, 4) w x y z bone -> world, free
@@ -91,42 +149,24 @@ def tracked_signals(points: Sequence[str], noise: TrackingNoise | None = None, r
     noise = noise or TrackingNoise()
 
     def signals(motion: Motion, seed: int) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        m60 = motion.resample(FPS_SIGNAL)
-        T = m60.n_frames
-        grid = np.arange(T) / FPS_SIGNAL
-        rig = SimVrRig(TrackedSource(m60, tuple(points)), rate=rate, noise=noise)
-        rig.rng = np.random.default_rng(seed)
-        n = int(np.floor(grid[-1] * rate)) + 1
-        t_rig = np.arange(n) / rate
-        est = {p: ImpliedImu() for p in points}
-        pos_q: dict[str, list[np.ndarray]] = {p: [] for p in points}
-        acc_t: dict[str, list[float]] = {p: [] for p in points}
-        acc_v: dict[str, list[np.ndarray]] = {p: [] for p in points}
-        site_of_serial = {rig.serials[p]: p for p in points}
-        for t in t_rig:
-            for pose in rig.poses(float(t)):
-                p = site_of_serial[pose.serial]
-                q = np.asarray(pose.quat, float)
-                pos_q[p].append(q)
-                reading = est[p].update(float(t), np.asarray(pose.position, float), q)
-                if reading is not None:
-                    acc_t[p].append(float(t))
-                    acc_v[p].append(reading.free_acc)
+        m60, grid, t_rig, poses = _rig_poses(motion, points, seed, noise, rate)
         out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         for p in points:
-            site = MODEL_SITES[p]
-            q_dev = _nlerp(np.stack(pos_q[p]), t_rig, grid)
-            if acc_t[p]:
-                a = np.stack(acc_v[p])
-                free = np.stack([np.interp(grid, np.asarray(acc_t[p]), a[:, k]) for k in range(3)], axis=-1)
+            P, Q = (np.stack(v) for v in poses[p])
+            est = ImpliedImu()
+            acc_t, acc_v = [], []
+            for t, pos, q in zip(t_rig, P, Q):
+                reading = est.update(float(t), pos, q)
+                if reading is not None:
+                    acc_t.append(float(t))
+                    acc_v.append(reading.free_acc)
+            if acc_t:
+                a = np.stack(acc_v)
+                free = np.stack([np.interp(grid, np.asarray(acc_t), a[:, k]) for k in range(3)], axis=-1)
             else:
-                free = np.zeros((T, 3))
-            # device -> bone, matched on the first frame (a calibration in the standing start)
-            R_bone0 = m60.rot[0, SEGMENT_INDEX[SITE_SEGMENT[site]]]
-            R_dev0 = quat_to_matrix(q_dev[0])
-            q_db = matrix_to_quat(R_dev0.T @ R_bone0)
-            quat = quat_multiply(q_dev, np.broadcast_to(q_db, q_dev.shape))
-            out[site] = (quat / np.linalg.norm(quat, axis=-1, keepdims=True), free)
+                free = np.zeros((len(grid), 3))
+            site = MODEL_SITES[p]
+            out[site] = (_onto_segment(_nlerp(Q, t_rig, grid), m60.rot[0, SEGMENT_INDEX[SITE_SEGMENT[site]]]), free)
         return out
 
     return signals

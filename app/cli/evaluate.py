@@ -232,15 +232,16 @@ def run(args: argparse.Namespace) -> int:
 
     set_torch_threads(args.threads)
     sites = [] if args.sensors.strip().lower() in ("", "none") else parse_sites(args.sensors)
-    given, points = None, []
+    given, tracked_input, points = None, None, []
     if args.points:
-        from app.tracked_eval import check_sites, parse_points, tracked_signals
+        from app.tracked_eval import check_sites, parse_points, tracked_points_input, tracked_signals
 
         points = parse_points(args.points)
         check_sites(sites, points)
         if args.report or args.confidence_report or REAL in map(str, args.data):
             raise ValueError("--points scores the sets given; it takes no --report, --confidence-report or @real")
         given = tracked_signals(points)
+        tracked_input = tracked_points_input(points) if "head" in points else None
     elif not sites:
         raise ValueError("--sensors none needs --points: nothing would be observed")
     if args.limit is not None and args.limit < 1:
@@ -297,6 +298,10 @@ def run(args: argparse.Namespace) -> int:
         if latency_warning:
             print(f"evaluate: warning: {latency_warning}", file=sys.stderr)
         kind = "floor" if model is None else model.kind
+        # a model with a position input reads the points as points, any other as the IMUs they imply
+        reads_points = kind == "diffusion" and bool(getattr(model.config, "points", False))
+        if reads_points and given is not None and tracked_input is None:
+            raise ValueError(f"{spec} reads tracked positions against the headset: add head to --points")
         st = (steps if steps is not None else default_steps(model)) if kind == "diffusion" else []
         summary, clips = evaluate_motions(motions, model, set_sites, insoles, st or None, noise, args.seed,
                                           progress=progress, keep=keep or confidence, desc=f"{label or spec}",
@@ -306,9 +311,11 @@ def run(args: argparse.Namespace) -> int:
                                           stride_scale=args.stride_scale,
                                           pelvis_odometry="default" if args.pelvis_odometry else None,
                                           causal=causal, confidence=confidence and kind == "diffusion",
-                                          lanes=lanes, given=given)
+                                          lanes=lanes, given=None if reads_points else given,
+                                          tracked=tracked_input if reads_points else None)
         summary.update({
             "model": str(spec), "kind": kind, "sensors": list(set_sites), "points": list(points),
+            "points_read_as": ("positions" if reads_points else "imu") if points else None,
             "insoles": insoles, "steps": _steps_label(st, kind), "step_list": st if kind == "diffusion" else None,
             "noise": bool(noise is not None), "seed": args.seed, "smoothing": args.smoothing,
             "inpaint_noise": noise_mode_for(model, args.inpaint_noise) if kind == "diffusion" else None,

@@ -88,6 +88,16 @@ def point_features(positions: Any, present: Any) -> Any:
     return xp.concatenate([flat, pres], axis=-1) if xp is np else xp.cat([flat, pres], dim=-1)
 
 
+def mirror_point_features(f: Any) -> Any:
+    """``point_features`` (..., 16) of the body reflected in its sagittal plane (world y ->
+    -y, left and right swapped), as ``inference.features.mirror`` reflects the features."""
+    n = len(TRACKED_POINTS)
+    swap = [TRACKED_POINTS.index({"l_hand": "r_hand", "r_hand": "l_hand"}.get(p, p)) for p in TRACKED_POINTS]
+    idx = [3 * j + k for j in swap for k in range(3)] + [3 * n + j for j in swap]
+    sign = [1.0, -1.0, 1.0] * n + [1.0] * n
+    return f[..., idx] * _as_like(sign, f)
+
+
 def presence(points: tuple[str, ...] | list[str]) -> np.ndarray:
     """(4,) bool flags of the named points (``TRACKED_POINTS`` order)."""
     unknown = sorted(set(points) - set(TRACKED_POINTS))
@@ -97,4 +107,4 @@ def presence(points: tuple[str, ...] | list[str]) -> np.ndarray:
 
 
 __all__ = ["TRACKED_POINTS", "THREE_POINTS", "POINT_SEGMENTS", "POINT_FEATURES", "grip_rotation", "point_locals",
-           "point_positions", "point_features", "presence"]
+           "point_positions", "point_features", "mirror_point_features", "presence"]

@@ -71,6 +71,7 @@ class ClipInput:
     rot: np.ndarray  # (T, 24, 3, 3) truth
     root: np.ndarray  # (T, 3) truth
     joints: np.ndarray  # (T, 24, 3) truth
+    points: np.ndarray | None = None  # (T, 16) tracked points' position input, for a model that reads it
 
 
 def face_forward(motion: Motion) -> Motion:
@@ -92,17 +93,22 @@ def face_forward(motion: Motion) -> Motion:
 # signals of sites that are not IMUs (tracked points, app/tracked_eval.py): (aligned motion, seed)
 # -> site -> (quat (T, 4) bone -> world, free acceleration (T, 3) world, unsmoothed) at 60 Hz
 GivenSignals = Callable[[Motion, int], dict[str, tuple[np.ndarray, np.ndarray]]]
+# tracked points for a model that reads them (ModelConfig.points): (aligned motion, seed) ->
+# (segment name -> quat (T, 4) bone -> world, the position input (T, 16)) at 60 Hz
+TrackedInput = Callable[[Motion, int], tuple[dict[str, np.ndarray], np.ndarray]]
 
 
 def clip_input(motion: Motion, sites: Sequence[str], insoles: bool = False, noise: NoiseModel | None = None,
                seed: int = 0, align: bool = True, causal: bool = False,
-               given: GivenSignals | None = None) -> ClipInput:
+               given: GivenSignals | None = None, tracked: TrackedInput | None = None) -> ClipInput:
     """Synthesize a motion's signals at `sites` and turn them into 20 Hz features and
     masks the way the live pipeline does (module docstring), plus the 20 Hz truth.
     ``align`` first turns the clip to face +X at its start (``face_forward``); ``causal``:
     the trailing acceleration filter of the low-latency live mode; ``given``: further
     sites whose 60 Hz signals come from elsewhere (a tracked point read as the live chain
-    reads it), resampled and masked like the IMU sites."""
+    reads it), resampled and masked like the IMU sites; ``tracked``: tracked points for a
+    model with a position input, their orientations as known segment entries and their
+    positions as ``ClipInput.points``, both taken at the 20 Hz frames."""
     sites = parse_sites(list(sites))
     if align:
         motion = face_forward(motion)
@@ -136,8 +142,16 @@ def clip_input(motion: Motion, sites: Sequence[str], insoles: bool = False, nois
     if insoles:
         feats[:, SL_CONTACT] = kin.contacts[::STEP].astype(np.float64)
     mask = np.broadcast_to(observation_mask(sites, insoles), (T, N_FEATURES)).copy()
+    points = None
+    if tracked is not None:
+        segs, pf = tracked(motion, seed)
+        for name, q in segs.items():
+            cols = slice(SL_ROT.start + 6 * SEGMENT_INDEX[name], SL_ROT.start + 6 * SEGMENT_INDEX[name] + 6)
+            feats[:, cols] = matrix_to_rot6d(quat_to_matrix(np.asarray(q)[::STEP][:T]))
+            mask[:, cols] = True
+        points = np.asarray(pf, np.float64)[::STEP][:T]
     return ClipInput(name=motion.name, body=motion.body, features=feats, mask=mask, rot=rot,
-                     root=kin.root[::STEP], joints=kin.joints[::STEP])
+                     root=kin.root[::STEP], joints=kin.joints[::STEP], points=points)
 
 
 def clip_seed(seed: int, name: str) -> int:
@@ -179,7 +193,7 @@ def reconstruct_clip(model: LoadedModel | None, inp: ClipInput, steps=None, seed
     """``clip_poser`` frame by frame over one clip, as live."""
     poser = clip_poser(model, inp, steps, seed, smoothing, contact_detector, inpaint_noise, mirror, stride_scale,
                        pelvis_odometry, confidence)
-    return reconstruct_offline(poser, inp.features, inp.mask, progress=progress)
+    return reconstruct_offline(poser, inp.features, inp.mask, progress=progress, points=inp.points)
 
 
 def evaluate_motions(
@@ -203,6 +217,7 @@ def evaluate_motions(
     lanes: int = DEFAULT_LANES,
     causal: bool = False,
     given: GivenSignals | None = None,
+    tracked: TrackedInput | None = None,
 ) -> tuple[dict, list[ClipResult]]:
     """Evaluate one model and sensor set over motions; returns (pooled summary, per-clip
     results). ``keep`` retains reconstructions (for exports) instead of only metrics;
@@ -212,18 +227,19 @@ def evaluate_motions(
     ``pelvis_odometry`` and ``confidence``. ``lanes`` clips share each model call
     (``batched.reconstruct_many``: each clip's answer is its frame-by-frame one); 1 runs
     them one after the other. ``causal``: the signals through the low-latency mode's trailing
-    acceleration filter (docs/latency.md); ``given``: sites whose signals come from elsewhere
-    (``clip_input``)."""
+    acceleration filter (docs/latency.md); ``given``, ``tracked``: sites whose signals come
+    from elsewhere, tracked points for a model with a position input (``clip_input``)."""
     from tqdm import tqdm
 
-    inputs = [clip_input(m, sites, insoles, noise, clip_seed(seed, m.name), causal=causal, given=given)
-              for m in motions]
+    inputs = [clip_input(m, sites, insoles, noise, clip_seed(seed, m.name), causal=causal, given=given,
+                         tracked=tracked) for m in motions]
     total = sum(i.features.shape[0] for i in inputs)
     posers = [clip_poser(model, inp, steps, clip_seed(seed, inp.name), smoothing, contact_detector, inpaint_noise,
                          mirror, stride_scale, pelvis_odometry, confidence) for inp in inputs]
     with tqdm(total=total, desc=desc, unit="frame", file=sys.stderr, disable=not progress,
               dynamic_ncols=True) as bar:
-        recs = reconstruct_many(posers, [(i.features, i.mask) for i in inputs], lanes=lanes, progress=bar.update)
+        recs = reconstruct_many(posers, [(i.features, i.mask) for i in inputs], lanes=lanes, progress=bar.update,
+                                points=[i.points for i in inputs])
     results: list[ClipResult] = []
     for inp, rec in zip(inputs, recs):
         cm = evaluate_clip(inp.name, rec.rot, rec.root, rec.joints, inp.rot, inp.root, inp.joints, FPS_MODEL)

@@ -101,11 +101,18 @@ class MirrorAveraged(nn.Module):
     def mirror(self, x: Tensor) -> Tensor:
         return x[..., self.idx] * self.scale + self.shift
 
-    def forward(self, x: Tensor, *rest: Tensor) -> Tensor:
+    def forward(self, x: Tensor, *rest: Tensor, points: Tensor | None = None) -> Tensor:
         """``x`` (B, N, F) normalised window; ``rest`` as the wrapped model takes them:
-        per-window tensors (B,) (level, height) are repeated, masks (B, N, F) mirrored."""
+        per-window tensors (B,) (level, height) are repeated, masks (B, N, F) mirrored;
+        ``points`` (B or 1, N, 16): tracked points' input, mirrored (``mirror_point_features``)."""
         b = x.shape[0]
         args = [torch.cat([a, a[..., self.idx]]) if a.dim() == x.dim() else torch.cat([a, a]) for a in rest]
+        if points is not None:
+            from inference.body.tracked import mirror_point_features
+
+            p = points.expand(b, -1, -1)
+            y = self.model(torch.cat([x, self.mirror(x)]), *args, points=torch.cat([p, mirror_point_features(p)]))
+            return 0.5 * (y[:b] + self.mirror(y[b:]))
         y = self.model(torch.cat([x, self.mirror(x)]), *args)
         return 0.5 * (y[:b] + self.mirror(y[b:]))
 

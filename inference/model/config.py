@@ -58,6 +58,11 @@ class ModelConfig:
     # answers in when not told (chosen at export), which is what the poser gets.
     readings: int = 0
     reading: int = 0
+    # tracked VR points (headset, controllers, waist tracker) as a position input of every
+    # frame token (``inference.body.tracked.point_features``: 16 numbers per frame, zeros
+    # where absent). Zero at first, so a model fine-tuned from one without it starts as
+    # that model; their orientations reach the model as known segment orientations.
+    points: bool = False
     T: int = 1000
 
     @classmethod

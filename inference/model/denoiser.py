@@ -52,6 +52,12 @@ class Denoiser(nn.Module):
             # zero at first: a model fine-tuned from one without readings starts as that model
             self.reading_emb = nn.Embedding(cfg.readings + 1, d)
             nn.init.zeros_(self.reading_emb.weight)
+        if cfg.points:
+            from inference.body.tracked import POINT_FEATURES
+
+            self.points_proj = nn.Linear(POINT_FEATURES, d)
+            nn.init.zeros_(self.points_proj.weight)
+            nn.init.zeros_(self.points_proj.bias)
         layer = nn.TransformerDecoderLayer(
             d_model=d, nhead=cfg.heads, dim_feedforward=cfg.ff, dropout=cfg.dropout,
             activation="gelu", batch_first=True, norm_first=True,
@@ -79,18 +85,23 @@ class Denoiser(nn.Module):
         return torch.stack([step, body], dim=1)
 
     def forward(self, z: Tensor, t: Tensor, height: Tensor, mask: Tensor | None = None,
-                reading: Tensor | None = None) -> Tensor:
+                reading: Tensor | None = None, points: Tensor | None = None) -> Tensor:
         """z (B, N, F) noised window, t (B,) int levels, height (B,) metres -> x0 (B, N, F).
         mask (B, N, F) bool, True = known: read only by ``mask_input`` models (None there
         means nothing is known: unconditional generation). reading (B,) int indices of
-        READINGS for models with ``readings``; None = the model's own ``reading``."""
+        READINGS for models with ``readings``; None = the model's own ``reading``.
+        points (B, N, 16) or (1, N, 16): tracked points' position input for models with
+        ``points`` (None: none tracked)."""
         n = z.shape[1]
         cond = self.cond_tokens(t, height, reading)
         inp = z
         if self.config.mask_input:
             m = torch.zeros_like(z) if mask is None else mask.to(z.dtype)
             inp = torch.cat([z, m], dim=-1)
-        tokens = torch.cat([cond, self.in_proj(inp)], dim=1) + self.pos[:, : n + 2]
+        frames = self.in_proj(inp)
+        if self.config.points and points is not None:
+            frames = frames + self.points_proj(points.to(frames.dtype))
+        tokens = torch.cat([cond, frames], dim=1) + self.pos[:, : n + 2]
         if self.training or torch.is_grad_enabled():
             h = self.decoder(tokens, cond)
         else:

@@ -164,8 +164,11 @@ def validate_steps(steps: Sequence[int], T: int = T_DEFAULT) -> None:
 
 # --------------------------------------------------------------------- samplers
 
-def _call(model, z: Tensor, t: int, height: Tensor, mask: Tensor | None = None) -> Tensor:
+def _call(model, z: Tensor, t: int, height: Tensor, mask: Tensor | None = None,
+          points: Tensor | None = None) -> Tensor:
     tt = torch.full((z.shape[0],), t, dtype=torch.long, device=z.device)
+    if points is not None:  # a model with a position input (ModelConfig.points), which reads the mask too
+        return model(z, tt, height, mask, points=points)
     if mask is not None:
         return model(z, tt, height, mask)
     return model(z, tt, height)
@@ -223,7 +226,8 @@ INPAINT_STARTS = ("sample", "mean")
 
 def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequence[int],
             generator: torch.Generator | None = None, schedule: Schedule | None = None,
-            mode: str = "paper", mask_input: bool | None = None, start: str = "sample") -> Tensor:
+            mode: str = "paper", mask_input: bool | None = None, start: str = "sample",
+            points: Tensor | None = None) -> Tensor:
     """Inpaint the unobserved features of a window (the paper's Algorithm 1).
 
     x_input: (B, N, F) normalised features; unobserved entries hold an initial guess (the
@@ -256,7 +260,8 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
     history"). With the DDIM modes the whole run is then deterministic and draws nothing.
 
     ``mask_input``: hand the model the mask too (default: ``wants_mask(model)``; pass it
-    for a traced model, which has no config).
+    for a traced model, which has no config). ``points`` (B or 1, N, 16): the tracked
+    points' position input of a model that takes one (``ModelConfig.points``).
 
     One model call per step; per step cost beyond the model is a few elementwise ops.
     """
@@ -284,14 +289,14 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
                     z = schedule.sqrt_ab(t) * x + schedule.sqrt_1mab(t) * draw(i == 0)
                     if mode == "replace":
                         z = torch.where(m, x_input, z)
-                x0 = _call(model, z, t, height, mk)
+                x0 = _call(model, z, t, height, mk, points)
                 x = torch.where(m, x_input, x0)
             return x
         if mode == "ddim":
             t0 = steps[0]
             z = schedule.sqrt_ab(t0) * x + schedule.sqrt_1mab(t0) * draw(True)
             for i, t in enumerate(steps):
-                x0 = _call(model, z, t, height, mk)
+                x0 = _call(model, z, t, height, mk, points)
                 x = torch.where(m, x_input, x0)
                 if i + 1 == len(steps):
                     break
@@ -304,7 +309,7 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
             t0 = steps[0]
             z = torch.where(m, x_input, schedule.sqrt_ab(t0) * x + schedule.sqrt_1mab(t0) * draw(True))
             for i, t in enumerate(steps):
-                x = torch.where(m, x_input, _call(model, z, t, height, mk))
+                x = torch.where(m, x_input, _call(model, z, t, height, mk, points))
                 if i + 1 == len(steps):
                     break
                 z = torch.where(m, x_input, ddim_step(schedule, z, x, t, steps[i + 1]))
@@ -313,7 +318,8 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
 
 
 def redraw(model, x_hat: Tensor, x_input: Tensor, mask: Tensor, height: Tensor, level: int, noise: Tensor,
-           schedule: Schedule | None = None, mask_input: bool | None = None) -> Tensor:
+           schedule: Schedule | None = None, mask_input: bool | None = None,
+           points: Tensor | None = None) -> Tensor:
     """Other inpaintings near an answer: ``x_hat`` (B, N, F), normalised, re-noised to
     ``level`` with ``noise`` (B, N, F) and denoised by one model call, the known entries
     held at ``x_input`` throughout (as in ``mode="replace"``).
@@ -328,7 +334,7 @@ def redraw(model, x_hat: Tensor, x_input: Tensor, mask: Tensor, height: Tensor, 
         m = mask.to(dtype=torch.bool)
         z = torch.where(m, x_input, schedule.sqrt_ab(level) * x_hat.float() + schedule.sqrt_1mab(level) * noise)
         mk = m if (wants_mask(model) if mask_input is None else mask_input) else None
-        return torch.where(m, x_input, _call(model, z, level, height.to(x_input.dtype), mk))
+        return torch.where(m, x_input, _call(model, z, level, height.to(x_input.dtype), mk, points))
 
 
 __all__ = [

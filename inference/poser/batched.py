@@ -42,7 +42,7 @@ DEFAULT_CHUNK = 8  # frames per batch: 16 windows with mirror averaging, the fas
 def batchable(poser: Poser) -> bool:
     """Whether frames of a clip can share model calls without changing the answer."""
     return (poser.kind == "diffusion" and poser.history_mode == "measured" and poser.noise_mode == "mean"
-            and poser.inpaint_mode == "replace-ddim")
+            and poser.inpaint_mode == "replace-ddim" and not poser.takes_points)
 
 
 def reconstruct_batched(poser: Poser, features: np.ndarray, mask: np.ndarray, chunk: int = DEFAULT_CHUNK,
@@ -79,19 +79,22 @@ def reconstruct_batched(poser: Poser, features: np.ndarray, mask: np.ndarray, ch
 
 
 def reconstruct_many(posers: Sequence[Poser], clips: Sequence[tuple[np.ndarray, np.ndarray]], lanes: int = 8,
-                     progress: Callable[[int], object] | None = None) -> list[Reconstruction]:
+                     progress: Callable[[int], object] | None = None,
+                     points: Sequence[np.ndarray | None] | None = None) -> list[Reconstruction]:
     """Clips (features (T, 190), mask (T, 190) or (190,)) each through its own poser, the
     model calls of up to ``lanes`` clips in one batch: every clip's windows are exactly
     the ones its poser builds frame by frame, so each reconstruction equals
     ``reconstruct_offline`` of that clip to float tolerance. A lane whose clip ends takes
     the next clip. The posers must share one model and be ``batchable`` (else each clip
-    runs frame by frame)."""
+    runs frame by frame, which is also how clips with tracked ``points`` (T, 16) run)."""
     if len(posers) != len(clips):
         raise ValueError(f"{len(posers)} posers for {len(clips)} clips")
     if not posers:
         return []
-    if not all(batchable(p) and p.model is posers[0].model for p in posers) or lanes <= 1:
-        return [reconstruct_offline(p, f, m, progress) for p, (f, m) in zip(posers, clips)]
+    tracked = points is not None and any(p is not None for p in points)
+    if tracked or not all(batchable(p) and p.model is posers[0].model for p in posers) or lanes <= 1:
+        pts = points if points is not None else [None] * len(clips)
+        return [reconstruct_offline(p, f, m, progress, pt) for p, (f, m), pt in zip(posers, clips, pts)]
     feats = [np.asarray(f) for f, _ in clips]
     masks = [np.ascontiguousarray(np.broadcast_to(np.asarray(m, dtype=bool), (len(f), N_FEATURES)))
              for f, (_, m) in zip(feats, clips)]

@@ -60,6 +60,7 @@ from torch import Tensor
 from inference.body.body import Body, contact_points, forward_kinematics, npose_rotations, tpose
 from inference.body.rotations import matrix_to_rot6d, rot6d_to_matrix
 from inference.body.skeleton import N_CONTACTS, N_SEGMENTS, SEGMENT_INDEX, SITE_INDEX
+from inference.body.tracked import POINT_FEATURES
 from inference.features.layout import N_FEATURES, SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
 from inference.features.mirror import MirrorAveraged
 from inference.model.denoiser import Denoiser, freeze_for_cpu
@@ -268,12 +269,19 @@ class Poser:
         self._pelvis_idx = torch.as_tensor(PELVIS_INDEX)
         self.reset()
 
+    @property
+    def takes_points(self) -> bool:
+        """Whether the model reads tracked points' positions (``ModelConfig.points``)."""
+        cfg = getattr(self.model, "config", None) if self.model is not None else None
+        return bool(getattr(cfg, "points", False)) and self.kind == "diffusion"
+
     def net_for(self, windows: int, mirror: bool | None = None):
         """The model as called on ``windows`` windows at once: a frozen trace of that batch
         shape (mirror averaging doubles it) when the poser freezes. Traces are kept per
         model and shape (``_model_nets``), so the many posers of an offline run share them."""
         mirror = self.mirror if mirror is None else mirror
-        frozen = self._freeze and isinstance(self.model.model, Denoiser)
+        # a model with a position input takes it as a keyword the traces do not carry: eager
+        frozen = self._freeze and isinstance(self.model.model, Denoiser) and not self.takes_points
         nets = _model_nets(self.model)
         onnx = frozen and windows == 1 and self.runtime == "onnx"
         key = (windows, mirror, frozen, self.window) + (("onnx",) if onnx else ())
@@ -308,6 +316,8 @@ class Poser:
             self._mbuf = (torch.ones(1, 2 * N, N_FEATURES, dtype=torch.bool)
                           if self.history_mode == "measured" else None)
             self._stand_win = stand_n.expand(1, N, N_FEATURES)
+            # tracked points' position input per frame, aligned with _buf (none at the start)
+            self._pbuf = torch.zeros(1, 2 * N, POINT_FEATURES) if self.takes_points else None
             R0 = rot6d_to_matrix(self._stand[SL_ROT].view(N_SEGMENTS, 6))
             j0 = forward_kinematics(R0, torch.zeros(3), self._offsets)
             self._prev_cps = contact_points(R0, j0, self._contact_offsets)
@@ -334,6 +344,8 @@ class Poser:
             self._buf[:, : N - 1] = self._buf[:, N + 1:].clone()
             if self._mbuf is not None:
                 self._mbuf[:, : N - 1] = self._mbuf[:, N + 1:].clone()
+            if self._pbuf is not None:
+                self._pbuf[:, : N - 1] = self._pbuf[:, N + 1:].clone()
             self._pos = N - 2
         self._pos += 1
         return self._buf[:, self._pos - N + 1: self._pos + 1]
@@ -364,21 +376,26 @@ class Poser:
             return inpaint(self._net, win, mask, self._height, self.steps, generator=self._gen,
                            schedule=self.schedule, mode=self.inpaint_mode,
                            mask_input=self.model.config.mask_input,
-                           start="mean" if self.noise_mode == "mean" else "sample")
+                           start="mean" if self.noise_mode == "mean" else "sample", points=self.points_window())
         if self.kind == "regressor":
             return regress(self._net, win, mask, self._height)
         return torch.where(mask, win, self._stand_win)
 
-    def step(self, features: np.ndarray | Tensor, observed_mask: np.ndarray | Tensor) -> PoseFrame:
+    def step(self, features: np.ndarray | Tensor, observed_mask: np.ndarray | Tensor,
+             points: np.ndarray | Tensor | None = None) -> PoseFrame:
         """Reconstruct the next frame from this frame's observation.
 
         features: (190,) physical units; only the observed entries are read (the others
         may hold anything, NaN included). observed_mask: (190,) bool, True = measured in
         this frame (``features.observation_mask`` of the sensors that delivered).
+        points: (16,) this frame's tracked points (``inference.body.tracked.point_features``)
+        for a model that reads them; None = none tracked. Their orientations come as the
+        segments' entries of ``features`` with ``observed_mask``.
         """
         with torch.inference_mode():
             obs = self.observe(features, observed_mask)
             win, mask = self.enter(obs)
+            self.enter_points(points)
             out = self._predict(win, mask)
             draws = None
             if self.confidence_due():
@@ -407,6 +424,20 @@ class Poser:
         self._mask[0, -1] = obs.m
         return win, self._mask
 
+    def enter_points(self, points: np.ndarray | Tensor | None) -> None:
+        """This frame's tracked points into the window just entered (a model without a
+        position input ignores them; NaN reads as not tracked)."""
+        if self._pbuf is None:
+            return
+        p = torch.zeros(POINT_FEATURES) if points is None else torch.as_tensor(_writable(points)).to(torch.float32)
+        self._pbuf[0, self._pos] = torch.where(torch.isfinite(p), p, torch.zeros(()))
+
+    def points_window(self) -> Tensor | None:
+        """(1, N, 16) the tracked points of the current window, or None for a model without them."""
+        if self._pbuf is None:
+            return None
+        return self._pbuf[:, self._pos - self.window + 1: self._pos + 1]
+
     def confidence_due(self) -> bool:
         """Whether the frame about to be finished gets new draws."""
         return self.confidence is not None and self.index % self.confidence.every == 0
@@ -427,8 +458,9 @@ class Poser:
             return a.repeat_interleave(k, dim=0) if k > 1 else a
 
         h = rep(heights) if heights is not None else self._height.expand(noise.shape[0])
+        pts = self.points_window() if heights is None else None
         return redraw(net or self._draw_net, rep(out), rep(win), rep(mask), h, self.confidence.level, noise,
-                      self.schedule, mask_input=self.model.config.mask_input)
+                      self.schedule, mask_input=self.model.config.mask_input, points=pts)
 
     def finish(self, y_n: Tensor, win: Tensor, obs: Observation, draws: Tensor | None = None) -> PoseFrame:
         """Clean the model's answer ``y_n`` (F,) for the window's last frame (normalised),
@@ -620,8 +652,10 @@ class Reconstruction:
         return int(self.rot.shape[0])
 
 
-def reconstruct_offline(poser: Poser, features: np.ndarray, mask: np.ndarray, progress=None) -> Reconstruction:
-    """Run the live loop over a clip: features (T, 190), mask (T, 190) or (190,) bool.
+def reconstruct_offline(poser: Poser, features: np.ndarray, mask: np.ndarray, progress=None,
+                        points: np.ndarray | None = None) -> Reconstruction:
+    """Run the live loop over a clip: features (T, 190), mask (T, 190) or (190,) bool,
+    points (T, 16) tracked points' input or None.
 
     Exactly the per-frame ``step`` a live session runs (no look-ahead, no batching), so
     evaluation measures what a user gets. ``progress`` is called with 1 after each frame
@@ -631,7 +665,7 @@ def reconstruct_offline(poser: Poser, features: np.ndarray, mask: np.ndarray, pr
     mask = np.ascontiguousarray(np.broadcast_to(np.asarray(mask, dtype=bool), (T, N_FEATURES)))
     rec = Reconstruction.empty(T)
     for t in range(T):
-        rec.put(t, poser.step(features[t], mask[t]))
+        rec.put(t, poser.step(features[t], mask[t], None if points is None else points[t]))
         if progress is not None:
             progress(1)
     return rec

@@ -160,6 +160,12 @@ class TrainConfig:
     # the reading tokens' learning rate as a multiple of the schedule's: a fine-tune that adds
     # them at a fine-tune's rate left them at ~1/30 of the height token's norm after 2500 steps
     reading_lr_scale: float = 1.0
+    # for models with a position input (ModelConfig.points): share of the conditioned
+    # windows that have a headset and two controllers tracked, and of those the share with a
+    # waist tracker too (inference/training/points.py); the rest have none, so the model
+    # stays what it was for IMUs alone
+    points_share: float = 0.6
+    points_pelvis: float = 0.3
     seed: int = 0
     T: int = 1000
     log_every: int = 50

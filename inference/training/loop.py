@@ -65,6 +65,7 @@ from inference.training.losses import (
     sites_known_share,
     total_loss,
 )
+from inference.training.points import draw_presence, known_orientations, window_points
 
 _EVAL_SEGMENTS = [i for i in range(N_SEGMENTS) if i not in {SEGMENT_INDEX[s] for s in METRIC_EXCLUDED}]
 
@@ -233,9 +234,18 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
             # conditioning by replacement: known entries clean in z (and exact in the
             # output), so the loss is spent on what inpainting has to infer
             m = torch.as_tensor(random_observation_mask(rng, B, x.shape[1], cfg.mask))
-            m &= torch.as_tensor(rng.random(B) < cfg.cond_prob)[:, None, None]
+            cond = torch.as_tensor(rng.random(B) < cfg.cond_prob)
+            m &= cond[:, None, None]
+            extra = {}
+            if cfg.model.points:
+                # tracked points (inference/training/points.py): their positions as the
+                # model's position input, their orientations as known segment entries
+                present = draw_presence(B, cfg.points_share, cfg.points_pelvis, gen) & cond[:, None]
+                m = m | known_orientations(present, x.shape[1])
+                extra["points"] = window_points(x, offsets, height, present, gen)
             z = torch.where(m, xm, z)
-            out = model(z, t, height, m, *told) if cfg.model.mask_input else model(z, t, height, *unmasked)
+            out = (model(z, t, height, m, *told, **extra) if cfg.model.mask_input
+                   else model(z, t, height, *unmasked))
             pred = torch.where(m, xn, out)
         else:
             pred = model(z, t, height, *unmasked)
@@ -402,9 +412,12 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
         # dropout is training behaviour, not architecture: a fine-tune may switch it
         init_model = replace(ModelConfig.from_dict(init["model_config"]), dropout=cfg.model.dropout)
         deeper = replace(init_model, layers=cfg.model.layers) == cfg.model and cfg.model.layers > init_model.layers
-        # reading tokens added to a model without them start at zero: the same model at first
-        added = (not init_model.readings and cfg.model.readings
-                and replace(init_model, readings=cfg.model.readings, reading=cfg.model.reading) == cfg.model)
+        # reading tokens or a position input added to a model without them start at zero:
+        # the same model at first
+        added = ((not init_model.readings and cfg.model.readings
+                  and replace(init_model, readings=cfg.model.readings, reading=cfg.model.reading) == cfg.model)
+                 or (not init_model.points and cfg.model.points and cfg.model.mask_input
+                     and replace(init_model, points=True) == cfg.model))
         grown = (deeper or added) and cfg.kind == "diffusion"
         if init["kind"] != cfg.kind or (init_model != cfg.model and not grown):
             raise ValueError(f"--init {init_from}: its model ({init['kind']}, {init['model_config']}) "
