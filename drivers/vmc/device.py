@@ -179,12 +179,16 @@ class VmcInDevice(Device):
         r, _, _ = select.select([sock], [], [], timeout)
         if not r:
             return
-        now = self.clock()  # one stamp per wake-up: these datagrams were all here now
         for _ in range(_MAX_DATAGRAMS):
             try:
                 data = sock.recv(65536, socket.MSG_DONTWAIT)
             except BlockingIOError:
                 break
+            # each datagram stamped as it is taken, never before: one stamp per wake-up taken
+            # before the loop dated the datagrams that came in while the loop decoded (ms each
+            # when the process is busy) too early, and the hub's clock model, which trusts the
+            # earliest arrivals, then put the whole rig up to 90 ms early
+            now = self.clock()
             try:
                 poses = vmc.decode(data)
             except ValueError:

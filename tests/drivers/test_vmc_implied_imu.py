@@ -106,3 +106,41 @@ def test_the_device_sends_the_implied_channels():
     finally:
         tx.close()
         dev.close()
+
+
+def test_no_datagram_is_stamped_before_it_was_sent():
+    """A sender in this process keeps sending while the device decodes a backlog: every
+    sample's arrival stamp is at or after its send time (the hub's clock model trusts the
+    earliest arrivals, so a stamp taken before the datagram came puts the rig early)."""
+    import threading
+
+    port = free_udp_port()
+    dev = open_device(f"vmc-in://127.0.0.1:{port}?head=H")
+    t0 = time.monotonic()
+    stop = threading.Event()
+
+    def send() -> None:
+        tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            while not stop.is_set():
+                st = time.monotonic() - t0  # small: exact in the bundle's float32
+                tx.sendto(vmc.encode_frame([vmc.DevicePose("hmd", "H", np.zeros(3), UP)], sender_time=st),
+                          ("127.0.0.1", port))
+                time.sleep(0.0005)
+        finally:
+            tx.close()
+
+    th = threading.Thread(target=send, daemon=True)
+    th.start()
+    delays: list[float] = []
+    try:
+        end = time.monotonic() + 20.0
+        while len(delays) < 3000 and time.monotonic() < end:
+            time.sleep(0.03)  # a backlog piles up, then is decoded while the sender goes on
+            delays += [s.t - (t0 + s.device_time) for s in dev.read_many(0.0, max_samples=4096)]
+    finally:
+        stop.set()
+        th.join(5.0)
+        dev.close()
+    assert len(delays) >= 1000
+    assert min(delays) >= -1e-4, min(delays)  # float32 of times under 20 s: ~2 us
