@@ -34,21 +34,24 @@ COMPARE = (("3 points + 2 shanks", "3 points"), ("3 points + 2 shanks", "2 shank
 
 def run_set(held_out: str, label: str, model_spec: str, seed: int, cache: Path) -> list:
     """Per-clip metrics of one sensor set on one held-out set (cached)."""
-    key = cache / f"{held_out}__{label.replace(' ', '_').replace('+', 'and')}__{Path(model_spec).stem}.pkl"
+    stem = Path(model_spec).stem if model_spec in ("diffusion", "regressor") else Path(model_spec).parent.name
+    key = cache / f"{held_out}__{label.replace(' ', '_').replace('+', 'and')}__{stem}.pkl"
     if key.exists():
         return pickle.loads(key.read_bytes())
-    from app.tracked_eval import tracked_signals
+    from app.tracked_eval import tracked_points_input, tracked_signals
     from inference.evaluation.runner import evaluate_motions, evaluation_noise, load_motions
     from inference.poser.models import default_steps, resolve_model
     from inference.training.splits import held_out_files
 
     sites, points = SENSOR_SETS[label]
     model = resolve_model(model_spec)
+    reads_points = bool(getattr(model.config, "points", False))  # positions, else the IMUs they imply
     motions = load_motions(held_out_files(held_out))
     t0 = time.time()
     _, clips = evaluate_motions(motions, model, list(sites), steps=default_steps(model) or None,
                                 noise=evaluation_noise(), seed=seed, progress=False,
-                                given=tracked_signals(points) if points else None)
+                                given=tracked_signals(points) if points and not reads_points else None,
+                                tracked=tracked_points_input(points) if points and reads_points else None)
     metrics = [c.metrics for c in clips]
     print(f"vr_three_point: {held_out} {label}: {len(metrics)} clips in {time.time() - t0:.0f} s", file=sys.stderr)
     key.parent.mkdir(parents=True, exist_ok=True)
@@ -62,6 +65,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sets", default="dg,cmu-val,sad", help="held-out sets (inference/training/splits.py)")
     ap.add_argument("--model", default="diffusion")
+    ap.add_argument("--against", default=None, metavar="MODEL",
+                    help="a second model (e.g. one that reads the points' positions): its rows, and --model minus "
+                         "it per sensor set")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, required=True)
     ap.add_argument("--markdown", type=Path, default=None)
@@ -85,6 +91,15 @@ def main(argv: list[str] | None = None) -> int:
             entry["differences"][f"{a} - {b}"] = {
                 m: paired_difference(per[a], per[b], m, seed=args.seed).as_dict() for m in ("ga_deg", "lower_pe_cm",
                                                                                             "mpjpe_cm")}
+        if args.against:
+            theirs = {label: run_set(held_out, label, args.against, args.seed, cache) for label in SENSOR_SETS}
+            entry["against"] = {"model": args.against, "rows": {}, "differences": {}}
+            for label, metrics in theirs.items():
+                s = summarize(metrics)
+                entry["against"]["rows"][label] = {m: s.get(m) for m in METRICS}
+                entry["against"]["differences"][label] = {
+                    m: paired_difference(per[label], metrics, m, seed=args.seed).as_dict()
+                    for m in ("ga_deg", "mpjpe_cm", "hand_pe_cm", "lower_pe_cm")}
         out["sets"][held_out] = entry
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(out, indent=1))
@@ -107,6 +122,18 @@ def markdown(out: dict) -> str:
             cells = [f"{m} {v['difference']:+.2f} [{v['low']:+.2f}, {v['high']:+.2f}]" for m, v in d.items()]
             lines.append(f"- {name}: " + "; ".join(cells))
         lines.append("")
+        if "against" in e:
+            a = e["against"]
+            lines += [f"against {a['model']}:", "", "| sensors | " + " | ".join(METRICS) + " |",
+                      "|---" * (len(METRICS) + 1) + "|"]
+            for label, row in a["rows"].items():
+                lines.append(f"| {label} | " + " | ".join("n/a" if row[m] is None else f"{row[m]:.2f}"
+                                                          for m in METRICS) + " |")
+            lines.append("")
+            for label, d in a["differences"].items():
+                cells = [f"{m} {v['difference']:+.2f} [{v['low']:+.2f}, {v['high']:+.2f}]" for m, v in d.items()]
+                lines.append(f"- {out['model']} minus it, {label}: " + "; ".join(cells))
+            lines.append("")
     return "\n".join(lines)
 
 
