@@ -36,8 +36,8 @@ CLI = [sys.executable, "-m", "app.cli.main"]
 GA_BOUND_DEG = 12.0
 TRACKED_SEGMENT_BOUND_DEG = 3.5  # head and forearms at replay's lag: measured 0.4-1.2 deg, 2.04 beside other jobs
 # each observed segment at the truth's own clock (the rig's 15 ms latency given in its URL):
-# head and forearms measured 0.40-0.89 deg, shanks 0.65-2.11 on a quiet machine, and up to 1.35
-# and 2.92 beside other jobs (load 4 on 2 cores); ~1.5x the latter
+# head and forearms measured 0.39-0.89 deg, shanks 0.65-2.57, quiet and beside other jobs
+# (docs/vr_input.md); the bounds leave room for a busier machine
 AT_CLOCK_BOUND_DEG = {"head": 2.0, "l_forearm": 2.0, "r_forearm": 2.0, "l_shank": 4.5, "r_shank": 4.5}
 
 
