@@ -6,19 +6,11 @@ In its own process: ``python -m sim_devices.vr_rig_process`` (``sim_devices/vr_r
 that module picks the motion, which a module of ``sim_devices.devices`` may not, as
 ``sim_devices.motions`` sits above the devices).
 
-Where the points sit on the body (``tracked_points``), fractions of body height H so a
-smaller body carries them where a smaller person would:
-- headset: the midpoint between the eyes, where OpenVR puts an HMD's pose; 0.05 H ahead
-  of and 0.07 H above the head joint, which puts it at 0.936 H standing, the eye height
-  of Drillis & Contini (1966), the table ``inference.body.body`` takes its ratios from.
-  Orientation: the head segment's.
-- controllers (the grip offset): the grip pose's origin inside the fist, 0.6 of the way
-  from the wrist to the knuckles along the hand bone and 0.02 H (3.5 cm at 1.75 m) to the
-  palm side; orientation the hand segment's turned by ``GRIP_PITCH_DEG`` = 30 deg about the
-  hand's lateral axis (our Y in the T-pose), an assumed tilt of a handle in the fist. Both
-  are what calibration must find for a real controller (docs/vr_input.md).
-- waist tracker: the pelvis sensor site (the sacrum, ``Body.site_offsets``), the pelvis
-  orientation.
+Where the devices sit on the body (``tracked_points``): ``inference/body/tracked.py``, one
+placement for the rig, the training and the evaluation (the headset between the eyes, a
+controller's grip in the fist turned ``GRIP_PITCH_DEG`` about the hand's lateral axis, the
+waist tracker at the pelvis sensor site). Calibration must find the grip for a real
+controller (docs/vr_input.md).
 
 Tracking error and latency (``TrackingNoise``), consumer SteamVR / Quest class:
 - position: white jitter of 1 mm per axis plus a slow wander of 2 mm per axis
@@ -46,18 +38,17 @@ from pythonosc.udp_client import UDPClient
 from drivers.urls import build_url
 from drivers.vmc import protocol as vmc
 from drivers.vmc.device import DEFAULT_PORT
+from inference.body import tracked
 from inference.body.motion import Motion
 from inference.body.rotations import axis_angle_to_matrix, matrix_to_quat, quat_exp, quat_multiply
-from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX
 
 from .base import DeviceFaults, SimDevice
 from .can_loopback import is_loopback
 
-HMD_OFFSET_H = (0.05, 0.0, 0.07)  # head segment frame, x body height: between the eyes
-GRIP_ALONG = 0.6  # of the wrist -> knuckles bone
-GRIP_PALM_H = 0.02  # x body height, to the palm side (-Z of the hand in the T-pose)
-GRIP_PITCH_DEG = 30.0
-EYE_HEIGHT_RATIO = 0.936  # Drillis & Contini: eye height / body height; headset height -> H
+# the devices' placement on the body is the training's and the evaluation's too
+# (inference/body/tracked.py); re-exported here for the rig's users
+GRIP_PITCH_DEG, EYE_HEIGHT_RATIO = tracked.GRIP_PITCH_DEG, tracked.EYE_HEIGHT_RATIO
+grip_rotation = tracked.grip_rotation
 
 ROLES: dict[str, str] = {"head": "hmd", "l_hand": "con", "r_hand": "con", "pelvis": "tra"}
 DEFAULT_SERIALS: dict[str, str] = {"head": "SIM-HMD", "l_hand": "SIM-CON-L", "r_hand": "SIM-CON-R",
@@ -83,38 +74,23 @@ class TrackingNoise:
 NO_NOISE = TrackingNoise(0.0, 0.0, 2.0, 0.0, 0.0)
 
 
-def grip_rotation(pitch_deg: float = GRIP_PITCH_DEG) -> np.ndarray:
-    """Controller frame in the hand segment's frame: a turn about the hand's lateral axis."""
-    return axis_angle_to_matrix(np.array([0.0, math.radians(pitch_deg), 0.0]))
-
-
 def tracked_points(motion: Motion, sites: tuple[str, ...] = DEFAULT_SITES) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Per site, the device's position (T, 3) and orientation (T, 4, w x y z) over the motion."""
+    unknown = [s for s in sites if s not in ROLES]
+    if unknown:
+        raise ValueError(f"no VR device for site {unknown[0]!r} (known: {', '.join(ROLES)})")
     J = motion.joints()
-    Rm = motion.rot
-    body = motion.body
-    H = float(body.height)
+    pos = tracked.point_positions(motion.rot, J, tracked.point_locals(motion.body.offsets, motion.body.height))
     out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for site in sites:
-        if site == "head":
-            k = SEGMENT_INDEX["head"]
-            p = J[:, k] + Rm[:, k] @ (np.array(HMD_OFFSET_H) * H)
-            Rd = Rm[:, k]
-        elif site in ("l_hand", "r_hand"):
-            k = SEGMENT_INDEX[site]
-            knuckles = body.offsets[SEGMENT_INDEX[site[0] + "_fingers"]]
-            local = GRIP_ALONG * knuckles + np.array([0.0, 0.0, -GRIP_PALM_H * H])
-            p = J[:, k] + Rm[:, k] @ local
-            Rd = Rm[:, k] @ grip_rotation()
-        elif site == "pelvis":
-            p = motion.sites(J)[:, SITE_INDEX["pelvis"]]
-            Rd = Rm[:, SEGMENT_INDEX["pelvis"]]
-        else:
-            raise ValueError(f"no VR device for site {site!r} (known: {', '.join(ROLES)})")
+        k = tracked.TRACKED_POINTS.index(site)
+        Rd = motion.rot[:, tracked.POINT_SEGMENTS[k]]
+        if site in ("l_hand", "r_hand"):
+            Rd = Rd @ grip_rotation()
         q = matrix_to_quat(Rd)
         d = np.sum(q[1:] * q[:-1], axis=-1)  # a continuous sign, so interpolation never crosses the double cover
         q[1:] *= np.cumprod(np.where(d < 0, -1.0, 1.0))[:, None]
-        out[site] = (np.ascontiguousarray(p), q)
+        out[site] = (np.ascontiguousarray(pos[:, k]), q)
     return out
 
 
