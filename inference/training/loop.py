@@ -154,14 +154,20 @@ def training_levels(cfg: TrainConfig, batch: int, gen: torch.Generator, T: int) 
 
 
 def param_groups(model: nn.Module, cfg: TrainConfig) -> list[dict]:
-    """The optimiser's parameter groups: the reading tokens on their own learning-rate scale
-    (``reading_lr_scale``) when they have one, everything else on the schedule."""
-    emb = getattr(model, "reading_emb", None)
-    if emb is None or cfg.reading_lr_scale == 1.0:
+    """The optimiser's parameter groups: the reading tokens and the points' input layer on
+    their own learning-rate scales (``reading_lr_scale``, ``points_lr_scale``) when they have
+    one, everything else on the schedule. Both start at zero in a fine-tune and would
+    otherwise stay small for thousands of steps at a fine-tune's rate."""
+    own: list[tuple[nn.Module, float]] = []
+    for name, scale in (("reading_emb", cfg.reading_lr_scale), ("points_proj", cfg.points_lr_scale)):
+        part = getattr(model, name, None)
+        if part is not None and scale != 1.0:
+            own.append((part, scale))
+    if not own:
         return [{"params": list(model.parameters())}]
-    own = {id(p) for p in emb.parameters()}
-    return [{"params": [p for p in model.parameters() if id(p) not in own]},
-            {"params": list(emb.parameters()), "lr_scale": cfg.reading_lr_scale}]
+    ids = {id(p) for part, _ in own for p in part.parameters()}
+    return [{"params": [p for p in model.parameters() if id(p) not in ids]},
+            *({"params": list(part.parameters()), "lr_scale": scale} for part, scale in own)]
 
 
 def clip_readings(ds: Dataset | None, cfg: TrainConfig) -> np.ndarray | None:

@@ -168,3 +168,15 @@ def test_window_points_geometry_matches_forward_kinematics():
     fm = window_points(mirror_features(x), mirror_points(off, SEGMENTS), h,
                        torch.tensor([[True] * 4]), noise=False)
     torch.testing.assert_close(fm, mirror_point_features(f), atol=1e-9, rtol=0)
+
+
+def test_the_position_input_learns_on_its_own_rate():
+    from inference.training.config import TrainConfig
+    from inference.training.loop import param_groups
+
+    net = build_model("diffusion", _config(True))
+    groups = param_groups(net, TrainConfig(points_lr_scale=30.0))
+    own = [g for g in groups if g.get("lr_scale") == 30.0]
+    assert len(own) == 1 and {id(p) for p in own[0]["params"]} == {id(p) for p in net.points_proj.parameters()}
+    assert sum(len(g["params"]) for g in groups) == len(list(net.parameters()))
+    assert len(param_groups(net, TrainConfig())) == 1
