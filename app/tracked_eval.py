@@ -82,7 +82,7 @@ def _nlerp(q: np.ndarray, t_src: np.ndarray, t: np.ndarray) -> np.ndarray:
     return out / np.linalg.norm(out, axis=-1, keepdims=True)
 
 
-def _rig_poses(motion: Motion, points: Sequence[str], seed: int, noise: TrackingNoise,
+def rig_poses(motion: Motion, points: Sequence[str], seed: int, noise: TrackingNoise,
                rate: float) -> tuple[Motion, np.ndarray, np.ndarray, dict[str, tuple[list, list]]]:
     """The rig's noisy poses of ``points`` over ``motion``: (the 60 Hz motion, its grid, the
     rig's send times, point -> (positions, quaternions) per send)."""
@@ -124,7 +124,7 @@ def tracked_points_input(points: Sequence[str], noise: TrackingNoise | None = No
     flags = presence(points)
 
     def signals(motion: Motion, seed: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        m60, grid, t_rig, poses = _rig_poses(motion, points, seed, noise, rate)
+        m60, grid, t_rig, poses = rig_poses(motion, points, seed, noise, rate)
         pos = np.zeros((len(grid), len(TRACKED_POINTS), 3))
         segs: dict[str, np.ndarray] = {}
         for k, name in enumerate(TRACKED_POINTS):
@@ -149,7 +149,7 @@ def tracked_signals(points: Sequence[str], noise: TrackingNoise | None = None, r
     noise = noise or TrackingNoise()
 
     def signals(motion: Motion, seed: int) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        m60, grid, t_rig, poses = _rig_poses(motion, points, seed, noise, rate)
+        m60, grid, t_rig, poses = rig_poses(motion, points, seed, noise, rate)
         out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         for p in points:
             P, Q = (np.stack(v) for v in poses[p])

@@ -34,7 +34,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.vr_three_point import METRICS, run_set  # noqa: E402
+from benchmarks.vr_three_point import METRICS, difference_cells, run_set, store, table_lines  # noqa: E402
 
 OURS = "3 points"
 OURS_LABEL = "ours, 3 points"
@@ -48,29 +48,16 @@ def rig_points(motion, seed: int, noise=None):
     ``TrackingNoise`` (default: the rig's own)."""
     import numpy as np
 
-    from app.tracked_eval import RIG_RATE, _nlerp
+    from app.tracked_eval import RIG_RATE, _nlerp, rig_poses
     from inference.body.rotations import quat_to_matrix
     from inference.model.agrol_mlp import DEVICES
     from inference.signals.resample import STEP
-    from inference.signals.synthesis import FPS_SIGNAL
-    from sim_devices.devices.vr_rig import SimVrRig, TrackedSource, TrackingNoise
+    from sim_devices.devices.vr_rig import TrackingNoise
 
-    m60 = motion.resample(FPS_SIGNAL)
-    grid = np.arange(m60.n_frames) / FPS_SIGNAL
-    rig = SimVrRig(TrackedSource(m60, DEVICES), rate=RIG_RATE, noise=noise or TrackingNoise())
-    rig.rng = np.random.default_rng(seed)
-    t_rig = np.arange(int(np.floor(grid[-1] * RIG_RATE)) + 1) / RIG_RATE
-    of_serial = {rig.serials[p]: p for p in DEVICES}
-    pos: dict[str, list] = {p: [] for p in DEVICES}
-    quat: dict[str, list] = {p: [] for p in DEVICES}
-    for t in t_rig:
-        for pose in rig.poses(float(t)):
-            p = of_serial[pose.serial]
-            pos[p].append(np.asarray(pose.position, float))
-            quat[p].append(np.asarray(pose.quat, float))
-    P = np.stack([np.stack([np.interp(grid, t_rig, np.stack(pos[p])[:, k]) for k in range(3)], -1)
+    _, grid, t_rig, poses = rig_poses(motion, DEVICES, seed, noise or TrackingNoise(), RIG_RATE)
+    P = np.stack([np.stack([np.interp(grid, t_rig, np.stack(poses[p][0])[:, k]) for k in range(3)], -1)
                   for p in DEVICES], axis=1)
-    Q = np.stack([_nlerp(np.stack(quat[p]), t_rig, grid) for p in DEVICES], axis=1)
+    Q = np.stack([_nlerp(np.stack(poses[p][1]), t_rig, grid) for p in DEVICES], axis=1)
     return P[::STEP], quat_to_matrix(Q[::STEP])
 
 
@@ -99,11 +86,7 @@ def run_mlp(held_out: str, agrol: Path, seed: int, cache: Path) -> list:
         root, joints = place_under_headset(R, aligned.body.offsets, aligned.body.height, pos[:, 0])
         metrics.append(evaluate_clip(inp.name, R, root, joints, inp.rot, inp.root, inp.joints, FPS_MODEL))
     print(f"vr_baseline: {held_out} AGRoL MLP: {len(metrics)} clips in {time.time() - t0:.0f} s", file=sys.stderr)
-    key.parent.mkdir(parents=True, exist_ok=True)
-    tmp = key.with_suffix(".tmp")
-    tmp.write_bytes(pickle.dumps(metrics))
-    tmp.replace(key)
-    return metrics
+    return store(key, metrics)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -147,15 +130,8 @@ def main(argv: list[str] | None = None) -> int:
 def markdown(out: dict) -> str:
     lines = []
     for held_out, e in out["sets"].items():
-        lines += [f"**@{held_out}** ({e['clips']} clips)", "",
-                  "| model | " + " | ".join(METRICS) + " |", "|---" * (len(METRICS) + 1) + "|"]
-        for label, row in e["rows"].items():
-            lines.append(f"| {label} | " + " | ".join("n/a" if row[m] is None else f"{row[m]:.2f}" for m in METRICS)
-                         + " |")
-        lines.append("")
-        for name, d in e["differences"].items():
-            cells = [f"{m} {v['difference']:+.2f} [{v['low']:+.2f}, {v['high']:+.2f}]" for m, v in d.items()]
-            lines.append(f"- {name}: " + "; ".join(cells))
+        lines += [f"**@{held_out}** ({e['clips']} clips)", "", *table_lines(e["rows"], "model"), ""]
+        lines += [f"- {name}: {difference_cells(d)}" for name, d in e["differences"].items()]
         lines.append("")
     return "\n".join(lines)
 

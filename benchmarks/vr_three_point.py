@@ -54,6 +54,11 @@ def run_set(held_out: str, label: str, model_spec: str, seed: int, cache: Path) 
                                 tracked=tracked_points_input(points) if points and reads_points else None)
     metrics = [c.metrics for c in clips]
     print(f"vr_three_point: {held_out} {label}: {len(metrics)} clips in {time.time() - t0:.0f} s", file=sys.stderr)
+    return store(key, metrics)
+
+
+def store(key: Path, metrics: list) -> list:
+    """Keep per-clip metrics under ``key``, atomically (a run that stops leaves no half file)."""
     key.parent.mkdir(parents=True, exist_ok=True)
     tmp = key.with_suffix(".tmp")
     tmp.write_bytes(pickle.dumps(metrics))
@@ -109,30 +114,30 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def table_lines(rows: dict, head: str = "sensors") -> list[str]:
+    """A markdown table of ``rows`` (label -> metric -> value) over ``METRICS``."""
+    out = [f"| {head} | " + " | ".join(METRICS) + " |", "|---" * (len(METRICS) + 1) + "|"]
+    for label, row in rows.items():
+        out.append(f"| {label} | " + " | ".join("n/a" if row[m] is None else f"{row[m]:.2f}" for m in METRICS) + " |")
+    return out
+
+
+def difference_cells(d: dict) -> str:
+    """Paired differences (metric -> ``PairedDifference.as_dict``) as one line."""
+    return "; ".join(f"{m} {v['difference']:+.2f} [{v['low']:+.2f}, {v['high']:+.2f}]" for m, v in d.items())
+
+
 def markdown(out: dict) -> str:
     lines = []
     for held_out, e in out["sets"].items():
-        lines += [f"**@{held_out}** ({e['clips']} clips)", "",
-                  "| sensors | " + " | ".join(METRICS) + " |", "|---" * (len(METRICS) + 1) + "|"]
-        for label, row in e["rows"].items():
-            lines.append(f"| {label} | " + " | ".join("n/a" if row[m] is None else f"{row[m]:.2f}" for m in METRICS)
-                         + " |")
-        lines.append("")
-        for name, d in e["differences"].items():
-            cells = [f"{m} {v['difference']:+.2f} [{v['low']:+.2f}, {v['high']:+.2f}]" for m, v in d.items()]
-            lines.append(f"- {name}: " + "; ".join(cells))
+        lines += [f"**@{held_out}** ({e['clips']} clips)", "", *table_lines(e["rows"]), ""]
+        lines += [f"- {name}: {difference_cells(d)}" for name, d in e["differences"].items()]
         lines.append("")
         if "against" in e:
             a = e["against"]
-            lines += [f"against {a['model']}:", "", "| sensors | " + " | ".join(METRICS) + " |",
-                      "|---" * (len(METRICS) + 1) + "|"]
-            for label, row in a["rows"].items():
-                lines.append(f"| {label} | " + " | ".join("n/a" if row[m] is None else f"{row[m]:.2f}"
-                                                          for m in METRICS) + " |")
-            lines.append("")
-            for label, d in a["differences"].items():
-                cells = [f"{m} {v['difference']:+.2f} [{v['low']:+.2f}, {v['high']:+.2f}]" for m, v in d.items()]
-                lines.append(f"- {out['model']} minus it, {label}: " + "; ".join(cells))
+            lines += [f"against {a['model']}:", "", *table_lines(a["rows"]), ""]
+            lines += [f"- {out['model']} minus it, {label}: {difference_cells(d)}"
+                      for label, d in a["differences"].items()]
             lines.append("")
     return "\n".join(lines)
 
