@@ -35,7 +35,7 @@ import numpy as np
 from drivers.vmc.device import MODEL_SITES
 from drivers.vmc.implied_imu import ImpliedImu
 from inference.body.motion import Motion
-from inference.body.rotations import matrix_to_quat, quat_multiply, quat_to_matrix
+from inference.body.rotations import matrix_to_quat, quat_continuous, quat_multiply, quat_to_matrix
 from inference.body.skeleton import SEGMENT_INDEX, SEGMENTS, SITE_SEGMENT
 from inference.body.tracked import POINT_SEGMENTS, TRACKED_POINTS, point_features, presence
 from inference.signals.synthesis import FPS_SIGNAL
@@ -75,9 +75,7 @@ def check_sites(sensors: Sequence[str], points: Sequence[str]) -> None:
 def _nlerp(q: np.ndarray, t_src: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Quaternions (N, 4) at times ``t_src`` onto ``t``: normalised linear interpolation
     on a sign-continuous sequence (the hub's interpolation does the same)."""
-    q = q.copy()
-    d = np.sum(q[1:] * q[:-1], axis=-1)
-    q[1:] *= np.cumprod(np.where(d < 0, -1.0, 1.0))[:, None]
+    q = quat_continuous(q)
     out = np.stack([np.interp(t, t_src, q[:, k]) for k in range(4)], axis=-1)
     return out / np.linalg.norm(out, axis=-1, keepdims=True)
 

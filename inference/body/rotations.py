@@ -321,6 +321,16 @@ def quat_to_axis_angle(q: Array) -> Array:
     return scale[..., None] * v
 
 
+def quat_continuous(q: np.ndarray) -> np.ndarray:
+    """A sequence of quaternions (T, ..., 4) with each on the hemisphere of its predecessor
+    (a copy): interpolating between neighbours then never crosses the double cover."""
+    q = np.array(q, dtype=np.float64)
+    if len(q) > 1:
+        d = np.sum(q[1:] * q[:-1], axis=-1, keepdims=True)
+        q[1:] *= np.cumprod(np.where(d < 0, -1.0, 1.0), axis=0)
+    return q
+
+
 def quat_exp(rotvec: Array) -> Array:
     """Exponential map from the tangent space (rotation vector) to unit quaternions.
 
@@ -599,6 +609,7 @@ def random_quat(shape: tuple[int, ...] | int = (), rng: np.random.Generator | No
 
 
 __all__ = [
+    "quat_continuous",
     "axis_angle_to_euler", "axis_angle_to_matrix", "axis_angle_to_quat", "axis_angle_to_rot6d",
     "euler_to_axis_angle", "euler_to_matrix", "euler_to_quat", "euler_to_rot6d",
     "matrix_about_axis", "matrix_angle_between", "matrix_to_axis_angle", "matrix_to_euler",

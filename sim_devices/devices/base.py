@@ -20,6 +20,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from inference.body.rotations import quat_continuous
 from inference.signals.site_signals import SiteSignals
 
 
@@ -64,11 +65,8 @@ class SignalSource:
         self.n = len(signals)
         self.duration = self.n / self.fps
         raw = signals.meta.get("free_acc_raw") if signals.meta else None
-        self.quat = np.ascontiguousarray(signals.quat[:, k], dtype=float)
-        # keep the quaternion sign continuous so interpolation never crosses the double cover
-        d = np.sum(self.quat[1:] * self.quat[:-1], axis=-1)
-        flips = np.cumprod(np.where(d < 0, -1.0, 1.0))
-        self.quat[1:] *= flips[:, None]
+        # a continuous sign, so interpolation never crosses the double cover
+        self.quat = np.ascontiguousarray(quat_continuous(signals.quat[:, k]))
         self.free_acc = np.array(raw[:, k] if raw is not None else signals.free_acc[:, k], dtype=float)
         self.specific_force = np.array(signals.specific_force[:, k], dtype=float)
         self.gyro = np.array(signals.gyro[:, k], dtype=float)

@@ -40,7 +40,7 @@ from drivers.vmc import protocol as vmc
 from drivers.vmc.device import DEFAULT_PORT
 from inference.body import tracked
 from inference.body.motion import Motion
-from inference.body.rotations import axis_angle_to_matrix, matrix_to_quat, quat_exp, quat_multiply
+from inference.body.rotations import axis_angle_to_matrix, matrix_to_quat, quat_continuous, quat_exp, quat_multiply
 
 from .base import DeviceFaults, SimDevice
 from .can_loopback import is_loopback
@@ -87,10 +87,7 @@ def tracked_points(motion: Motion, sites: tuple[str, ...] = DEFAULT_SITES) -> di
         Rd = motion.rot[:, tracked.POINT_SEGMENTS[k]]
         if site in ("l_hand", "r_hand"):
             Rd = Rd @ grip_rotation()
-        q = matrix_to_quat(Rd)
-        d = np.sum(q[1:] * q[:-1], axis=-1)  # a continuous sign, so interpolation never crosses the double cover
-        q[1:] *= np.cumprod(np.where(d < 0, -1.0, 1.0))[:, None]
-        out[site] = (np.ascontiguousarray(pos[:, k]), q)
+        out[site] = (np.ascontiguousarray(pos[:, k]), quat_continuous(matrix_to_quat(Rd)))
     return out
 
 
