@@ -63,6 +63,9 @@ class ModelConfig:
     # where absent). Zero at first, so a model fine-tuned from one without it starts as
     # that model; their orientations reach the model as known segment orientations.
     points: bool = False
+    # HAD's hierarchical refinement of the output (torso, then arms, then legs;
+    # inference/model/hierarchy.py). Zero at first, like ``points``.
+    hmr: bool = False
     T: int = 1000
 
     @classmethod

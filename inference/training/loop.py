@@ -156,18 +156,27 @@ def training_levels(cfg: TrainConfig, batch: int, gen: torch.Generator, T: int) 
 def param_groups(model: nn.Module, cfg: TrainConfig) -> list[dict]:
     """The optimiser's parameter groups: the reading tokens and the points' input layer on
     their own learning-rate scales (``reading_lr_scale``, ``points_lr_scale``) when they have
-    one, everything else on the schedule. Both start at zero in a fine-tune and would
+    one, everything else on the schedule; with ``train_only``, only the parameters named so
+    (the rest frozen). Both start at zero in a fine-tune and would
     otherwise stay small for thousands of steps at a fine-tune's rate."""
+    if cfg.train_only:
+        trained = [n for n, _ in model.named_parameters() if n.startswith(tuple(cfg.train_only))]
+        if not trained:
+            raise ValueError(f"train_only {list(cfg.train_only)}: no parameter of this model starts so")
+        for n, p in model.named_parameters():
+            p.requires_grad_(n in trained)
     own: list[tuple[nn.Module, float]] = []
     for name, scale in (("reading_emb", cfg.reading_lr_scale), ("points_proj", cfg.points_lr_scale)):
         part = getattr(model, name, None)
         if part is not None and scale != 1.0:
             own.append((part, scale))
+    live = [p for p in model.parameters() if p.requires_grad]
     if not own:
-        return [{"params": list(model.parameters())}]
+        return [{"params": live}]
     ids = {id(p) for part, _ in own for p in part.parameters()}
-    return [{"params": [p for p in model.parameters() if id(p) not in ids]},
-            *({"params": list(part.parameters()), "lr_scale": scale} for part, scale in own)]
+    return [{"params": [p for p in live if id(p) not in ids]},
+            *({"params": [p for p in part.parameters() if p.requires_grad], "lr_scale": scale}
+              for part, scale in own)]
 
 
 def clip_readings(ds: Dataset | None, cfg: TrainConfig) -> np.ndarray | None:
@@ -418,12 +427,15 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
         # dropout is training behaviour, not architecture: a fine-tune may switch it
         init_model = replace(ModelConfig.from_dict(init["model_config"]), dropout=cfg.model.dropout)
         deeper = replace(init_model, layers=cfg.model.layers) == cfg.model and cfg.model.layers > init_model.layers
-        # reading tokens or a position input added to a model without them start at zero:
+        grow = {k: True for k in ("points", "hmr") if getattr(cfg.model, k) and not getattr(init_model, k)}
+        if grow.get("points") and not cfg.model.mask_input:
+            grow = {}
+        # reading tokens, a position input or a refinement stage added to a model without
+        # them start at zero:
         # the same model at first
         added = ((not init_model.readings and cfg.model.readings
                   and replace(init_model, readings=cfg.model.readings, reading=cfg.model.reading) == cfg.model)
-                 or (not init_model.points and cfg.model.points and cfg.model.mask_input
-                     and replace(init_model, points=True) == cfg.model))
+                 or (bool(grow) and replace(init_model, **grow) == cfg.model))
         grown = (deeper or added) and cfg.kind == "diffusion"
         if init["kind"] != cfg.kind or (init_model != cfg.model and not grown):
             raise ValueError(f"--init {init_from}: its model ({init['kind']}, {init['model_config']}) "
