@@ -39,6 +39,7 @@ from benchmarks.vr_three_point import METRICS, difference_cells, run_set, store,
 OURS = "3 points"
 OURS_LABEL = "ours, 3 points"
 MLP_LABEL = "AGRoL MLP, 3 points"
+REACH = ", reach"  # the same answers, each arm then reaching its controller (inference/body/reach.py)
 DIFF_METRICS = METRICS
 
 
@@ -61,14 +62,17 @@ def rig_points(motion, seed: int, noise=None):
     return P[::STEP], quat_to_matrix(Q[::STEP])
 
 
-def run_mlp(held_out: str, agrol: Path, seed: int, cache: Path) -> list:
-    """Per-clip metrics of the MLP on one held-out set (cached beside our model's)."""
-    key = cache / f"{held_out}__agrol_mlp__{agrol.parent.name}_{agrol.stem}.pkl"
+def run_mlp(held_out: str, agrol: Path, seed: int, cache: Path, reach: bool = False) -> list:
+    """Per-clip metrics of the MLP on one held-out set (cached beside our model's); ``reach``:
+    its arms then reach the controllers as ours do in the ", reach" rows."""
+    key = cache / f"{held_out}__agrol_mlp{'_reach' if reach else ''}__{agrol.parent.name}_{agrol.stem}.pkl"
     if key.exists() and key.stat().st_mtime > agrol.stat().st_mtime:
         return pickle.loads(key.read_bytes())
+    from app.tracked_eval import tracked_points_input
+    from inference.body.reach import reach_hands
     from inference.evaluation.runner import clip_input, clip_seed, face_forward, load_motions
     from inference.metrics.errors import evaluate_clip
-    from inference.model.agrol_mlp import input_features, load_agrol, place_under_headset
+    from inference.model.agrol_mlp import DEVICES, input_features, load_agrol, place_under_headset
     from inference.signals.resample import FPS_MODEL
     from inference.training.splits import held_out_files
 
@@ -77,13 +81,17 @@ def run_mlp(held_out: str, agrol: Path, seed: int, cache: Path) -> list:
     metrics = []
     for motion in load_motions(held_out_files(held_out)):
         aligned = face_forward(motion)
-        inp = clip_input(aligned, [], align=False)
-        pos, rot = rig_points(aligned, clip_seed(seed, motion.name))
+        seed_c = clip_seed(seed, motion.name)
+        inp = clip_input(aligned, [], align=False, seed=seed_c,
+                         reach=tracked_points_input(DEVICES) if reach else None)
+        pos, rot = rig_points(aligned, seed_c)
         T = inp.rot.shape[0]
         if pos.shape[0] != T:
             raise ValueError(f"{motion.name}: rig gives {pos.shape[0]} frames at 20 Hz, the truth {T}")
         R = model.pose_causal(input_features(pos, rot))
         root, joints = place_under_headset(R, aligned.body.offsets, aligned.body.height, pos[:, 0])
+        if inp.reach is not None:
+            R, joints = reach_hands(R, root, aligned.body, *inp.reach)
         metrics.append(evaluate_clip(inp.name, R, root, joints, inp.rot, inp.root, inp.joints, FPS_MODEL))
     print(f"vr_baseline: {held_out} AGRoL MLP: {len(metrics)} clips in {time.time() - t0:.0f} s", file=sys.stderr)
     return store(key, metrics)
@@ -110,14 +118,17 @@ def main(argv: list[str] | None = None) -> int:
     cache = args.cache or Path("runs/vr/cache")
     out: dict = {"model": args.model, "agrol": str(args.agrol), "seed": args.seed, "sets": {}}
     for held_out in [s.strip() for s in args.sets.split(",") if s.strip()]:
-        ours = run_set(held_out, OURS, args.model, args.seed, cache)
-        mlp = run_mlp(held_out, args.agrol, args.seed, cache)
-        entry: dict = {"clips": len(ours), "rows": {}, "differences": {}}
-        for label, per in ((OURS_LABEL, ours), (MLP_LABEL, mlp)):
-            s = summarize(per)
+        per = {OURS_LABEL: run_set(held_out, OURS, args.model, args.seed, cache),
+               MLP_LABEL: run_mlp(held_out, args.agrol, args.seed, cache),
+               OURS_LABEL + REACH: run_set(held_out, OURS + REACH, args.model, args.seed, cache),
+               MLP_LABEL + REACH: run_mlp(held_out, args.agrol, args.seed, cache, reach=True)}
+        entry: dict = {"clips": len(per[OURS_LABEL]), "rows": {}, "differences": {}}
+        for label, metrics in per.items():
+            s = summarize(metrics)
             entry["rows"][label] = {m: s.get(m) for m in METRICS}
-        entry["differences"][f"{OURS_LABEL} - {MLP_LABEL}"] = {
-            m: paired_difference(ours, mlp, m, seed=args.seed).as_dict() for m in DIFF_METRICS}
+        for a, b in ((OURS_LABEL, MLP_LABEL), (OURS_LABEL + REACH, MLP_LABEL + REACH)):
+            entry["differences"][f"{a} - {b}"] = {
+                m: paired_difference(per[a], per[b], m, seed=args.seed).as_dict() for m in DIFF_METRICS}
         out["sets"][held_out] = entry
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(out, indent=1))

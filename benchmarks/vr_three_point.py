@@ -9,7 +9,9 @@ bootstrap intervals over clips.
 Each (set, sensor set) result is kept in ``--cache`` (default beside --json) as it finishes,
 so a run that stops resumes where it was. The comparison the issue asks for: 3 points + 2
 shanks against 3 points alone and against 2 shanks alone, on lower-body PE and GA; a
-difference whose interval holds 0 is not settled by the clips.
+difference whose interval holds 0 is not settled by the clips. The ", reach" rows are the
+same answers with each arm reaching its controller afterwards (``imucap evaluate --reach``,
+``inference/body/reach.py``).
 """
 
 from __future__ import annotations
@@ -24,12 +26,16 @@ from pathlib import Path
 METRICS = ("ga_deg", "mpjre_deg", "mpjpe_cm", "mpjve_cms", "jitter_1e2m_s3", "hand_pe_cm", "upper_pe_cm",
            "lower_pe_cm", "root_pe_cm")
 POINTS = ("head", "l_hand", "r_hand")
-SENSOR_SETS = {  # label -> (IMU sites, tracked points)
-    "3 points + 2 shanks": (("l_shank", "r_shank"), POINTS),
-    "3 points": ((), POINTS),
-    "2 shanks": (("l_shank", "r_shank"), ()),
+SENSOR_SETS = {  # label -> (IMU sites, tracked points, the arms reach the controllers after the answer)
+    "3 points + 2 shanks": (("l_shank", "r_shank"), POINTS, False),
+    "3 points": ((), POINTS, False),
+    "2 shanks": (("l_shank", "r_shank"), (), False),
+    "3 points, reach": ((), POINTS, True),
+    "3 points + 2 shanks, reach": (("l_shank", "r_shank"), POINTS, True),
 }
-COMPARE = (("3 points + 2 shanks", "3 points"), ("3 points + 2 shanks", "2 shanks"))
+COMPARE = (("3 points + 2 shanks", "3 points"), ("3 points + 2 shanks", "2 shanks"),
+           ("3 points, reach", "3 points"), ("3 points + 2 shanks, reach", "2 shanks"))
+COMPARED = ("ga_deg", "lower_pe_cm", "mpjpe_cm", "hand_pe_cm", "upper_pe_cm")
 
 
 def run_set(held_out: str, label: str, model_spec: str, seed: int, cache: Path) -> list:
@@ -43,7 +49,7 @@ def run_set(held_out: str, label: str, model_spec: str, seed: int, cache: Path) 
     from inference.poser.models import default_steps, resolve_model
     from inference.training.splits import held_out_files
 
-    sites, points = SENSOR_SETS[label]
+    sites, points, reach = SENSOR_SETS[label]
     model = resolve_model(model_spec)
     reads_points = bool(getattr(model.config, "points", False))  # positions, else the IMUs they imply
     motions = load_motions(held_out_files(held_out))
@@ -51,7 +57,8 @@ def run_set(held_out: str, label: str, model_spec: str, seed: int, cache: Path) 
     _, clips = evaluate_motions(motions, model, list(sites), steps=default_steps(model) or None,
                                 noise=evaluation_noise(), seed=seed, progress=False,
                                 given=tracked_signals(points) if points and not reads_points else None,
-                                tracked=tracked_points_input(points) if points and reads_points else None)
+                                tracked=tracked_points_input(points) if points and reads_points else None,
+                                reach=tracked_points_input(points) if reach else None)
     metrics = [c.metrics for c in clips]
     print(f"vr_three_point: {held_out} {label}: {len(metrics)} clips in {time.time() - t0:.0f} s", file=sys.stderr)
     return store(key, metrics)
@@ -94,8 +101,7 @@ def main(argv: list[str] | None = None) -> int:
             entry["rows"][label] = {m: s.get(m) for m in METRICS}
         for a, b in COMPARE:
             entry["differences"][f"{a} - {b}"] = {
-                m: paired_difference(per[a], per[b], m, seed=args.seed).as_dict() for m in ("ga_deg", "lower_pe_cm",
-                                                                                            "mpjpe_cm")}
+                m: paired_difference(per[a], per[b], m, seed=args.seed).as_dict() for m in COMPARED}
         if args.against:
             theirs = {label: run_set(held_out, label, args.against, args.seed, cache) for label in SENSOR_SETS}
             entry["against"] = {"model": args.against, "rows": {}, "differences": {}}

@@ -113,6 +113,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="tracked VR points too (head,l_hand,r_hand[,pelvis]), read as the live vmc-in chain reads "
                         "them: each stands for a model site (a controller for the wrist; app/tracked_eval.py); "
                         "--sensors none for the points alone")
+    p.add_argument("--reach", action="store_true",
+                   help="with --points: each tracked hand's arm reaches its controller after the model's answer "
+                        "(inference/body/reach.py), as a VR avatar's arm IK does; needs the headset")
     p.add_argument("--steps", default=None,
                    help="diffusion steps: K (evenly spaced), 'paper' (10D list) or a list 1000,500,0; "
                         "default: the model's own")
@@ -242,6 +245,10 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError("--points scores the sets given; it takes no --report, --confidence-report or @real")
         given = tracked_signals(points)
         tracked_input = tracked_points_input(points) if "head" in points else None
+        if args.reach and (tracked_input is None or not {"l_hand", "r_hand"} & set(points)):
+            raise ValueError("--reach needs the headset and a controller in --points (head,l_hand,r_hand)")
+    elif args.reach:
+        raise ValueError("--reach needs --points: the controllers to reach for")
     elif not sites:
         raise ValueError("--sensors none needs --points: nothing would be observed")
     if args.limit is not None and args.limit < 1:
@@ -312,10 +319,12 @@ def run(args: argparse.Namespace) -> int:
                                           pelvis_odometry="default" if args.pelvis_odometry else None,
                                           causal=causal, confidence=confidence and kind == "diffusion",
                                           lanes=lanes, given=None if reads_points else given,
-                                          tracked=tracked_input if reads_points else None)
+                                          tracked=tracked_input if reads_points else None,
+                                          reach=tracked_input if args.reach else None)
         summary.update({
             "model": str(spec), "kind": kind, "sensors": list(set_sites), "points": list(points),
             "points_read_as": ("positions" if reads_points else "imu") if points else None,
+            "reach": bool(args.reach),
             "insoles": insoles, "steps": _steps_label(st, kind), "step_list": st if kind == "diffusion" else None,
             "noise": bool(noise is not None), "seed": args.seed, "smoothing": args.smoothing,
             "inpaint_noise": noise_mode_for(model, args.inpaint_noise) if kind == "diffusion" else None,

@@ -28,6 +28,7 @@ import numpy as np
 
 from inference.body.body import Body, global_from_local, npose_rotations
 from inference.body.motion import Motion
+from inference.body.reach import reach_hands
 from inference.body.rotations import matrix_about_axis, matrix_to_rot6d, quat_to_matrix
 from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX, SITE_SEGMENT, parse_sites
 from inference.features.layout import N_FEATURES, SL_ACC, SL_CONTACT, SL_ROT, observation_mask
@@ -72,6 +73,9 @@ class ClipInput:
     root: np.ndarray  # (T, 3) truth
     joints: np.ndarray  # (T, 24, 3) truth
     points: np.ndarray | None = None  # (T, 16) tracked points' position input, for a model that reads it
+    # the controllers for the arms' reach after the answer (inference/body/reach.py): hand
+    # segment -> orientation (T, 3, 3), and the position input (T, 16)
+    reach: tuple[dict[str, np.ndarray], np.ndarray] | None = None
 
 
 def face_forward(motion: Motion) -> Motion:
@@ -100,7 +104,8 @@ TrackedInput = Callable[[Motion, int], tuple[dict[str, np.ndarray], np.ndarray]]
 
 def clip_input(motion: Motion, sites: Sequence[str], insoles: bool = False, noise: NoiseModel | None = None,
                seed: int = 0, align: bool = True, causal: bool = False,
-               given: GivenSignals | None = None, tracked: TrackedInput | None = None) -> ClipInput:
+               given: GivenSignals | None = None, tracked: TrackedInput | None = None,
+               reach: TrackedInput | None = None) -> ClipInput:
     """Synthesize a motion's signals at `sites` and turn them into 20 Hz features and
     masks the way the live pipeline does (module docstring), plus the 20 Hz truth.
     ``align`` first turns the clip to face +X at its start (``face_forward``); ``causal``:
@@ -108,7 +113,8 @@ def clip_input(motion: Motion, sites: Sequence[str], insoles: bool = False, nois
     sites whose 60 Hz signals come from elsewhere (a tracked point read as the live chain
     reads it), resampled and masked like the IMU sites; ``tracked``: tracked points for a
     model with a position input, their orientations as known segment entries and their
-    positions as ``ClipInput.points``, both taken at the 20 Hz frames."""
+    positions as ``ClipInput.points``, both taken at the 20 Hz frames; ``reach``: the same
+    for the arms' reach onto the controllers after the answer (``ClipInput.reach``)."""
     sites = parse_sites(list(sites))
     if align:
         motion = face_forward(motion)
@@ -150,8 +156,13 @@ def clip_input(motion: Motion, sites: Sequence[str], insoles: bool = False, nois
             feats[:, cols] = matrix_to_rot6d(quat_to_matrix(np.asarray(q)[::STEP][:T]))
             mask[:, cols] = True
         points = np.asarray(pf, np.float64)[::STEP][:T]
+    reach_in = None
+    if reach is not None:
+        segs, pf = reach(motion, seed)
+        hands = {n: quat_to_matrix(np.asarray(q)[::STEP][:T]) for n, q in segs.items() if n in ("l_hand", "r_hand")}
+        reach_in = (hands, np.asarray(pf, np.float64)[::STEP][:T])
     return ClipInput(name=motion.name, body=motion.body, features=feats, mask=mask, rot=rot,
-                     root=kin.root[::STEP], joints=kin.joints[::STEP], points=points)
+                     root=kin.root[::STEP], joints=kin.joints[::STEP], points=points, reach=reach_in)
 
 
 def clip_seed(seed: int, name: str) -> int:
@@ -218,6 +229,7 @@ def evaluate_motions(
     causal: bool = False,
     given: GivenSignals | None = None,
     tracked: TrackedInput | None = None,
+    reach: TrackedInput | None = None,
 ) -> tuple[dict, list[ClipResult]]:
     """Evaluate one model and sensor set over motions; returns (pooled summary, per-clip
     results). ``keep`` retains reconstructions (for exports) instead of only metrics;
@@ -228,11 +240,13 @@ def evaluate_motions(
     (``batched.reconstruct_many``: each clip's answer is its frame-by-frame one); 1 runs
     them one after the other. ``causal``: the signals through the low-latency mode's trailing
     acceleration filter (docs/latency.md); ``given``, ``tracked``: sites whose signals come
-    from elsewhere, tracked points for a model with a position input (``clip_input``)."""
+    from elsewhere, tracked points for a model with a position input (``clip_input``);
+    ``reach``: tracked controllers the answer's arms reach for before it is scored
+    (``inference.body.reach``)."""
     from tqdm import tqdm
 
     inputs = [clip_input(m, sites, insoles, noise, clip_seed(seed, m.name), causal=causal, given=given,
-                         tracked=tracked) for m in motions]
+                         tracked=tracked, reach=reach) for m in motions]
     total = sum(i.features.shape[0] for i in inputs)
     posers = [clip_poser(model, inp, steps, clip_seed(seed, inp.name), smoothing, contact_detector, inpaint_noise,
                          mirror, stride_scale, pelvis_odometry, confidence) for inp in inputs]
@@ -242,6 +256,9 @@ def evaluate_motions(
                                 points=[i.points for i in inputs])
     results: list[ClipResult] = []
     for inp, rec in zip(inputs, recs):
+        if inp.reach is not None:
+            R2, j2 = reach_hands(rec.rot, rec.root, inp.body, *inp.reach)
+            rec = replace(rec, rot=R2, joints=j2)
         cm = evaluate_clip(inp.name, rec.rot, rec.root, rec.joints, inp.rot, inp.root, inp.joints, FPS_MODEL)
         results.append(ClipResult(inp.name, cm, rec if keep else None, inp if keep else None))
     return summarize([r.metrics for r in results]), results

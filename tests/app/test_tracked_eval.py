@@ -88,8 +88,27 @@ def test_points_and_shanks_against_each_alone(capsys, tmp_path):
     assert runs["both"]["lower_pe_cm"] < runs["points"]["lower_pe_cm"]
 
 
+def test_the_arms_reach_puts_the_hands_on_their_controllers(capsys, tmp_path):
+    d = tmp_path / "data"
+    d.mkdir()
+    write_motion_bvh(d / "walk.bvh", generate("walk", seconds=8.0, seed=2))
+    runs = {}
+    for label, extra in (("model", []), ("reach", ["--reach"])):
+        code, out, err = _run(capsys, "--data", str(d), "--sensors", "none", "--points", "head,l_hand,r_hand",
+                              "--json", *extra)
+        assert code == 0, err
+        runs[label] = json.loads(out)
+    assert runs["reach"]["reach"] and not runs["model"]["reach"]
+    # the controller's few millimetres of tracking error and the hand's grip, not the model's guess
+    assert runs["reach"]["hand_pe_cm"] < 3.0 < runs["model"]["hand_pe_cm"]
+    assert runs["reach"]["upper_pe_cm"] < runs["model"]["upper_pe_cm"]
+    assert runs["reach"]["lower_pe_cm"] == pytest.approx(runs["model"]["lower_pe_cm"], abs=1e-6)
+
+
 @pytest.mark.parametrize(("argv", "says"), [
     (["--sensors", "head", "--points", "head"], "both give head"),
+    (["--reach"], "needs --points"),
+    (["--sensors", "none", "--points", "l_hand,r_hand", "--reach"], "needs the headset"),
     (["--points", "l_foot"], "unknown tracked point"),
     (["--sensors", "none"], "needs --points"),
     (["--points", "head,head"], "named twice"),
