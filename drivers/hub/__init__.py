@@ -33,7 +33,9 @@ Why each piece exists:
 - A device of kind ``tracked`` (a VR rig, ``drivers/vmc``) is one device and several
   sites: read once, on one clock model (its sites share the sender's clock), its samples
   routed by ``extra["site"]`` into a ring per site (``Track.site_rings``), each a site of
-  the frame like an IMU's.
+  the frame like an IMU's. Its positions (``extra["position"]``) go into the same rings and
+  onto the grid as the free acceleration does (held, or blended between the same two
+  samples): ``HubFrame.position``, NaN at IMU sites, None from a hub with no tracked device.
 - Each frame says which sample of each site went into it last (``sample_t``,
   ``sample_counter``), so a latency measurement starts at a real sample.
 - ``latency`` (how far behind now the grid runs) and ``max_latency`` (how far it

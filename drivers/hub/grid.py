@@ -50,19 +50,21 @@ class Interpolation:
 
 class Ring:
     """Recent samples of one device as rows of a float array: t, quat(4), free_acc(3),
-    acc(3), gyro(3), packet counter; NaN where the device does not report a quantity. Rows are
+    acc(3), gyro(3), packet counter, position(3) (a tracked device's ``extra["position"]``);
+    NaN where the device does not report a quantity. Rows are
     contiguous (the buffer is twice the capacity and slides back when full), so the
     grid code works on array views without per-sample Python."""
 
-    COLS = 15
+    COLS = 18
     COUNTER = 14
+    POSITION = slice(15, 18)
 
     def __init__(self, capacity: int = 512) -> None:
         self.cap = capacity
         self.buf = np.full((2 * capacity, self.COLS), np.nan)
         self.start = 0
         self.end = 0
-        self.has = {"quat": False, "free_acc": False, "acc": False, "gyro": False}
+        self.has = {"quat": False, "free_acc": False, "acc": False, "gyro": False, "position": False}
 
     def __len__(self) -> int:
         return self.end - self.start
@@ -96,6 +98,12 @@ class Ring:
                     else:
                         r[a:b] = v
                         self.has[name] = True
+        pos = [s.extra.get("position") if s.extra else None for s in samples]
+        if any(p is not None for p in pos):
+            block[:, self.POSITION] = [np.full(3, np.nan) if p is None else p for p in pos]
+            self.has["position"] = True
+        else:
+            block[:, self.POSITION] = np.nan
         self.end += n
         if len(self) > self.cap:
             self.start = self.end - self.cap
@@ -247,3 +255,31 @@ def batched(rings: Sequence[Ring], gaps: Sequence[Gaps], grid: np.ndarray, stale
         arr[~present] = np.nan
     quat, free, acc, gyro, newest = out
     return quat, free, acc, gyro, present, newest
+
+
+def positions(rings: Sequence[Ring], grid: np.ndarray, present: np.ndarray,
+              interpolation: Interpolation | None) -> np.ndarray:
+    """(G, S, 3) positions on the grid of the rings that carry them (a tracked device's
+    sites), NaN elsewhere and where ``present`` (G, S) is False: held as the other channels
+    are, or with an ``interpolation`` blended linearly between the pair of samples around
+    each grid time that ``batched`` takes for the free acceleration (the same pair and
+    weight), so a position and the orientation beside it stand for one instant."""
+    G, S = grid.size, len(rings)
+    out = np.full((G, S, 3), np.nan)
+    for k, ring in enumerate(rings):
+        if not ring.has["position"] or not len(ring) or not present[:, k].any():
+            continue
+        rows = ring.rows(grid[0] - 0.5)
+        ts = rows[:, 0]
+        n = ts.size
+        idx = np.searchsorted(ts, grid, side="right") - 1
+        if interpolation is not None and ring.has["quat"] and n >= 2:
+            i1 = np.clip(idx + 1, 1, n - 1)
+            i0 = i1 - 1
+            dt = ts[i1] - ts[i0]
+            w = np.clip((grid - ts[i0]) / np.where(dt > 0, dt, 1.0), 0.0, 1.0)[:, None]
+            p = (1.0 - w) * rows[i0, Ring.POSITION] + w * rows[i1, Ring.POSITION]
+        else:
+            p = rows[np.maximum(idx, 0), Ring.POSITION]
+        out[:, k] = np.where(present[:, k, None], p, np.nan)
+    return out

@@ -64,6 +64,10 @@ class HubFrame:
     # that are not a hub (synthetic frames, recordings)
     sample_t: np.ndarray | None = None
     sample_counter: np.ndarray | None = None
+    # per site: a tracked device's position (m, in its own frame: a VR runtime's, Z up, floor
+    # at 0), NaN at sites with none (IMUs) and where the site is not present; None from
+    # sources without tracked devices (IMU-only hubs, synthetic frames, older recordings)
+    position: np.ndarray | None = None
 
 
 @dataclass
@@ -143,6 +147,8 @@ class Hub:
             self._site_rings.update({s: (r, tr.site_gaps[s]) for s, r in tr.site_rings.items()} if tr.site_rings
                                     else {n: (tr.ring, tr.gap_spans)})
         self.insole_names: set[str] = {n for n, d in devices.items() if d.kind == "insoles"}
+        # a tracked device's sites carry positions: the frames then hold them (``HubFrame.position``)
+        self._tracked = any(tr.site_rings for tr in self.tracks.values())
         self.stats = HubStats()
         self._stop = threading.Event()
         self._next_index: int | None = None
@@ -382,6 +388,8 @@ class Hub:
                 force[g] = f
                 contacts[g] = c
             ins_ok |= ok
+        position = (grid_values.positions([self._ring(n)[0] for n in sites], grid, present, self.interpolation)
+                    if self._tracked else None)
         self._trim()
         return [
             HubFrame(
@@ -399,6 +407,7 @@ class Hub:
                 lost if g == 0 else {},
                 newest[g, :, 0],
                 newest[g, :, 1],
+                None if position is None else position[g],
             )
             for g in range(G)
         ]
