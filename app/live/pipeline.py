@@ -1,5 +1,5 @@
 """The live chain: hub frames (60 Hz) -> calibration -> 60->20 Hz resampler -> 190-feature
-observation + mask -> ``Poser.step`` -> sinks.
+observation + mask -> ``Poser.step`` -> the arms' reach onto a VR rig's controllers -> sinks.
 
 ``Pipeline`` is the chain without threads: ``push(frame)`` returns the poses that frame
 completed (0 or 1), so tests, offline replay and the threaded runner share one code
@@ -12,6 +12,11 @@ Acceleration: devices stream *raw* free acceleration and the resampler applies t
 model's 11-frame moving average once. The simulated suit replays synthesis's
 ``meta["free_acc_raw"]`` (sim_devices.devices.base.SignalSource), so nothing here
 smooths twice; ``frames_from_signals`` (``sources.py``) follows the same rule for device-less replay.
+
+A VR rig's positions (``HubFrame.position``) are turned into the model's world with the
+calibration's yaw for the rig (``tracked.py``), resampled with the orientations (the
+20 Hz frame's own sample), and after the poser's answer each tracked hand's arm reaches
+its controller (``inference.body.reach``); ``reach=False`` leaves the answer as it is.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from app.live.tracked import N_POINTS, RigPoints, position_input, reach
 from calibration import Calibration, Calibrator
 from drivers.hub import HubFrame
 from inference.body.rotations import matrix_to_rot6d
@@ -45,7 +51,11 @@ POSE_SKIPPED_EVENT = "pose skipped"
 """The event a pipeline sends its sinks for each 20 Hz frame the live loop had no time to
 pose (``pass_over``), at that frame's time: a recording keeps them, so that a replay can
 leave out the same frames and give back the live reconstruction exactly."""
-_NR = N_SITES * 9  # packed rest payload: R_WB (13*9) | observed (13) | contacts (4) | insole present (1)
+# packed rest payload: R_WB (13*9) | observed (13) | contacts (4) | insole present (1) | tracked points (4*3)
+_NR = N_SITES * 9
+_INS = _NR + N_SITES + N_CONTACTS  # the insoles' present flag
+_POS = _INS + 1  # the tracked points in the model's world, NaN where not tracked
+_REST = _POS + 3 * N_POINTS
 
 
 @dataclass
@@ -68,6 +78,9 @@ class LivePose:
     insoles: bool
     latency_ms: float | None
     compute_ms: float
+    # the frame's tracked points (position input, ``inference.body.tracked.point_features``)
+    # when the arms reached for them (``Pipeline(reach=...)``), else None
+    points: np.ndarray | None = None
 
 
 def stride_text(status: dict[str, Any]) -> str:
@@ -163,7 +176,9 @@ class Pipeline:
     insoles: use the insoles' contacts. clock: the session clock, for latency (None for
     replay of recorded or synthetic times, where latency means nothing). causal: the
     resampler's trailing moving average (the low-latency mode, ``app.latency``); None = the
-    filter the poser's model was trained on.
+    filter the poser's model was trained on. reach: the arms of the hands a VR rig tracks
+    reach its controllers after the poser's answer (frames with the headset's position and
+    at least one controller's); False leaves the answer as the model gave it.
     """
 
     def __init__(
@@ -177,13 +192,16 @@ class Pipeline:
         sinks: Iterable[Sink] = (),
         clock: Callable[[], float] | None = None,
         causal: bool | None = None,
+        reach: bool = True,
     ) -> None:
         self.poser = poser
+        self.reach = bool(reach)
         self.sites = tuple(sites)
         unknown = [s for s in self.sites if s not in SITE_INDEX]
         if unknown:
             raise ValueError(f"unknown sensor site(s) {unknown}")
         self._site_idx = np.array([SITE_INDEX[s] for s in self.sites], dtype=int)
+        self._rig = RigPoints(self.sites)
         self.calibrator = calibrator or Calibrator(self.sites)
         self.calibration: Calibration | None = None
         self.sinks: list[Sink] = list(sinks)
@@ -333,8 +351,9 @@ class Pipeline:
 
     @staticmethod
     def _empty_rest() -> np.ndarray:
-        r = np.zeros(_NR + N_SITES + N_CONTACTS + 1)
+        r = np.zeros(_REST)
         r[:_NR] = np.nan
+        r[_POS:] = np.nan
         return r
 
     def _observe(self, frame: HubFrame) -> tuple[np.ndarray, np.ndarray]:
@@ -349,8 +368,10 @@ class Pipeline:
         R13[self._site_idx[ok]] = R[ok].reshape(-1, 9)
         rest[_NR:_NR + N_SITES][self._site_idx[ok]] = 1.0
         if self.insoles and frame.insole_present:
-            rest[_NR + N_SITES:_NR + N_SITES + N_CONTACTS] = frame.contacts
-            rest[-1] = 1.0
+            rest[_NR + N_SITES:_INS] = frame.contacts
+            rest[_INS] = 1.0
+        if frame.position is not None:
+            rest[_POS:] = self._rig.points(self.calibration, frame.position, ok).reshape(-1)  # type: ignore[arg-type]
         return acc13, rest
 
     def _resample(self, t: float, acc: np.ndarray, rest: np.ndarray, t_start: float,
@@ -371,21 +392,27 @@ class Pipeline:
         R = rest[:_NR].reshape(N_SITES, 3, 3)
         observed = rest[_NR:_NR + N_SITES] > 0.5
         observed &= np.all(np.isfinite(acc), axis=-1)
-        insoles = bool(rest[-1] > 0.5)
+        insoles = bool(rest[_INS] > 0.5)
         x = np.zeros(N_FEATURES)
         for k in np.nonzero(observed)[0]:
             seg = SITE_SEGMENT_INDEX[k]
             x[SL_ROT.start + 6 * seg: SL_ROT.start + 6 * seg + 6] = matrix_to_rot6d(R[k]).reshape(6)
             x[SL_ACC.start + 3 * k: SL_ACC.start + 3 * k + 3] = acc[k]
         if insoles:
-            x[SL_CONTACT] = rest[_NR + N_SITES:_NR + N_SITES + N_CONTACTS]
+            x[SL_CONTACT] = rest[_NR + N_SITES:_INS]
         mask = observation_mask([SITES[k] for k in np.nonzero(observed)[0]], insoles=insoles)
         t0 = time.perf_counter()
-        pose = self.poser.step(x, mask)
+        points = position_input(rest[_POS:].reshape(N_POINTS, 3))
+        pose = self.poser.step(x, mask, points)  # a model with a position input reads them
+        reached = reach(pose, self.poser.body, points, R, observed) if self.reach else None
+        if reached is not None:
+            pose = reached
+        else:
+            points = None
         t1 = time.perf_counter()
         latency = (self.clock() - t_newest) * 1e3 if self.clock is not None else None
         lp = LivePose(pose=pose, t=t, t_newest=t_newest, index=index, observed_sites=observed, insoles=insoles,
-                      latency_ms=latency, compute_ms=(t1 - t_start) * 1e3)
+                      latency_ms=latency, compute_ms=(t1 - t_start) * 1e3, points=points)
         self.stats.poses += 1
         self.stats.step_ms.append((t1 - t0) * 1e3)
         self.stats.compute_ms.append(lp.compute_ms)

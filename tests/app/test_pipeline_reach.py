@@ -1,0 +1,132 @@
+"""The live chain with a VR rig's positions: hub frames that carry the headset's and the
+controllers' positions in the rig's own frame (turned about Z and moved against ours),
+the rig's yaw from the calibration, and the arms' reach onto the controllers after the
+poser's answer (``Pipeline(reach=...)``). Real parts: a generated walk, its device points
+(``inference.body.tracked``), a calibration that turns each site's reference frame, the
+floor poser (the model's place in the chain; its arms hang, so the reach has work to do)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from app.live import Pipeline
+from app.live.tracked import rig_yaw
+from calibration import Calibration
+from drivers.hub import HubFrame
+from inference.body.rotations import matrix_to_quat
+from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX
+from inference.body.tracked import point_locals, point_positions
+from inference.metrics.vr import head_anchored
+from inference.poser.poser import make_poser
+from inference.signals.synthesis import kinematics
+from sim_devices.motions import generate
+
+SITES = ("pelvis", "head", "l_wrist", "r_wrist")  # an IMU at the pelvis, the rig at the others
+RIG_YAW = math.radians(35.0)  # the rig's frame against ours, as a runtime's room setup puts it
+PELVIS_YAW = math.radians(100.0)  # the pelvis IMU's own heading reference: not the rig's
+RIG_ORIGIN = np.array([1.3, -0.7, 0.0])  # the room's origin; the floor is z = 0 in both
+T0 = 200.0
+HANDS = (SEGMENT_INDEX["l_hand"], SEGMENT_INDEX["r_hand"])
+# the segment each site's device turns with: a controller is held in the fist
+DEVICE_SEGMENT = {"pelvis": "pelvis", "head": "head", "l_wrist": "l_hand", "r_wrist": "r_hand"}
+POINT = {"head": 0, "l_wrist": 1, "r_wrist": 2}
+
+
+def _rz(a: float) -> np.ndarray:
+    return np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
+
+
+@pytest.fixture(scope="module")
+def rig():
+    motion = generate("walk", seconds=4.0, seed=4)
+    kin = kinematics(motion, 60.0)
+    pts = point_positions(kin.rot, kin.joints, point_locals(motion.body.offsets, motion.body.height))
+    R_WG = np.stack([_rz(PELVIS_YAW)] + [_rz(RIG_YAW)] * 3)
+    frames = []
+    for i in range(len(kin.rot)):
+        quat, free, pos = np.zeros((4, 4)), np.zeros((4, 3)), np.full((4, 3), np.nan)
+        for k, s in enumerate(SITES):
+            quat[k] = matrix_to_quat(R_WG[k].T @ kin.rot[i, SEGMENT_INDEX[DEVICE_SEGMENT[s]]])
+            free[k] = R_WG[k].T @ kin.site_acc_raw[i, SITE_INDEX[s]]
+            if s in POINT:
+                pos[k] = R_WG[k].T @ pts[i, POINT[s]] + RIG_ORIGIN
+        frames.append(HubFrame(t=T0 + i / 60.0, index=i, sites=SITES, quat=quat, free_acc=free,
+                               acc=np.zeros((4, 3)), gyro=np.zeros((4, 3)), present=np.ones(4, bool),
+                               insole_force=np.full(2, np.nan), contacts=np.zeros(4, bool), insole_present=False,
+                               position=pos))
+    cal = Calibration(SITES, R_WG=R_WG, R_SB=np.tile(np.eye(3), (4, 1, 1)), acc_offset=np.zeros((4, 3)),
+                      valid=np.ones(4, bool))
+    return motion, kin, frames, cal
+
+
+def _run(rig, frames=None, **kw):
+    motion, kin, all_frames, cal = rig
+    pipe = Pipeline(make_poser("floor", body=motion.body), SITES, calibration=cal, **kw)
+    out = []
+    for f in all_frames if frames is None else frames:
+        out += pipe.push(f)
+    return out
+
+
+def hand_error_cm(rig, poses) -> np.ndarray:
+    """(T, 2) each hand joint's distance from the truth's, both read against the head joint
+    (the three-point papers' hand PE)."""
+    motion, kin, frames, cal = rig
+    i = np.array([round((lp.t - T0) * 60) for lp in poses])
+    pred = head_anchored(np.stack([lp.pose.joints for lp in poses]), kin.joints[i])
+    true = head_anchored(kin.joints[i], kin.joints[i])
+    return 100 * np.linalg.norm(pred[:, HANDS] - true[:, HANDS], axis=-1)
+
+
+def test_the_arms_reach_the_controllers(rig):
+    on, off = _run(rig), _run(rig, reach=False)
+    assert len(on) == len(off) > 60
+    err_on, err_off = hand_error_cm(rig, on), hand_error_cm(rig, off)
+    print("hand PE cm: reach", err_on.mean().round(2), "without", err_off.mean().round(2))
+    assert err_off.mean() > 4.0  # the floor poser's arms hang (6.2 cm)
+    assert err_on.max() < 0.5, err_on.max()  # exact devices, the controller's orientation for the hand
+    assert all(lp.points is not None and lp.points.shape == (16,) for lp in on)
+    assert all(lp.points is None for lp in off)
+    # only the arms move, and the joints are the reached body's
+    arms = [SEGMENT_INDEX[f"{s}_{p}"] for s in "lr" for p in ("collar", "upperarm", "forearm", "hand")]
+    rest = [k for k in range(24) if k not in arms]
+    for a, b in zip(on, off, strict=True):
+        np.testing.assert_allclose(a.pose.rot[rest], b.pose.rot[rest], atol=1e-12)
+        np.testing.assert_allclose(a.pose.root, b.pose.root, atol=1e-12)
+    assert not np.allclose(np.stack([lp.pose.rot[arms] for lp in on]), np.stack([lp.pose.rot[arms] for lp in off]))
+
+
+def test_without_the_headset_nothing_is_reached(rig):
+    motion, kin, frames, cal = rig
+    blind = [HubFrame(**{**f.__dict__, "position": np.where(np.arange(4)[:, None] == 1, np.nan, f.position)})
+             for f in frames]
+    poses, off = _run(rig, blind), _run(rig, reach=False)
+    assert all(lp.points is None for lp in poses)
+    for a, b in zip(poses, off, strict=True):
+        np.testing.assert_allclose(a.pose.joints, b.pose.joints, atol=1e-12)
+
+
+def test_one_controller_is_reached_and_the_other_arm_kept(rig):
+    motion, kin, frames, cal = rig
+    one = [HubFrame(**{**f.__dict__, "position": np.where(np.arange(4)[:, None] == 2, np.nan, f.position)})
+           for f in frames]  # the left controller lost
+    err = hand_error_cm(rig, _run(rig, one))
+    off = hand_error_cm(rig, _run(rig, reach=False))
+    assert err[:, 1].max() < 0.5
+    np.testing.assert_allclose(err[:, 0], off[:, 0], atol=1e-4)  # the poser's float32 joints, refitted
+
+
+def test_the_rigs_yaw_is_the_mean_of_its_sites_and_no_imus():
+    sites = ("pelvis", "head", "l_wrist", "r_wrist")
+    R_WG = np.stack([_rz(2.0), _rz(0.50), _rz(0.54), _rz(0.58)])
+    cal = Calibration(sites, R_WG=R_WG, R_SB=np.tile(np.eye(3), (4, 1, 1)), acc_offset=np.zeros((4, 3)),
+                      valid=np.ones(4, bool))
+    np.testing.assert_allclose(rig_yaw(cal, ("head", "l_wrist", "r_wrist")), _rz(0.54), atol=1e-12)
+    # across the +-180 deg seam the mean is still the middle
+    cal.R_WG[1:] = np.stack([_rz(math.pi - 0.1), _rz(-math.pi + 0.1), _rz(math.pi)])
+    np.testing.assert_allclose(rig_yaw(cal, ("head", "l_wrist", "r_wrist")), _rz(math.pi), atol=1e-12)
+    cal.valid[:] = False
+    assert rig_yaw(cal, ("head",)) is None
