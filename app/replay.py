@@ -96,6 +96,7 @@ class _Stream:
         self.free_acc, self.acc, self.gyro = stack("free_acc", 3), stack("acc", 3), stack("gyro", 3)
         self.present = (np.stack([np.asarray(r[s]["present"], bool) for s in self.sites], axis=1) if S
                         else np.zeros((n, 0), bool))
+        self.position = rec.positions()  # a VR rig's (None when the recording kept none)
         ins = r["insoles"]
         self.force = np.asarray(ins["force"], dtype=np.float64)
         self.contacts = np.asarray(ins["contacts"], dtype=bool)
@@ -107,7 +108,8 @@ class _Stream:
     def frame(self, i: int) -> HubFrame:
         return HubFrame(t=float(self.t[i]), index=int(self.index[i]), sites=self.sites, quat=self.quat[i],
                         free_acc=self.free_acc[i], acc=self.acc[i], gyro=self.gyro[i], present=self.present[i],
-                        insole_force=self.force[i], contacts=self.contacts[i], insole_present=bool(self.ins_present[i]))
+                        insole_force=self.force[i], contacts=self.contacts[i], insole_present=bool(self.ins_present[i]),
+                        position=None if self.position is None else self.position[i])
 
     def __iter__(self) -> Iterator[HubFrame]:
         return (self.frame(i) for i in range(len(self)))
@@ -207,7 +209,7 @@ def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] 
                      insoles: bool | None = None, calibration: Calibration | None = None,
                      progress: Callable[[int, int, int], None] | None = None, sinks: Sequence[Sink] = (),
                      pace: Callable[[float], None] | None = None, causal: bool | None = None,
-                     every_frame: bool = False) -> ReplayResult:
+                     every_frame: bool = False, reach: bool | None = None) -> ReplayResult:
     """Run ``rec``'s raw stream through a Pipeline with ``poser``.
 
     sensors: the recorded sites whose measurements the poser gets (default all; the
@@ -219,7 +221,9 @@ def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] 
     before the frame of time ``t`` is pushed (``app.streams.pacing.Pacer`` holds it back
     to real time). causal: the trailing acceleration filter of the low-latency mode (None:
     the one the poser's model was trained on). every_frame: also pose the frames the live
-    loop had no time for (default: leave them out, as live did).
+    loop had no time for (default: leave them out, as live did). reach: the arms reach a VR
+    rig's recorded controllers after each answer (``Pipeline(reach=...)``; None: as the
+    session did, its metadata's ``reach``, on when it does not say).
     """
     use = resolve_sensors(rec, sensors)
     ins = resolve_insoles(rec, insoles)
@@ -231,7 +235,8 @@ def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] 
     # when a live recalibration stopped the posing (a calibration given here holds throughout)
     recals = [] if calibration is not None else sorted(ev[0] for ev in rec.events if ev[1] == RECALIBRATION_EVENT)
     stream = _Stream(rec)
-    pipe = Pipeline(poser, rec.sites, active_sites=use, insoles=ins, sinks=sinks, causal=causal)
+    reach = bool(rec.metadata.get("reach", True)) if reach is None else bool(reach)
+    pipe = Pipeline(poser, rec.sites, active_sites=use, insoles=ins, sinks=sinks, causal=causal, reach=reach)
     skipped = live_skipped_times(rec)
     if len(skipped) and not every_frame:
         pipe.skip_pose = lambda t20: bool(match_times(np.array([t20]), skipped, SAME_FRAME_S)[0] >= 0)

@@ -75,6 +75,7 @@ class CaptureOptions:
     sinks: list[Sink] = field(default_factory=list)  # more consumers of the live body: streams (app.streams)
     latency: str = "centred"  # app.latency.LATENCY_MODES: "low" waits for no future sample
     confidence: bool = False  # each pose with its per-segment spread (inference/poser/confidence.py)
+    reach: bool = True  # a VR rig's tracked hands: the arms reach the controllers (app/live/tracked.py)
 
 
 def session_spec(setup: Setup, options: CaptureOptions) -> dict[str, Any]:
@@ -90,6 +91,7 @@ def session_spec(setup: Setup, options: CaptureOptions) -> dict[str, Any]:
         "latency": options.latency, "threads": options.threads, "countdown_s": options.countdown,
         "calibration_timeout_s": options.timeout, "record": options.record is not None,
         "reuses_calibration": options.calibration is not None,
+        **({"reach": options.reach} if setup.tracked else {}),
     }
 
 
@@ -113,7 +115,7 @@ class CaptureSession:
                            confidence=opt.confidence or setup.confidence)
         self.guided = GuidedCalibration(self.sites, setup.calibration, countdown=opt.countdown, timeout=opt.timeout)
         self.pipeline = Pipeline(self.poser, self.sites, calibrator=self.guided, insoles=setup.insoles is not None,
-                                 clock=time.monotonic, causal=causal)
+                                 clock=time.monotonic, causal=causal, reach=opt.reach)
         self.watch = _Watch(self)
         self.pipeline.add_sink(self.watch)
         for sink in opt.sinks:
@@ -181,13 +183,14 @@ class CaptureSession:
             "app_version": APP_VERSION,
             # how the poser ran, from the poser built: a replay with no options runs it so again
             **poser_metadata(self.poser, self.options.latency),
-            "body_height_m": s.subject.height_m, **self.options.metadata,
+            "body_height_m": s.subject.height_m, "reach": bool(self.options.reach), **self.options.metadata,
         }
 
     def start_recording(self, path: str | Path):
         from app.recording import Recorder
 
-        rec = Recorder(path, sites=self.sites, metadata=self.metadata(), on_error=self._recording_failed)
+        rec = Recorder(path, sites=self.sites, metadata=self.metadata(), on_error=self._recording_failed,
+                       position_sites=[s for e in self.setup.tracked.values() for s in e.sites])
         self.recorder = rec
 
         def attach(p: Pipeline) -> None:

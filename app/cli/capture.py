@@ -135,7 +135,8 @@ def run(args: argparse.Namespace) -> int:
     headless = args.headless or not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
     term = _Terminal()
     options = CaptureOptions(record=record, calibration=cal, countdown=args.countdown, timeout=args.timeout,
-                             on_event=term.event, latency=args.latency, confidence=args.confidence)
+                             on_event=term.event, latency=args.latency, confidence=args.confidence,
+                             reach=not args.no_reach)
     try:
         options.sinks = sinks_from_args(args)
         session = CaptureSession(setup, options)
@@ -204,6 +205,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="each pose with a spread per segment (deg) and for the root (m): 0 where a sensor measured "
                         "it, larger where the model guessed; coloured in the window, in the recording, on LSL "
                         "(docs/confidence.md); costs ~40 %% more per frame")
+    p.add_argument("--no-reach", action="store_true",
+                   help="with a VR rig: leave the arms as the model gives them instead of reaching the tracked "
+                        "controllers (docs/vr_input.md)")
     add_stream_arguments(p)
     p.add_argument("--screenshot", help="with a window: save it to this PNG after --quit-after seconds")
     p.add_argument("--quit-after", type=float, default=0.0)

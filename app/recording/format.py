@@ -23,6 +23,9 @@ EVENT_DETAIL = "S512"
 # it cannot open
 SITE_FIELDS = (("quat", (4,), "f4"), ("free_acc", (3,), "f4"), ("acc", (3,), "f4"), ("gyro", (3,), "f4"),
                ("present", (), "?"))
+# a tracked device's site (a VR rig's) also keeps its position (m, in the rig's own frame);
+# only those sites have it, and recordings from before positions were kept have none
+POSITION_FIELD = ("position", (3,), "f4")
 INSOLE_FIELDS = (("force", (2,), "f4"), ("contacts", (N_CONTACTS,), "?"), ("present", (), "?"))
 RECON_FIELDS = (("t", (), "f8"), ("index", (), "i8"), ("rot", (N_SEGMENTS, 4), "f4"), ("root", (3,), "f4"),
                 ("joints", (N_SEGMENTS, 3), "f4"), ("contacts", (N_CONTACTS,), "?"),

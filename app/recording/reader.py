@@ -19,6 +19,7 @@ from app.recording.format import (
     EVENT_FIELDS,
     HDF5_SIGNATURE,
     INSOLE_FIELDS,
+    POSITION_FIELD,
     RECON_FIELDS,
     RECON_NEWER,
     SITE_FIELDS,
@@ -40,7 +41,8 @@ IN_FLIGHT_RETRY_S = 0.01
 @dataclass
 class Recording:
     """A recording in memory. raw: ``t``, ``index`` and per site dicts (quat, free_acc,
-    acc, gyro, present) plus ``insoles``; calibrations: (t, Calibration) in order;
+    acc, gyro, present, and ``position`` at a tracked device's sites) plus ``insoles``;
+    calibrations: (t, Calibration) in order;
     recon: arrays as in the file, ``rot`` also as matrices under ``R``.
 
     damage: one line per stretch that could not be read (a chunk whose checksum failed,
@@ -69,11 +71,28 @@ class Recording:
     def n_frames(self) -> int:
         return int(len(self.raw["t"]))
 
+    @property
+    def position_sites(self) -> tuple[str, ...]:
+        """The sites whose positions were kept (a VR rig's; none in older recordings)."""
+        return tuple(s for s in self.sites if "position" in self.raw.get(s, {}))
+
+    def positions(self) -> np.ndarray | None:
+        """(N, S, 3) the kept positions over ``sites`` (NaN at the others), or None when the
+        recording kept none: what the hub's frames held (``HubFrame.position``)."""
+        if not self.position_sites:
+            return None
+        out = np.full((self.n_frames, len(self.sites), 3), np.nan)
+        for k, s in enumerate(self.sites):
+            if "position" in self.raw[s]:
+                out[:, k] = self.raw[s]["position"]
+        return out
+
     def hub_frames(self) -> list[HubFrame]:
         """The raw stream as hub frames, to replay through a ``Pipeline``."""
         S = len(self.sites)
         r = self.raw
         out = []
+        pos = self.positions()
         for i in range(self.n_frames):
             quat = np.stack([r[s]["quat"][i] for s in self.sites]).astype(np.float64) if S else np.zeros((0, 4))
             vec = {n: np.stack([r[s][n][i] for s in self.sites]).astype(np.float64) if S else np.zeros((0, 3))
@@ -83,7 +102,8 @@ class Recording:
             out.append(HubFrame(t=float(r["t"][i]), index=int(r["index"][i]), sites=self.sites, quat=quat,
                                 free_acc=vec["free_acc"], acc=vec["acc"], gyro=vec["gyro"], present=present,
                                 insole_force=ins["force"][i].astype(np.float64), contacts=ins["contacts"][i].copy(),
-                                insole_present=bool(ins["present"][i])))
+                                insole_present=bool(ins["present"][i]),
+                                position=None if pos is None else pos[i]))
         return out
 
 
@@ -387,6 +407,14 @@ def _never_written(cols: dict[str, _Column], mask: np.ndarray, names: Sequence[s
     cols[names[0]].lost += [(a, b, NEVER_WRITTEN) for a, b in _stretches(extra)]
 
 
+def _has(f: h5py.File, name: str) -> bool:
+    """Whether the file links ``name`` (a damaged link reads as there: the read then says so)."""
+    try:
+        return name in f
+    except (OSError, RuntimeError, KeyError, ValueError):
+        return True
+
+
 def read_recording(path: str | os.PathLike) -> Recording:
     """Everything flushed so far (a live or killed file included), minus what cannot be
     trusted: a chunk that fails its checksum, a part cut off or never written is skipped
@@ -406,7 +434,10 @@ def read_recording(path: str | os.PathLike) -> Recording:
         # raw: a frame without a readable time or index is dropped, a site's damaged samples
         # are marked not present
         raw_fields = [("t", (), "f8"), ("index", (), "i8")]
-        raw_fields += [(f"{s}/{k}", tail, dt) for s in sites for k, tail, dt in SITE_FIELDS]
+        # a site's position only where the writer kept one (a tracked device's site)
+        site_fields = {s: SITE_FIELDS + ((POSITION_FIELD,) if _has(f, f"raw/{s}/{POSITION_FIELD[0]}") else ())
+                       for s in sites}
+        raw_fields += [(f"{s}/{k}", tail, dt) for s in sites for k, tail, dt in site_fields[s]]
         raw_fields += [(f"insoles/{k}", tail, dt) for k, tail, dt in INSOLE_FIELDS]
         cols, n = rd.group("raw", raw_fields)
         t_raw = cols["t"].data.astype(np.float64)
@@ -417,7 +448,7 @@ def read_recording(path: str | os.PathLike) -> Recording:
         rd.note(cols, "raw", "frames", t_raw)
         keep = ~drop
         raw: dict[str, Any] = {"t": t_raw[keep], "index": idx[keep]}
-        for s, fields in [(s, SITE_FIELDS) for s in sites] + [("insoles", INSOLE_FIELDS)]:
+        for s, fields in [(s, site_fields[s]) for s in sites] + [("insoles", INSOLE_FIELDS)]:
             sub = {k: cols[f"{s}/{k}"] for k, _, _ in fields}
             hurt = np.zeros(n, bool)
             for c in sub.values():

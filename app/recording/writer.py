@@ -26,6 +26,7 @@ from app.recording.format import (
     EVENT_KIND,
     FORMAT,
     INSOLE_FIELDS,
+    POSITION_FIELD,
     RECON_FIELDS,
     SITE_FIELDS,
     VERSION,
@@ -46,6 +47,9 @@ CHUNKS_CACHED = 2
 8 MiB chunk cache by default, and a recording appends to ~40 datasets, so an hour-long
 session's memory grew with what it had written until each dataset's cache was full (+93 MB
 in 60 minutes, ``docs/robustness.md``). Fully written chunks go first (``rdcc_w0 = 1``)."""
+
+
+_NO_POSITION = np.full(3, np.nan)
 
 
 def _ds(g: h5py.Group, name: str, tail: tuple[int, ...], dtype: Any, chunk: int) -> h5py.Dataset:
@@ -74,7 +78,8 @@ class Recorder(Sink):
 
     sites: the suit's sites in the hub's order; metadata: JSON-able dict stored as the
     root attribute ``metadata``; flush_interval: seconds between flushes (the most a
-    crash can lose).
+    crash can lose); position_sites: the sites whose positions are kept (a VR rig's: the
+    hub's ``HubFrame.position``), each a ``position`` dataset beside its other channels.
 
     Faults while recording (disk full, the disk gone read-only, an I/O error, the file or
     its folder removed) never raise into the pipeline: the recorder stops writing, sets
@@ -90,10 +95,16 @@ class Recorder(Sink):
 
     def __init__(self, path: str | os.PathLike, sites: Sequence[str], metadata: dict[str, Any] | None = None,
                  flush_interval: float = 1.0, chunk: int = 256, clock: Callable[[], float] = time.monotonic,
-                 on_error: Callable[[float, str], None] | None = None) -> None:
+                 on_error: Callable[[float, str], None] | None = None,
+                 position_sites: Sequence[str] = ()) -> None:
         self._lock = threading.RLock()
         self.path = Path(path)
         self.sites = tuple(sites)
+        unknown = [s for s in position_sites if s not in self.sites]
+        if unknown:
+            raise ValueError(f"position site(s) {unknown} are not among the recording's sites {self.sites}")
+        # (index in the frame, site) of each site whose positions are kept
+        self._positions = [(k, s) for k, s in enumerate(self.sites) if s in set(position_sites)]
         self.flush_interval = flush_interval
         self.clock = clock
         self.on_error = on_error
@@ -117,6 +128,9 @@ class Recorder(Sink):
             for s in self.sites:
                 g = raw.create_group(s)
                 for name, tail, dt in SITE_FIELDS:
+                    self._raw[f"{s}/{name}"] = _ds(g, name, tail, dt, chunk)
+                if s in set(position_sites):
+                    name, tail, dt = POSITION_FIELD
                     self._raw[f"{s}/{name}"] = _ds(g, name, tail, dt, chunk)
             g = raw.create_group("insoles")
             for name, tail, dt in INSOLE_FIELDS:
@@ -165,6 +179,8 @@ class Recorder(Sink):
             b[f"{s}/acc"].append(frame.acc[k])
             b[f"{s}/gyro"].append(frame.gyro[k])
             b[f"{s}/present"].append(bool(frame.present[k]))
+        for k, s in self._positions:
+            b[f"{s}/position"].append(_NO_POSITION if frame.position is None else frame.position[k])
         b["insoles/force"].append(frame.insole_force)
         b["insoles/contacts"].append(frame.contacts)
         b["insoles/present"].append(bool(frame.insole_present))

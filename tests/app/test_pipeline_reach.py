@@ -16,50 +16,18 @@ from app.live import Pipeline
 from app.live.tracked import rig_yaw
 from calibration import Calibration
 from drivers.hub import HubFrame
-from inference.body.rotations import matrix_to_quat
-from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX
-from inference.body.tracked import point_locals, point_positions
+from inference.body.skeleton import SEGMENT_INDEX
 from inference.metrics.vr import head_anchored
 from inference.poser.poser import make_poser
-from inference.signals.synthesis import kinematics
-from sim_devices.motions import generate
+from tests.app.rig_frames import SITES, T0, rig_walk, rz
 
-SITES = ("pelvis", "head", "l_wrist", "r_wrist")  # an IMU at the pelvis, the rig at the others
-RIG_YAW = math.radians(35.0)  # the rig's frame against ours, as a runtime's room setup puts it
-PELVIS_YAW = math.radians(100.0)  # the pelvis IMU's own heading reference: not the rig's
-RIG_ORIGIN = np.array([1.3, -0.7, 0.0])  # the room's origin; the floor is z = 0 in both
-T0 = 200.0
 HANDS = (SEGMENT_INDEX["l_hand"], SEGMENT_INDEX["r_hand"])
-# the segment each site's device turns with: a controller is held in the fist
-DEVICE_SEGMENT = {"pelvis": "pelvis", "head": "head", "l_wrist": "l_hand", "r_wrist": "r_hand"}
-POINT = {"head": 0, "l_wrist": 1, "r_wrist": 2}
-
-
-def _rz(a: float) -> np.ndarray:
-    return np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
 
 
 @pytest.fixture(scope="module")
 def rig():
-    motion = generate("walk", seconds=4.0, seed=4)
-    kin = kinematics(motion, 60.0)
-    pts = point_positions(kin.rot, kin.joints, point_locals(motion.body.offsets, motion.body.height))
-    R_WG = np.stack([_rz(PELVIS_YAW)] + [_rz(RIG_YAW)] * 3)
-    frames = []
-    for i in range(len(kin.rot)):
-        quat, free, pos = np.zeros((4, 4)), np.zeros((4, 3)), np.full((4, 3), np.nan)
-        for k, s in enumerate(SITES):
-            quat[k] = matrix_to_quat(R_WG[k].T @ kin.rot[i, SEGMENT_INDEX[DEVICE_SEGMENT[s]]])
-            free[k] = R_WG[k].T @ kin.site_acc_raw[i, SITE_INDEX[s]]
-            if s in POINT:
-                pos[k] = R_WG[k].T @ pts[i, POINT[s]] + RIG_ORIGIN
-        frames.append(HubFrame(t=T0 + i / 60.0, index=i, sites=SITES, quat=quat, free_acc=free,
-                               acc=np.zeros((4, 3)), gyro=np.zeros((4, 3)), present=np.ones(4, bool),
-                               insole_force=np.full(2, np.nan), contacts=np.zeros(4, bool), insole_present=False,
-                               position=pos))
-    cal = Calibration(SITES, R_WG=R_WG, R_SB=np.tile(np.eye(3), (4, 1, 1)), acc_offset=np.zeros((4, 3)),
-                      valid=np.ones(4, bool))
-    return motion, kin, frames, cal
+    r = rig_walk()
+    return r.motion, r.kin, r.frames, r.calibration
 
 
 def _run(rig, frames=None, **kw):
@@ -121,12 +89,12 @@ def test_one_controller_is_reached_and_the_other_arm_kept(rig):
 
 def test_the_rigs_yaw_is_the_mean_of_its_sites_and_no_imus():
     sites = ("pelvis", "head", "l_wrist", "r_wrist")
-    R_WG = np.stack([_rz(2.0), _rz(0.50), _rz(0.54), _rz(0.58)])
+    R_WG = np.stack([rz(2.0), rz(0.50), rz(0.54), rz(0.58)])
     cal = Calibration(sites, R_WG=R_WG, R_SB=np.tile(np.eye(3), (4, 1, 1)), acc_offset=np.zeros((4, 3)),
                       valid=np.ones(4, bool))
-    np.testing.assert_allclose(rig_yaw(cal, ("head", "l_wrist", "r_wrist")), _rz(0.54), atol=1e-12)
+    np.testing.assert_allclose(rig_yaw(cal, ("head", "l_wrist", "r_wrist")), rz(0.54), atol=1e-12)
     # across the +-180 deg seam the mean is still the middle
-    cal.R_WG[1:] = np.stack([_rz(math.pi - 0.1), _rz(-math.pi + 0.1), _rz(math.pi)])
-    np.testing.assert_allclose(rig_yaw(cal, ("head", "l_wrist", "r_wrist")), _rz(math.pi), atol=1e-12)
+    cal.R_WG[1:] = np.stack([rz(math.pi - 0.1), rz(-math.pi + 0.1), rz(math.pi)])
+    np.testing.assert_allclose(rig_yaw(cal, ("head", "l_wrist", "r_wrist")), rz(math.pi), atol=1e-12)
     cal.valid[:] = False
     assert rig_yaw(cal, ("head",)) is None
