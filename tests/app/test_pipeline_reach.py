@@ -98,3 +98,36 @@ def test_the_rigs_yaw_is_the_mean_of_its_sites_and_no_imus():
     np.testing.assert_allclose(rig_yaw(cal, ("head", "l_wrist", "r_wrist")), rz(math.pi), atol=1e-12)
     cal.valid[:] = False
     assert rig_yaw(cal, ("head",)) is None
+
+
+def test_a_model_with_a_position_input_reads_each_frames_points(rig, tmp_path):
+    """A model that takes tracked points (``ModelConfig.points``; a tiny untrained one) gets
+    each frame's position input from the live chain, the one the arms reach with."""
+    from dataclasses import replace
+
+    import torch
+
+    from inference.features.codec import features_from_motion
+    from inference.model.config import ModelConfig
+    from inference.model.files import build_model, save_model
+    from inference.poser.models import resolve_model
+    from inference.poser.poser import Poser
+    from inference.training.data import feature_stats
+
+    motion, kin, frames, cal = rig
+    mean, std = feature_stats([features_from_motion(motion)])
+    torch.manual_seed(0)
+    net = build_model("diffusion", replace(ModelConfig.tiny(), mask_input=True, points=True))
+    path = tmp_path / "points.pt"
+    save_model(path, net, "diffusion", mean, std, meta={"default_steps": "10D:2", "inpaint_mode": "replace-ddim",
+                                                        "history": "measured", "noise": "mean"})
+    poser = Poser(resolve_model(str(path)), body=motion.body)
+    assert poser.takes_points
+    pipe = Pipeline(poser, SITES, calibration=cal)
+    seen = 0
+    for f in frames[:120]:
+        for lp in pipe.push(f):
+            assert lp.points is not None
+            torch.testing.assert_close(poser.points_window()[0, -1], torch.as_tensor(lp.points, dtype=torch.float32))
+            seen += 1
+    assert seen > 20
