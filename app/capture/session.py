@@ -91,7 +91,7 @@ def session_spec(setup: Setup, options: CaptureOptions) -> dict[str, Any]:
         "latency": options.latency, "threads": options.threads, "countdown_s": options.countdown,
         "calibration_timeout_s": options.timeout, "record": options.record is not None,
         "reuses_calibration": options.calibration is not None,
-        **({"reach": options.reach} if setup.tracked else {}),
+        **({"reach": bool(options.reach and setup.reach)} if setup.tracked else {}),
     }
 
 
@@ -115,7 +115,7 @@ class CaptureSession:
                            confidence=opt.confidence or setup.confidence)
         self.guided = GuidedCalibration(self.sites, setup.calibration, countdown=opt.countdown, timeout=opt.timeout)
         self.pipeline = Pipeline(self.poser, self.sites, calibrator=self.guided, insoles=setup.insoles is not None,
-                                 clock=time.monotonic, causal=causal, reach=opt.reach)
+                                 clock=time.monotonic, causal=causal, reach=opt.reach and setup.reach)
         self.watch = _Watch(self)
         self.pipeline.add_sink(self.watch)
         for sink in opt.sinks:
@@ -183,7 +183,7 @@ class CaptureSession:
             "app_version": APP_VERSION,
             # how the poser ran, from the poser built: a replay with no options runs it so again
             **poser_metadata(self.poser, self.options.latency),
-            "body_height_m": s.subject.height_m, "reach": bool(self.options.reach), **self.options.metadata,
+            "body_height_m": s.subject.height_m, "reach": self.pipeline.reach, **self.options.metadata,
         }
 
     def start_recording(self, path: str | Path):

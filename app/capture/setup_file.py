@@ -37,7 +37,7 @@ TABLE_KEYS: dict[str, tuple[str, ...]] = {
     "sensors": SITES,
     "insoles": ("url",),
     "tracked": (),  # name = URL of a VR rig (any name that is not a site): its sites come from the URL
-    "model": ("name", "steps", "confidence"),
+    "model": ("name", "steps", "confidence", "reach"),
     "calibration": ("protocol",),
     "recording": ("folder",),
 }
@@ -91,6 +91,7 @@ class Setup:
     model: str = DEFAULT_MODEL
     steps: str | None = None
     confidence: bool = False  # each pose with its per-segment spread (docs/confidence.md)
+    reach: bool = True  # a VR rig's tracked hands: the arms reach the controllers (docs/vr_input.md)
     calibration: str = "walk"
     # relative = relative to the setup file's folder; load_setup resolves it against that folder
     recordings: Path = DEFAULT_RECORDINGS
@@ -244,7 +245,8 @@ class _Parser:
         self._check_one_device_per_site(sensors, insoles, tracked)
         model, steps = self._model(data.get("model", {}))
         return Setup(subject=subject, sensors=sensors, insoles=insoles, tracked=tracked, model=model, steps=steps,
-                     confidence=self._confidence(data.get("model", {})),
+                     confidence=self._flag(data.get("model", {}), "confidence", False),
+                     reach=self._flag(data.get("model", {}), "reach", True),
                      calibration=self._calibration(data.get("calibration", {})),
                      recordings=self._recordings(data.get("recording", {})), path=self.path)
 
@@ -443,11 +445,11 @@ class _Parser:
                              'write e.g. "10D:3", "paper", a number of steps, or a list "1000,500,0"', line) from None
         return name, steps
 
-    def _confidence(self, table: dict[str, Any]) -> bool:
-        value = table.get("confidence", False)
+    def _flag(self, table: dict[str, Any], key: str, default: bool) -> bool:
+        value = table.get(key, default)
         if not isinstance(value, bool):
-            raise self.error(f"confidence {value!r} is not true or false", "write confidence = true (or false)",
-                             self.line("model", "confidence"))
+            raise self.error(f"{key} {value!r} is not true or false", f"write {key} = true (or false)",
+                             self.line("model", key))
         return value
 
     def _calibration(self, table: dict[str, Any]) -> str:
@@ -565,6 +567,8 @@ def _dump(setup: Setup, base: Path | None) -> str:
         f"steps = {_quote(setup.steps)}" if setup.steps is not None else '# steps = "10D:3"',
         "# confidence: each pose with how sure the model is of each segment (~40 % more per frame)",
         f"confidence = {'true' if setup.confidence else 'false'}",
+        *(["# reach: the arms of the hands a VR rig tracks reach its controllers",
+           f"reach = {'true' if setup.reach else 'false'}"] if setup.tracked else []),
         "",
         "[calibration]",
         "# " + "; ".join(f'"{k}": {v}' for k, v in CALIBRATION_PROTOCOLS.items()),

@@ -91,3 +91,15 @@ def test_which_rig_urls_a_simulator_serves(tmp_path):
     url = twin.tracked["vr"].url
     assert simulation_problem(url) is None and url.endswith("?head=HMD&l_hand=CL&r_hand=CR")
     assert twin.tracked["vr"].sites == far.tracked["vr"].sites
+
+
+def test_the_arms_reach_unless_the_setup_says_not(tmp_path):
+    assert parse_setup(GOOD).reach is True and "reach = true" in dump_setup(parse_setup(GOOD))
+    off = GOOD + '\n[model]\nname = "diffusion"\nreach = false\n'
+    s = parse_setup(off)
+    assert s.reach is False and parse_setup(dump_setup(s)).reach is False
+    bad = GOOD + '\n[model]\nreach = "no"\n'
+    err = error_of(bad, tmp_path)
+    assert err.line == line_of(bad, "reach =") and "reach = true (or false)" in err.fix
+    # a setup without a rig has nothing to reach for, and its file does not mention it
+    assert "reach" not in dump_setup(parse_setup(GOOD.split("[tracked]")[0]))
