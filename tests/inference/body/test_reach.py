@@ -91,10 +91,10 @@ def test_a_controller_beyond_the_arm_turns_the_collar_but_no_more_than_a_collar_
     locals_ = point_locals(body.offsets, body.height)
     truth = point_positions(R, forward_kinematics(R, root, body.offsets), locals_)
     feats = point_features(truth, presence(["head", "l_hand", "r_hand"]))
-    # the model leaned the chest back and left the head where it is: the controllers are
-    # now beyond the arms' length
+    # the model turned the chest 46 deg about the vertical and left the head where it is: the
+    # controllers are now beyond the arms' length
     lean = R.copy()
-    lean[:, SEGMENT_INDEX["spine3"]] = axis_angle_to_matrix(np.array([0.0, -0.5, 0.0])) @ R[:, SEGMENT_INDEX["spine3"]]
+    lean[:, SEGMENT_INDEX["spine3"]] = axis_angle_to_matrix(np.array([0.0, 0.0, 0.8])) @ R[:, SEGMENT_INDEX["spine3"]]
     R2, j2 = reach_hands(lean, root, body, {}, feats)
     after = point_positions(R2, j2, locals_)
     err = np.linalg.norm(after[:, 1:3] - truth[:, 1:3] - (after[:, :1] - truth[:, :1]), axis=-1)
@@ -103,3 +103,29 @@ def test_a_controller_beyond_the_arm_turns_the_collar_but_no_more_than_a_collar_
         c = SEGMENT_INDEX[f"{side}_collar"]
         turned = np.degrees(matrix_angle_between(R2[:, c], lean[:, c]))
         assert turned.max() <= COLLAR_MAX_DEG + 1e-6 and turned.max() > 1.0
+
+
+def test_a_right_forearm_with_a_wrong_upper_arm_comes_back_whole():
+    """The swivel comes from the model's forearm: with the shoulder and the forearm right and
+    only the upper arm wrong, the reach restores the true arm."""
+    from inference.body.rotations import matrix_angle_between
+
+    body, R, root = _walk()
+    locals_ = point_locals(body.offsets, body.height)
+    truth = point_positions(R, forward_kinematics(R, root, body.offsets), locals_)
+    feats = point_features(truth, presence(["head", "l_hand", "r_hand"]))
+    wrong = R.copy()
+    rng = np.random.default_rng(5)
+    for seg in (SEGMENT_INDEX["l_upperarm"], SEGMENT_INDEX["r_upperarm"]):
+        axis = rng.normal(size=3)
+        wrong[:, seg] = axis_angle_to_matrix(np.radians(25.0) * axis / np.linalg.norm(axis)) @ R[:, seg]
+    R2, _ = reach_hands(wrong, root, body, {}, feats)
+    for side in ("l", "r"):
+        for seg in (f"{side}_upperarm", f"{side}_forearm"):
+            k = SEGMENT_INDEX[seg]
+            # the bone's direction is the truth's (a bone's twist is not the reach's to fix)
+            b = body.offsets[SEGMENT_INDEX[{"upperarm": f"{side}_forearm", "forearm": f"{side}_hand"}[seg[2:]]]]
+            got, want = (R2[:, k] @ b), (R[:, k] @ b)
+            assert np.degrees(np.arccos(np.clip(np.sum(got * want, -1) / np.linalg.norm(b) ** 2, -1, 1))).max() < 0.1
+        assert np.degrees(matrix_angle_between(R2[:, SEGMENT_INDEX[f"{side}_forearm"]],
+                                               R[:, SEGMENT_INDEX[f"{side}_forearm"]])).max() < 0.1
