@@ -40,9 +40,9 @@ def _fed(pipe, frames):
     seen = []
     step = pipe.poser.step
 
-    def spy(x, mask):
+    def spy(x, mask, points=None):
         seen.append(np.array(x, copy=True))
-        return step(x, mask)
+        return step(x, mask, points)
 
     pipe.poser.step = spy
     _, poses = _emitted_at(pipe, frames)
