@@ -18,6 +18,10 @@ series expansions near zero, so values and torch gradients stay finite at identi
 
 Composition: ``quat_multiply(a, b)`` is the rotation "b, then a" (matrix ``A @ B``), so
 a body-to-world quaternion chains as ``q_WS = q_WB * q_BS``.
+
+Numpy-only code (calibration, simulation, export, validation) uses
+``inference.body.conventions`` first: yaw/heading, turns about Z and the wxyz <-> scipy
+crossing, over scipy. This module is for what may meet a tensor, and for 6D and Euler.
 """
 
 from __future__ import annotations
