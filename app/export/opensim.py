@@ -69,6 +69,7 @@ from pathlib import Path
 import numpy as np
 
 from app.export.common import ExportMotion, atomic_target
+from inference.body.conventions import rot_z
 from inference.body.rotations import matrix_about_axis, matrix_to_euler
 from inference.body.skeleton import N_SEGMENTS, SEGMENT_INDEX
 
@@ -107,10 +108,6 @@ def _rx(deg: float) -> np.ndarray:
     return matrix_about_axis(np.array([1.0, 0.0, 0.0]), np.deg2rad(deg))
 
 
-def _rz(deg: float) -> np.ndarray:
-    return matrix_about_axis(np.array([0.0, 0.0, 1.0]), np.deg2rad(deg))
-
-
 def opensim_default_pose() -> np.ndarray:
     """(24, 3, 3) our global segment orientations in OpenSim's default pose: upright, arms
     hanging (lowered 90 deg about the forward axis), forearms and hands turned palms
@@ -119,7 +116,7 @@ def opensim_default_pose() -> np.ndarray:
     for side, down, palm in (("l", -90.0, 90.0), ("r", 90.0, -90.0)):
         Q[SEGMENT_INDEX[f"{side}_upperarm"]] = _rx(down)
         for seg in ("forearm", "hand", "fingers"):
-            Q[SEGMENT_INDEX[f"{side}_{seg}"]] = _rz(palm) @ _rx(down)
+            Q[SEGMENT_INDEX[f"{side}_{seg}"]] = rot_z(np.deg2rad(palm)) @ _rx(down)
     return Q
 
 

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from calibration import Calibration
+from inference.body.conventions import mean_angle, rot_z, yaw_of
 from inference.body.reach import reach_hands
 from inference.body.skeleton import SITE_INDEX
 from inference.body.tracked import TRACKED_POINTS, point_features
@@ -51,11 +52,8 @@ def rig_yaw(calibration: Calibration, sites: Sequence[str]) -> np.ndarray | None
     if not use:
         return None
     R = calibration.R_WG[calibration.index(use)]
-    # each yaw as the heading of the world x axis the site's frame turns to (robust to a small tilt)
-    yaw = np.arctan2(R[:, 1, 0] - R[:, 0, 1], R[:, 0, 0] + R[:, 1, 1])
-    mean = float(np.arctan2(np.sin(yaw).mean(), np.cos(yaw).mean()))
-    c, s = np.cos(mean), np.sin(mean)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    # each site's turn about Z (yaw_of: robust to a small tilt), then their circular mean
+    return rot_z(mean_angle(yaw_of(R)))
 
 
 class RigPoints:

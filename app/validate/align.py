@@ -11,7 +11,7 @@ found well inside one reference frame. Its correlation is reported with it.
 Heading: one rotation about the vertical for the whole trial, the least-squares one over
 the segments both sides have: orientations when the reference has them
 (sum of R_ref R_rec^T), else segment directions (sum of d_ref d_rec^T); the yaw of the
-best Z rotation of a 3x3 sum M is atan2(M10 - M01, M00 + M11).
+best Z rotation of a 3x3 sum M is ``conventions.yaw_of(M)``.
 """
 
 from __future__ import annotations
@@ -19,6 +19,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from inference.body.conventions import yaw_of
 
 MIN_OVERLAP_FRACTION = 0.5
 MIN_OVERLAP_S = 2.0
@@ -104,20 +106,10 @@ def find_time_offset(t_rec: np.ndarray, rec: dict[str, np.ndarray], t_ref: np.nd
     return lag, float(fs[k]), joints
 
 
-def best_yaw(M: np.ndarray) -> float:
-    """The yaw (rad) of the rotation about Z that best turns b onto a, M = sum a b^T."""
-    return float(np.arctan2(M[1, 0] - M[0, 1], M[0, 0] + M[1, 1]))
-
-
-def rz(yaw: float) -> np.ndarray:
-    c, s = np.cos(yaw), np.sin(yaw)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
 def heading_from_rotations(R_rec: np.ndarray, R_ref: np.ndarray) -> float:
     """Yaw (rad) turning R_rec (T, S, 3, 3) onto R_ref, least squares over frames and segments."""
     M = np.einsum("tsij,tskj->ik", R_ref, R_rec)
-    return best_yaw(M)
+    return float(yaw_of(M))
 
 
 def heading_from_directions(d_rec: dict[str, np.ndarray], d_ref: dict[str, np.ndarray]) -> float:
@@ -130,8 +122,7 @@ def heading_from_directions(d_rec: dict[str, np.ndarray], d_ref: dict[str, np.nd
     if not np.any(M):
         raise ValueError("the reference and the reconstruction share no segment to find the heading from; "
                          "give it with --heading")
-    return best_yaw(M)
+    return float(yaw_of(M))
 
 
-__all__ = ["Alignment", "find_time_offset", "correlation_at", "heading_from_rotations", "heading_from_directions",
-           "best_yaw", "rz"]
+__all__ = ["Alignment", "find_time_offset", "correlation_at", "heading_from_rotations", "heading_from_directions"]

@@ -16,12 +16,12 @@ from app.validate.align import (
     find_time_offset,
     heading_from_directions,
     heading_from_rotations,
-    rz,
 )
 from app.validate.compare import Track, bland_altman, compare, reference_at
 from app.validate.kinematics import JOINT_INDEX, directions, joint_angles
 from app.validate.reference import Reference, read_reference
 from inference.body.body import Body, forward_kinematics, npose_rotations
+from inference.body.conventions import heading_of, rot_z
 from inference.body.skeleton import SEGMENT_INDEX, SEGMENTS
 from inference.metrics.errors import EVAL_SEGMENTS
 
@@ -112,7 +112,7 @@ def align(run: Track, ref: Reference, time_offset: float | None = None, heading_
 
 
 def turned(track: Track, yaw_deg: float, inside: np.ndarray) -> Track:
-    Z = rz(np.deg2rad(yaw_deg))
+    Z = rot_z(np.deg2rad(yaw_deg))
     rot = None if track.rot is None else Z @ track.rot[inside]
     return Track(track.t[inside], rot, track.joints[inside] @ Z.T, track.have_joints, track.have_rot)
 
@@ -128,13 +128,13 @@ def reference_facing(r: Track) -> float:
     fwd = fwd[np.all(np.isfinite(fwd), axis=-1)]
     n = np.linalg.norm(fwd[:, :2], axis=-1, keepdims=True)
     m = (fwd[:, :2] / np.where(n > 1e-9, n, 1.0)).mean(axis=0) if len(fwd) else np.array([1.0, 0.0])
-    return float(np.arctan2(m[1], m[0]))
+    return float(heading_of(m))
 
 
 def standing_track(t: np.ndarray, body: Body, yaw: float) -> Track:
     """A subject standing still, arms by the sides, facing ``yaw``: the baseline a number
     has to beat to mean anything."""
-    R = rz(yaw) @ npose_rotations(len(t))
+    R = rot_z(yaw) @ npose_rotations(len(t))
     J = forward_kinematics(R, np.zeros((len(t), 3)), body.offsets)
     return Track(t, R, J, set(ALL_JOINTS))
 

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from inference.body.body import Body, global_from_local, npose_rotations
+from inference.body.conventions import heading_of, rot_z
 from inference.body.motion import Motion
 from inference.body.reach import reach_hands
 from inference.body.rotations import matrix_about_axis, matrix_to_rot6d, quat_to_matrix
@@ -87,9 +88,8 @@ def face_forward(motion: Motion) -> Motion:
     heading the poser's standing history has; clips in the data face wherever the
     capture did, and feeding them raw would start every evaluation with a sudden turn.
     A rigid motion of the world: every metric is unchanged by it for a perfect poser."""
-    fwd = motion.rot[0, 0] @ np.array([1.0, 0.0, 0.0])
-    yaw = float(np.arctan2(fwd[1], fwd[0]))
-    Rz = matrix_about_axis(np.array([0.0, 0.0, 1.0]), -yaw)
+    yaw = float(heading_of(motion.rot[0, 0, :, 0]))  # of the pelvis's forward (X) axis
+    Rz = rot_z(-yaw)
     root = (motion.root - [motion.root[0, 0], motion.root[0, 1], 0.0]) @ Rz.T
     return replace(motion, rot=Rz @ motion.rot, root=root)
 

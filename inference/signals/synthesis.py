@@ -43,6 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from inference.body.body import MAIN_CHILD, Body, points_on_segments
+from inference.body.conventions import rot_z
 from inference.body.motion import Motion
 from inference.body.rotations import matrix_about_axis, matrix_to_quat, so3_exp, so3_log
 from inference.body.skeleton import N_SEGMENTS, SEGMENT_INDEX, SEGMENTS, SITE_SEGMENT_INDEX, SITES
@@ -235,12 +236,6 @@ class NoiseModel:
                    ori_walk_deg_per_sqrt_s=0.05, mounting_deg=15.0, heading_deg=180.0)
 
 
-def _rz(angle: np.ndarray) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    z, o = np.zeros_like(angle), np.ones_like(angle)
-    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
-
-
 def _random_rotations(rng: np.random.Generator, n: int, max_deg: float) -> np.ndarray:
     axis = rng.normal(size=(n, 3))
     axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
@@ -290,7 +285,7 @@ def synthesize(
         step = np.deg2rad(nz.ori_walk_deg_per_sqrt_s) / np.sqrt(fps)
         walk = np.cumsum(rng.normal(size=(T, S)), axis=0) * step
     ori_w = rng.normal(size=(T, S, 3)) * np.deg2rad(nz.ori_white_deg) if nz.ori_white_deg > 0 else None
-    R_WG = _rz(heading)
+    R_WG = rot_z(heading)
     R_GW = np.swapaxes(R_WG, -1, -2)
     R_SB = np.swapaxes(R_BS, -1, -2)
     smooth = upsampled_site_paths(motion, fps)
@@ -323,7 +318,7 @@ def synthesize(
             g = g + gyro_w[out]
         R_GS = R_GW @ R_WS
         if walk is not None:
-            R_GS = _rz(walk[out]) @ R_GS
+            R_GS = rot_z(walk[out]) @ R_GS
         if ori_w is not None:
             R_GS = so3_exp(ori_w[out]) @ R_GS
         # as a device computes it: reported orientation x measured specific force + g

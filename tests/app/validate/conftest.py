@@ -17,8 +17,8 @@ import pytest
 
 from app.live import Pipeline, frames_from_signals
 from app.recording import Recorder
-from app.validate.align import rz
 from calibration import Calibrator, Protocol, synthesize_session
+from inference.body.conventions import rot_z
 from inference.body.motion import Motion
 from inference.poser.poser import make_poser
 from inference.signals.synthesis import NoiseModel
@@ -40,7 +40,7 @@ class Walk:
     def reference_motion(self, shift: int = SHIFT_FRAMES, heading_deg: float = HEADING_DEG) -> Motion:
         """The truth as another system saw it: from frame ``shift`` on, in a world turned by
         ``heading_deg``."""
-        Z = rz(np.deg2rad(heading_deg))
+        Z = rot_z(np.deg2rad(heading_deg))
         m = self.truth
         return Motion(Z @ m.rot[shift:], m.root[shift:] @ Z.T, m.fps, m.body, name="reference")
 
