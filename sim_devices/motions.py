@@ -33,6 +33,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
 from inference.body.body import Body, contact_points, forward_kinematics, global_from_local
+from inference.body.conventions import rot_z
 from inference.body.motion import Motion
 from inference.body.rotations import axis_angle_to_matrix
 from inference.body.skeleton import N_SEGMENTS, SEGMENT_INDEX
@@ -60,8 +61,7 @@ def ry(a):  # noqa: D103
     return _axis(a, 1)
 
 
-def rz(a):  # noqa: D103
-    return _axis(a, 2)
+rz = rot_z
 
 
 def _bump(p: np.ndarray, centre: float, width: float) -> np.ndarray:

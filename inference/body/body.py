@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from inference.body.rotations import matrix_about_axis
 from inference.body.skeleton import (
     N_SEGMENTS,
     PARENTS,
@@ -278,9 +279,8 @@ def npose_rotations(n: int = 1, arm_down_deg: float = 80.0) -> np.ndarray:
     the forward axis (used as a standing, arms-by-the-side default)."""
     R = tpose(n)
     a = np.deg2rad(arm_down_deg)
-    c, s = np.cos(a), np.sin(a)
-    left = np.array([[1, 0, 0], [0, c, s], [0, -s, c]])  # rotate +Y toward -Z about X
-    right = np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+    left = matrix_about_axis([1.0, 0.0, 0.0], -a)  # +Y (the left arm) turned toward -Z about X
+    right = matrix_about_axis([1.0, 0.0, 0.0], a)
     for side, M in (("l", left), ("r", right)):
         for seg in ("upperarm", "forearm", "hand", "fingers"):
             R[:, SEGMENT_INDEX[f"{side}_{seg}"]] = M

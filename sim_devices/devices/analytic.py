@@ -10,22 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from inference.body.rotations import quat_about_axis, quat_conjugate, quat_rotate
 from inference.signals.site_signals import SiteSignals
 
 G = 9.80665
-
-
-def _axis_angle_quat(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    axis = axis / np.linalg.norm(axis)
-    h = angle / 2
-    return np.concatenate([np.cos(h)[:, None], np.sin(h)[:, None] * axis[None]], axis=1)
-
-
-def _rotate_inv(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """World vector -> sensor frame for each row of unit quaternions q (sensor->world)."""
-    w, xyz = q[:, :1], -q[:, 1:]
-    t = 2 * np.cross(xyz, v)
-    return v + w * t + np.cross(xyz, t)
 
 
 def spinning_signals(
@@ -48,10 +36,10 @@ def spinning_signals(
         axis = np.array([0.0, 0.0, 1.0]) if k % 2 == 0 else np.array([0.3, 0.2, 1.0])
         axis = axis / np.linalg.norm(axis)
         w = np.radians(rate_dps) * (1 + k / 10)
-        q = _axis_angle_quat(axis, w * t)
+        q = quat_about_axis(axis, w * t)
         quat[:, k] = q
         gyro[:, k] = axis * w  # constant rotation about a fixed axis: same axis in the sensor frame
-        sf[:, k] = _rotate_inv(q, np.tile([0.0, 0.0, G], (n, 1)))
+        sf[:, k] = quat_rotate(quat_conjugate(q), [0.0, 0.0, G])  # the world's up in the sensor frame
     phase = (t % 2.0) < 1.0
     contacts = np.stack([phase, phase, ~phase, ~phase], axis=1)
     force = np.stack([phase, ~phase], axis=1) * body_weight_n

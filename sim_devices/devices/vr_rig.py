@@ -39,8 +39,9 @@ from drivers.urls import build_url
 from drivers.vmc import protocol as vmc
 from drivers.vmc.device import DEFAULT_PORT
 from inference.body import tracked
+from inference.body.conventions import quat_z, rot_z
 from inference.body.motion import Motion
-from inference.body.rotations import axis_angle_to_matrix, matrix_to_quat, quat_continuous, quat_exp, quat_multiply
+from inference.body.rotations import matrix_to_quat, quat_continuous, quat_exp, quat_multiply
 
 from .base import DeviceFaults, SimDevice
 from .can_loopback import is_loopback
@@ -106,9 +107,8 @@ class TrackedSource:
         self.points = tracked_points(motion, self.sites)
         if frame_yaw_deg or any(frame_origin):
             # world -> VR frame: p_vr = Rz(-yaw) (p - origin), q_vr = q_z(-yaw) q
-            half = -math.radians(frame_yaw_deg) / 2.0
-            qz = np.array([math.cos(half), 0.0, 0.0, math.sin(half)])
-            Rz = axis_angle_to_matrix(np.array([0.0, 0.0, -math.radians(frame_yaw_deg)]))
+            yaw = math.radians(frame_yaw_deg)
+            qz, Rz = quat_z(-yaw), rot_z(-yaw)
             self.points = {s: ((P - np.asarray(frame_origin)) @ Rz.T, quat_multiply(qz, Q))
                            for s, (P, Q) in self.points.items()}
         self.n = motion.n_frames
