@@ -11,7 +11,7 @@ Our model's rows are ``benchmarks/vr_three_point.py``'s "3 points" rows, read fr
    20 Hz truth (``clip_input``);
 2. the headset and the two controllers from the simulated rig (``SimVrRig``) at 72 Hz with
    its tracking error and latency (1 mm jitter + 2 mm wander per axis, 0.3 deg, 15 ms),
-   seeded with the clip's seed as ``app.tracked_eval.tracked_signals`` seeds it, so both
+   seeded with the clip's seed as ``app.evaluation.tracked_points.tracked_signals`` seeds it, so both
    models read the same noise draws; onto the 60 Hz grid by linear interpolation of
    positions and normalised linear interpolation of quaternions (the hub's), then every
    third frame (20 Hz);
@@ -49,7 +49,7 @@ def rig_points(motion, seed: int, noise=None):
     ``TrackingNoise`` (default: the rig's own)."""
     import numpy as np
 
-    from app.tracked_eval import RIG_RATE, _nlerp, rig_poses
+    from app.evaluation.tracked_points import RIG_RATE, _nlerp, rig_poses
     from inference.body.rotations import quat_to_matrix
     from inference.model.agrol_mlp import DEVICES
     from inference.signals.resample import STEP
@@ -68,7 +68,7 @@ def run_mlp(held_out: str, agrol: Path, seed: int, cache: Path, reach: bool = Fa
     key = cache / f"{held_out}__agrol_mlp{'_reach' if reach else ''}__{agrol.parent.name}_{agrol.stem}.pkl"
     if key.exists() and key.stat().st_mtime > agrol.stat().st_mtime:
         return pickle.loads(key.read_bytes())
-    from app.tracked_eval import tracked_points_input
+    from app.evaluation.tracked_points import tracked_points_input
     from inference.body.reach import reach_hands
     from inference.evaluation.runner import clip_input, clip_seed, face_forward, load_motions
     from inference.metrics.errors import evaluate_clip

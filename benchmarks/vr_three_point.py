@@ -1,6 +1,6 @@
 """The three-point task on the held-out sets: a VR headset and two controllers, alone, with
 two shank IMUs, and the shanks alone, read as the live vmc-in chain reads the points
-(``imucap evaluate --points``, app/tracked_eval.py), with the papers' metrics and paired
+(``imucap evaluate --points``, app/evaluation/tracked_points.py), with the papers' metrics and paired
 bootstrap intervals over clips.
 
     .venv/bin/python benchmarks/vr_three_point.py --sets dg,cmu-val,sad --json runs/vr/three_point.json \
@@ -44,7 +44,7 @@ def run_set(held_out: str, label: str, model_spec: str, seed: int, cache: Path) 
     key = cache / f"{held_out}__{label.replace(' ', '_').replace('+', 'and')}__{stem}.pkl"
     if key.exists():
         return pickle.loads(key.read_bytes())
-    from app.tracked_eval import tracked_points_input, tracked_signals
+    from app.evaluation.tracked_points import tracked_points_input, tracked_signals
     from inference.evaluation.runner import evaluate_motions, evaluation_noise, load_motions
     from inference.poser.models import default_steps, resolve_model
     from inference.training.splits import held_out_files

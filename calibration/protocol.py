@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from inference.body.body import contact_points, forward_kinematics, tpose
+from inference.body.conventions import rot_z
 from inference.body.motion import Motion
 from inference.body.rotations import matrix_about_axis, matrix_to_quat, quat_slerp, quat_to_matrix, so3_exp
 from inference.body.skeleton import SITES
@@ -196,7 +197,7 @@ class WalkProtocol:
 def _npose_standing(body, n: int, fps: float, xy: tuple[float, float], heading: float = 0.0) -> Motion:
     from inference.body.body import npose_rotations
 
-    Rh = matrix_about_axis(np.array([0.0, 0.0, 1.0]), heading)
+    Rh = rot_z(heading)
     R = Rh @ npose_rotations(n)
     j = forward_kinematics(R[:1], np.zeros(3), body.offsets)
     z = -float(contact_points(R[:1], j, body)[..., 2].min())

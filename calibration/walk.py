@@ -38,7 +38,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from inference.body.body import npose_rotations
-from inference.body.rotations import matrix_about_axis, quat_to_matrix
+from inference.body.conventions import heading_of, rot_z
+from inference.body.rotations import quat_to_matrix
 from inference.body.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX, parse_sites
 
 from .core import (
@@ -77,11 +78,6 @@ class WalkResult:
     path_m: np.ndarray  # (S,) horizontal displacement over the walk
     spread_deg: np.ndarray  # (S,) largest difference of a third's heading from the whole
     extra: dict = field(default_factory=dict)
-
-
-def _rz(angle: np.ndarray) -> np.ndarray:
-    angle = np.asarray(angle, float)
-    return matrix_about_axis(np.broadcast_to([0.0, 0.0, 1.0], angle.shape + (3,)), angle)
 
 
 def calibrate_walk(
@@ -130,9 +126,9 @@ def calibrate_walk(
     for k in range(S):
         if source[k] != "displacement":
             valid[k] |= bool(st.still[k])
-    heading = -np.arctan2(direction[:, 1], direction[:, 0])
+    heading = -heading_of(direction)
     heading[~valid] = 0.0
-    R_WG = _rz(heading)
+    R_WG = rot_z(heading)
     R_GS = np.where(ok[sl][..., None, None], quat_to_matrix(np.where(ok[sl][..., None], quat[sl], [1.0, 0, 0, 0])),
                     np.nan)
     Rm = mean_rotation(R_GS)

@@ -130,8 +130,8 @@ def _json_atomic(path: Path, obj: dict[str, Any]) -> None:
 
 def _model(spec: str, latency: str) -> Any:
     """The model for ``spec`` in latency mode ``latency``, loaded once per worker."""
-    from app.latency import model_spec_for
-    from app.model_choice import load_model
+    from app.live.latency import model_spec_for
+    from app.live.model_choice import load_model
 
     spec = model_spec_for(latency, spec)
     if spec not in _MODELS:
@@ -146,7 +146,7 @@ def one_line(exc: BaseException) -> str:
 
 def run_task(task: Task) -> dict[str, Any]:
     """Do ``task`` (or find it done); never raises for a bad recording: the result says."""
-    from app.model_choice import set_torch_threads
+    from app.live.model_choice import set_torch_threads
 
     set_torch_threads(1)  # one core per worker: the pool is the parallelism
     t0, c0 = time.perf_counter(), time.process_time()

@@ -56,7 +56,7 @@ class DemoConfig:
     noise: bool = True
     headless: bool = True
     threads: int = 1  # one window per step: 1 intra-op thread is fastest and leaves a core to the devices/GUI
-    latency: str = "centred"  # app.latency.LATENCY_MODES: "low" waits for no future sample
+    latency: str = "centred"  # app.live.latency.LATENCY_MODES: "low" waits for no future sample
     confidence: bool = False  # each pose with its per-segment spread (inference/poser/confidence.py)
     # sinks streaming the body to other programs (--stream: app.streams builds them); the
     # session adds them to its pipeline, which closes them

@@ -1,5 +1,5 @@
 """`imucap bench --end-to-end`: sensor-to-pose latency of the live path, per latency mode
-(``app.latency``), measured in one run so both modes share the machine's load.
+(``app.live.latency``), measured in one run so both modes share the machine's load.
 
 What is timed: from the moment a sample's packet leaves its simulated device (the device
 logs the monotonic time right after writing each packet to its transport, by packet
@@ -175,7 +175,7 @@ def run_end_to_end(seconds: float = 10.0, rounds: int = 2, model: str = "diffusi
     ``<mode>_model_p50_ms``, and ``model_p50_ms``/``model_p99_ms`` over both modes."""
     import torch
 
-    from app.latency import latency_settings
+    from app.live.latency import latency_settings
 
     for m in modes:
         latency_settings(m)

@@ -27,7 +27,7 @@ import numpy as np
 from app import APP_VERSION
 from app.capture.setup_file import Setup
 from app.live import LivePipeline, LivePose, Pipeline, Sink, close_sink
-from app.model_choice import choose_model, set_torch_threads
+from app.live.model_choice import choose_model, set_torch_threads
 from app.replay import poser_metadata
 from calibration import Calibration, GuidedCalibration
 from drivers.base import DeviceEvent
@@ -73,7 +73,7 @@ class CaptureOptions:
     on_event: Callable[[SessionEvent], None] | None = None
     metadata: dict[str, Any] = field(default_factory=dict)
     sinks: list[Sink] = field(default_factory=list)  # more consumers of the live body: streams (app.streams)
-    latency: str = "centred"  # app.latency.LATENCY_MODES: "low" waits for no future sample
+    latency: str = "centred"  # app.live.latency.LATENCY_MODES: "low" waits for no future sample
     confidence: bool = False  # each pose with its per-segment spread (inference/poser/confidence.py)
     reach: bool = True  # a VR rig's tracked hands: the arms reach the controllers (app/live/tracked.py)
 
@@ -139,7 +139,7 @@ class CaptureSession:
             devices[name] = drivers.make_device(url)
         if self.options.record is not None:
             self.start_recording(self.options.record)
-        from app.latency import hub_options
+        from app.live.latency import hub_options
 
         self.hub = Hub(devices, **hub_options(self.options.latency), on_event=self._device_event)
         self.started_at = time.monotonic()

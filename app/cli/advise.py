@@ -95,7 +95,7 @@ def _summary(rows: list, task: str, paper: tuple[str, ...] | None) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    from app.model_choice import load_model, set_torch_threads
+    from app.live.model_choice import load_model, set_torch_threads
     from inference.evaluation.advisor import (
         PAPER_SETS,
         TASKS,

@@ -199,7 +199,7 @@ def run_bench(model_spec: str = "diffusion", steps=None, frames: int = 200, pape
     """The `imucap bench` measurement (see the module docstring); returns its JSON object."""
     import torch
 
-    from app.model_choice import load_model, set_torch_threads
+    from app.live.model_choice import load_model, set_torch_threads
     from inference.features.layout import N_FEATURES
     from inference.model.config import ModelConfig
     from inference.model.diffusion import even_steps, parse_steps
@@ -308,7 +308,7 @@ def run(args: argparse.Namespace) -> int:
 def _run_sizes(args: argparse.Namespace) -> int:
     import torch
 
-    from app.model_choice import load_model, set_torch_threads
+    from app.live.model_choice import load_model, set_torch_threads
     from inference.model.diffusion import parse_steps
 
     sizes = parse_sizes(args.sizes)

@@ -111,7 +111,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--insoles", action="store_true", help="also observe the 4 foot contacts (pressure insoles)")
     p.add_argument("--points", default="", metavar="POINTS",
                    help="tracked VR points too (head,l_hand,r_hand[,pelvis]), read as the live vmc-in chain reads "
-                        "them: each stands for a model site (a controller for the wrist; app/tracked_eval.py); "
+                        "them: each stands for a model site (a controller for the wrist; app/evaluation/tracked_points.py); "
                         "--sensors none for the points alone")
     p.add_argument("--reach", action="store_true",
                    help="with --points: each tracked hand's arm reaches its controller after the model's answer "
@@ -214,7 +214,7 @@ def _confidence(args: argparse.Namespace, result: dict, clips: list, sites: list
 
 def run(args: argparse.Namespace) -> int:
 
-    from app.model_choice import set_torch_threads
+    from app.live.model_choice import set_torch_threads
     from inference.body.skeleton import parse_sites
     from inference.evaluation.runner import (
         DEFAULT_LANES,
@@ -237,7 +237,7 @@ def run(args: argparse.Namespace) -> int:
     sites = [] if args.sensors.strip().lower() in ("", "none") else parse_sites(args.sensors)
     given, tracked_input, points = None, None, []
     if args.points:
-        from app.tracked_eval import check_sites, parse_points, tracked_points_input, tracked_signals
+        from app.evaluation.tracked_points import check_sites, parse_points, tracked_points_input, tracked_signals
 
         points = parse_points(args.points)
         check_sites(sites, points)
@@ -298,7 +298,7 @@ def run(args: argparse.Namespace) -> int:
     lanes = DEFAULT_LANES if args.lanes is None else max(1, args.lanes)
 
     def one(spec: str, set_sites, insoles: bool, keep: bool = False, label: str = "", confidence: bool = False):
-        from app.latency import model_spec_for, resolve_filter
+        from app.live.latency import model_spec_for, resolve_filter
 
         model = get_model(model_spec_for(args.latency, spec))
         causal, latency_warning = resolve_filter(args.latency, model)

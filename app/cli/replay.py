@@ -165,7 +165,7 @@ def _mean_spread(poses) -> dict[str, float] | None:
 
 def run_replay(args: argparse.Namespace) -> int:
     from app.export.formats import body_for_recording, export_motion, motion_from_poses
-    from app.model_choice import set_torch_threads
+    from app.live.model_choice import set_torch_threads
     from app.replay import (
         ReplaySettings,
         build_replay_poser,

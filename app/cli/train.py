@@ -183,7 +183,7 @@ def _leave_distributed_run(rc: int) -> None:
 def run_helper_stage(args: argparse.Namespace) -> int:
     """Train one of the poser's small helper stages (contact detector, pelvis odometry) on
     every frame of the split's clips; both train in about a minute on one core."""
-    from app.model_choice import set_torch_threads
+    from app.live.model_choice import set_torch_threads
     from inference.training import splits
 
     set_torch_threads(1)

@@ -45,7 +45,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run_validate(args: argparse.Namespace) -> int:
-    from app.model_choice import set_torch_threads
+    from app.live.model_choice import set_torch_threads
     from app.validate.run import validate
 
     set_torch_threads(args.threads)

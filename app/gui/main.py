@@ -32,7 +32,7 @@ from app.gui.setup_panel import SetupPanel
 from app.gui.signal_tap import SignalTap
 from app.gui.widgets import MessageBar, fmt
 from app.gui.workers import Jobs
-from app.live_gait import GaitSink
+from app.live.gait import GaitSink
 
 TABS = ("Setup", "Devices", "Calibration", "Live", "Recordings", "Replay", "Outdoor")
 ALARM_KINDS = ("device_lost", "device_silent")

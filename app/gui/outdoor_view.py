@@ -8,7 +8,7 @@ bar per sensor, and one large record button. High contrast: white and yellow on 
 a number that needs attention turns orange.
 
 It draws what the window hands it (``show_pose`` at the view timer, ``show_numbers`` and
-``show_devices`` a few times a second); the numbers come from ``app.live_gait.GaitSink``.
+``show_devices`` a few times a second); the numbers come from ``app.live.gait.GaitSink``.
 """
 
 from __future__ import annotations

@@ -85,7 +85,7 @@ def rerun(job: Job, rec: Recording, sensors: tuple[str, ...], insoles: bool, mod
           steps: str | None, confidence: bool = False) -> Track:
     """The worker: a poser for ``model_spec`` and the recording's body, then the replay."""
     from app.export.formats import body_for_recording
-    from app.model_choice import FLOOR_FALLBACK_LABEL, choose_model, set_torch_threads
+    from app.live.model_choice import FLOOR_FALLBACK_LABEL, choose_model, set_torch_threads
     from app.replay import ReplaySettings, build_replay_poser, replay_recording
 
     set_torch_threads(1)  # leave the other core to the window and the devices

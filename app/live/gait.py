@@ -13,7 +13,7 @@ from collections import deque
 
 import numpy as np
 
-from app.live import LivePose, Sink
+from app.live.pipeline import LivePose, Sink
 from inference.metrics.gait import GaitNumbers, gait_numbers
 from inference.signals.resample import FPS_MODEL
 

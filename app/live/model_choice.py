@@ -4,11 +4,11 @@ bench, advise, train) and that used to be made in each, a little differently. Th
 made here.
 
 The model: a CLI-style spec ("diffusion", "regressor", "floor" or a file), which the latency
-mode may turn into the model trained for it (``app.latency.model_spec_for``), loaded
+mode may turn into the model trained for it (``app.live.latency.model_spec_for``), loaded
 (``inference.poser.models.resolve_model``), labelled the way recordings and summaries name
 it (``model_label``: a replay compares labels to know it runs the recorded model), and
 paired with the acceleration filter the mode and the model need
-(``app.latency.resolve_filter``). A live session falls back to the floor baseline, loudly,
+(``app.live.latency.resolve_filter``). A live session falls back to the floor baseline, loudly,
 when the default model's weights are not installed (the model is trained separately);
 everything else wants the error.
 
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from app.latency import model_spec_for, resolve_filter
+from app.live.latency import model_spec_for, resolve_filter
 
 if TYPE_CHECKING:
     from inference.model.files import LoadedModel

@@ -175,7 +175,7 @@ class Pipeline:
     (default all of ``sites``): the clinician's sensor configuration, changeable live.
     insoles: use the insoles' contacts. clock: the session clock, for latency (None for
     replay of recorded or synthetic times, where latency means nothing). causal: the
-    resampler's trailing moving average (the low-latency mode, ``app.latency``); None = the
+    resampler's trailing moving average (the low-latency mode, ``app.live.latency``); None = the
     filter the poser's model was trained on. reach: the arms of the hands a VR rig tracks
     reach its controllers after the poser's answer (frames with the headset's position and
     at least one controller's); False leaves the answer as the model gave it.

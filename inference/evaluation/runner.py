@@ -94,7 +94,7 @@ def face_forward(motion: Motion) -> Motion:
     return replace(motion, rot=Rz @ motion.rot, root=root)
 
 
-# signals of sites that are not IMUs (tracked points, app/tracked_eval.py): (aligned motion, seed)
+# signals of sites that are not IMUs (tracked points, app/evaluation/tracked_points.py): (aligned motion, seed)
 # -> site -> (quat (T, 4) bone -> world, free acceleration (T, 3) world, unsmoothed) at 60 Hz
 GivenSignals = Callable[[Motion, int], dict[str, tuple[np.ndarray, np.ndarray]]]
 # tracked points for a model that reads them (ModelConfig.points): (aligned motion, seed) ->

@@ -1,5 +1,5 @@
 """`imucap evaluate --points`: tracked VR points read as the live vmc-in chain reads them
-(app/tracked_eval.py), scored beside IMU sites."""
+(app/evaluation/tracked_points.py), scored beside IMU sites."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from scipy.ndimage import uniform_filter1d
 
 from app.cli.main import main
 from app.export.bvh import write_motion_bvh
-from app.tracked_eval import tracked_signals
+from app.evaluation.tracked_points import tracked_signals
 from drivers.vmc.implied_imu import WINDOW_S
 from inference.body.rotations import quat_to_matrix
 from inference.body.skeleton import SEGMENT_INDEX

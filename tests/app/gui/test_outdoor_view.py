@@ -32,7 +32,7 @@ from PySide6 import QtCore  # noqa: E402
 from app.gui.live_session import DeviceRow  # noqa: E402
 from app.gui.outdoor_view import ACCENT, BAD, WARN, OutdoorView  # noqa: E402
 from app.live import LivePose  # noqa: E402
-from app.live_gait import GaitSink  # noqa: E402
+from app.live.gait import GaitSink  # noqa: E402
 from inference.body.body import Body  # noqa: E402
 from inference.body.skeleton import SEGMENT_INDEX  # noqa: E402
 from inference.poser.poser import PoseFrame  # noqa: E402

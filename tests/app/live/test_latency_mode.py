@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from app import latency
+from app.live import latency
 from app.live import Pipeline, frames_from_signals
 from calibration import Calibrator, Protocol, synthesize_session
 from drivers.base import Sample

@@ -1,13 +1,13 @@
 """The one place that decides which model a run poses with and on how many torch threads
-(app/model_choice.py): the floor fallback a live session takes and nothing else does, the
+(app/live/model_choice.py): the floor fallback a live session takes and nothing else does, the
 low mode's own model, the label a replay matches recordings by, the thread count."""
 
 from __future__ import annotations
 
 import pytest
 
-from app import latency
-from app.model_choice import FLOOR_FALLBACK_LABEL, choose_model, load_model, model_label, set_torch_threads
+from app.live import latency
+from app.live.model_choice import FLOOR_FALLBACK_LABEL, choose_model, load_model, model_label, set_torch_threads
 from inference.poser.models import DEFAULT_WEIGHTS
 
 

@@ -23,7 +23,7 @@ from inference.poser.poser import make_poser
 from inference.signals.synthesis import NoiseModel
 from sim_devices.motions import generate
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 SITES = ("pelvis", "l_wrist", "r_wrist", "l_shank")
 PROTO = Protocol(table=1.0, strap=0.5, tpose=1.0, blend=0.3, margin=0.15)
 

@@ -38,7 +38,7 @@ from inference.poser.poser import make_poser
 from inference.signals.synthesis import NoiseModel
 from sim_devices.motions import generate
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 SITES = ("pelvis", "l_wrist", "r_wrist", "l_shank")
 PROTO = Protocol(table=1.0, strap=0.5, tpose=1.0, blend=0.3, margin=0.15)
 CHUNK = 64  # small chunks: a short recording spans several, so one can go bad in the middle
@@ -262,7 +262,7 @@ def test_a_block_zeroed_on_disk_is_not_taken_for_data(good, tmp_path):
 def test_a_recording_being_written_reads_clean(tmp_path):
     """SWMR with checksums: a second process following a live recording sees it grow,
     consistent, with nothing reported damaged (rows not yet on disk are simply not there)."""
-    from tests.app.test_recording import CHILD
+    from tests.app.recording.test_recording import CHILD
 
     path = tmp_path / "live.h5"
     proc = subprocess.Popen([sys.executable, "-c", CHILD.format(repo=str(REPO), path=str(path))],
@@ -464,11 +464,11 @@ DISK_FULL_CHILD = r"""
 import json, os, resource, signal, sys
 sys.path.insert(0, {repo!r})
 signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # past the limit a write fails with EFBIG instead of killing us
-from tests.app.test_recording_faults import _record, Session
+from tests.app.recording.test_recording_faults import _record, Session
 from calibration import Protocol, synthesize_session
 from inference.signals.synthesis import NoiseModel
 from sim_devices.motions import generate
-from tests.app.test_recording_faults import PROTO, SITES
+from tests.app.recording.test_recording_faults import PROTO, SITES
 sig, truth = synthesize_session(generate("walk", seconds=4.0, seed=2), PROTO, noise=NoiseModel.typical(), rng=3,
                                 sites=SITES)
 path = {path!r}

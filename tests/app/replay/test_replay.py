@@ -1,4 +1,4 @@
-"""Offline replay of a recording (app/replay.py): all sensors reproduce the live
+"""Offline replay of a recording (app/replay/run.py): all sensors reproduce the live
 reconstruction; a subset keeps the chosen sensors' segments and inpaints the rest;
 wrong sites, missing insoles or calibrations are clear errors."""
 
