@@ -111,8 +111,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--insoles", action="store_true", help="also observe the 4 foot contacts (pressure insoles)")
     p.add_argument("--points", default="", metavar="POINTS",
                    help="tracked VR points too (head,l_hand,r_hand[,pelvis]), read as the live vmc-in chain reads "
-                        "them: each stands for a model site (a controller for the wrist; app/evaluation/tracked_points.py); "
-                        "--sensors none for the points alone")
+                        "them: each stands for a model site (a controller for the wrist; "
+                        "app/evaluation/tracked_points.py); --sensors none for the points alone")
     p.add_argument("--reach", action="store_true",
                    help="with --points: each tracked hand's arm reaches its controller after the model's answer "
                         "(inference/body/reach.py), as a VR avatar's arm IK does; needs the headset")

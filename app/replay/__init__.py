@@ -12,7 +12,6 @@ from app.replay.compare import (
     truth_errors,
 )
 from app.replay.run import (
-    SITES,
     ReplayPoser,
     ReplayResult,
     ReplaySettings,
@@ -24,6 +23,7 @@ from app.replay.run import (
     resolve_insoles,
     resolve_sensors,
 )
+from inference.body.skeleton import SITES
 
 __all__ = [
     "MATCH_TOLERANCE_S", "SAME_FRAME_S", "SITES", "ReplayPoser", "ReplayResult", "ReplaySettings",

@@ -31,11 +31,11 @@ import numpy as np
 
 from app.live import POSE_SKIPPED_EVENT, RECALIBRATION_EVENT, LivePose, Pipeline, Sink
 from app.live.model_choice import choose_model
-from app.replay.compare import SAME_FRAME_S, match_times
 from app.recording import Recording
+from app.replay.compare import SAME_FRAME_S, match_times
 from calibration import Calibration
 from drivers.hub import HubFrame
-from inference.body.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX, SITES, parse_sites
+from inference.body.skeleton import parse_sites
 
 if TYPE_CHECKING:
     from inference.poser.poser import Poser

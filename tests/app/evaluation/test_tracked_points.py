@@ -10,8 +10,8 @@ import pytest
 from scipy.ndimage import uniform_filter1d
 
 from app.cli.main import main
-from app.export.bvh import write_motion_bvh
 from app.evaluation.tracked_points import tracked_signals
+from app.export.bvh import write_motion_bvh
 from drivers.vmc.implied_imu import WINDOW_S
 from inference.body.rotations import quat_to_matrix
 from inference.body.skeleton import SEGMENT_INDEX

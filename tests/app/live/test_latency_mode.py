@@ -9,8 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from app.live import latency
-from app.live import Pipeline, frames_from_signals
+from app.live import Pipeline, frames_from_signals, latency
 from calibration import Calibrator, Protocol, synthesize_session
 from drivers.base import Sample
 from drivers.hub import Hub
