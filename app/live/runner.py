@@ -21,10 +21,9 @@ SWITCH_INTERVAL_S = 0.02
 """How long a Python thread may hold the interpreter lock before it must offer it (Python's
 default: 5 ms). A live process has several Python threads: the inference thread, the hub's
 readers and ingest, and a window's GUI thread. On a busy machine each forced hand-over can
-wait a scheduler slice, and a pose makes many of them between its native calls. With 20 ms,
-beside 2 busy processes on 2 cores, the window demo posed p50 86-89 ms late with 1-14 of
-~620 frames unposed, against 285-330 ms and 23-77 with 5 ms; idle, 72.7 / 110.6 ms p50/p99
-against 74.6-80 / 126-130 (benchmarks/window_live.py, docs/window.md)."""
+wait a scheduler slice, and a pose makes many of them between its native calls. What 20 ms
+changed beside busy processes and idle, and the command that measures it: docs/window.md,
+"What the window costs"."""
 
 
 class LivePipeline:

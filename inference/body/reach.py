@@ -1,15 +1,15 @@
 """Hands onto tracked controllers: a two-bone reach of each arm after the model's answer.
 
 Why: a model reads a controller's position as one input among many and places the hand
-where its training says a hand with that history tends to be; the three-point task's
-hand error stays at 10-20 cm that way (docs/evaluation.md, "The three-point task"), while
-the controller says where the hand is to within millimetres. What VR avatars do (an
+where its training says a hand with that history tends to be, centimetres from where
+the controller says it is to within millimetres (the figures and the command that measures
+them: docs/evaluation.md, "The three-point task"). What VR avatars do (an
 arm IK after the body solve) is what this does: the upper arm and forearm are turned so
 that the wrist sits where the controller's grip puts it, and the elbow goes into the plane
 of the shoulder, the wrist and the elbow the model's forearm implies when hung from the
 wrist (the arm's swivel is the model's forearm's, which is a measurement wherever the
 controller stands for the wrist sensor; keeping the model's own elbow instead left the
-forearms 17 deg further off and cost 2.4 deg GA on dg); where the arm cannot reach, the
+forearms further off and cost GA: docs/evaluation.md); where the arm cannot reach, the
 collar bone turns (up to ``COLLAR_MAX_DEG``) to bring the shoulder nearer, as a reaching
 shoulder does. Every other segment is the model's answer unchanged.
 
