@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._math import G
+from .._math import G, quat_conjugate, quat_log, quat_mul, quat_to_matrix
 
 WINDOW_S = 0.15  # s of poses per fit: with the one before it, 12 poses at 72 Hz
 MIN_SAMPLES = 4
@@ -52,33 +52,6 @@ class ImuReading:
     free_acc: np.ndarray  # (3,) world, m/s^2, gravity removed
     acc: np.ndarray  # (3,) sensor frame, m/s^2, specific force
     gyro: np.ndarray  # (3,) sensor frame, rad/s
-
-
-def quat_conj_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a^-1 b for unit quaternions (w, x, y, z), a (4,) and b (N, 4)."""
-    aw, ax, ay, az = a[0], -a[1], -a[2], -a[3]
-    bw, bx, by, bz = b[:, 0], b[:, 1], b[:, 2], b[:, 3]
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz,
-                     aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw], axis=-1)
-
-
-def quat_log(q: np.ndarray) -> np.ndarray:
-    """Rotation vectors (N, 3) of unit quaternions (N, 4), the shorter way round."""
-    q = np.where(q[:, :1] < 0, -q, q)
-    v = q[:, 1:]
-    s = np.linalg.norm(v, axis=-1)
-    angle = 2.0 * np.arctan2(s, q[:, 0])
-    scale = np.where(s > 1e-12, angle / np.maximum(s, 1e-300), 2.0)
-    return v * scale[:, None]
-
-
-def rotation_matrix(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = (float(v) for v in q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
 class ImpliedImu:
@@ -121,10 +94,10 @@ class ImpliedImu:
         coef, *_ = np.linalg.lstsq(A, P, rcond=None)
         free = 2.0 * coef[2]
         Q = np.stack(self._q)
-        rv = quat_log(quat_conj_mul(Q[-1], Q))  # body-frame rotation of each pose from the newest
+        rv = quat_log(quat_mul(quat_conjugate(Q[-1]), Q))  # body-frame rotation of each pose from the newest
         tc = ts - ts.mean()
         gyro = (tc @ (rv - rv.mean(axis=0))) / float(tc @ tc)
-        R = rotation_matrix(Q[-1])
+        R = quat_to_matrix(Q[-1])
         acc = R.T @ (free + np.array([0.0, 0.0, G]))
         return ImuReading(free, acc, gyro)
 

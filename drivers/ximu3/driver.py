@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from .._math import G
+from .._math import G, quat_rotate
 from ..base import Device, DeviceGone, Sample
 
 _LOST = ("lost",)
@@ -212,19 +212,9 @@ class Ximu3Device(Device):
         i = self._last_i
         if i is not None and abs(i[0] - ts) * 1e-6 * self.rate < 1.0:
             gyro, acc = i[1], i[2]
-            free = _rotate(quat, acc) - np.array([0.0, 0.0, G])
+            free = quat_rotate(quat, acc) - np.array([0.0, 0.0, G])
         return Sample(0.0, ts * 1e-6, self.device_id, None, quat=quat, free_acc=free, acc=acc, gyro=gyro,
                       battery=self.battery, extra=extra)
-
-
-def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    w, x, y, z = q
-    r = np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
-    return r @ v
 
 
 def _ping_name(text: str) -> str | None:

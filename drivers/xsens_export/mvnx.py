@@ -28,8 +28,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from drivers._math import quat_conjugate, quat_rotate
 from drivers.device_log import DeviceLog
-from drivers.xsens_export.frames import conjugate, normalise, rotate
+from drivers.xsens_export.frames import normalise
 from drivers.xsens_export.samples import G
 
 # MVN's sensor labels (the segment each is strapped to) -> imucap's sites. The hands and
@@ -197,7 +198,7 @@ def _take(path: str | os.PathLike, labels: list[str], rate: float, t: list[float
     logs = []
     for k, label in enumerate(labels):
         q, ok = normalise(Q[:, k])
-        acc = rotate(conjugate(q[ok]), F[ok, k] + np.array([0.0, 0.0, G]))
+        acc = quat_rotate(quat_conjugate(q[ok]), F[ok, k] + np.array([0.0, 0.0, G]))
         counts = {**skipped, "no_orientation": int((~ok).sum())}
         logs.append(DeviceLog(label, label, tt[ok], q[ok], acc, np.full((len(acc), 3), np.nan),
                               skipped={key: v for key, v in counts.items() if v},

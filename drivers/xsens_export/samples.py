@@ -26,16 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from drivers._math import quat_conjugate, quat_mul, quat_rotate
 from drivers.device_log import DeviceLog
-from drivers.xsens_export.frames import (
-    EARTH_TO_ENU,
-    conjugate,
-    from_euler_deg,
-    from_matrix,
-    normalise,
-    quat_mul,
-    rotate,
-)
+from drivers.xsens_export.frames import EARTH_TO_ENU, from_euler_deg, from_matrix, normalise
 from drivers.xsens_export.table import ExportError, Table, norm_key
 
 G = 9.81  # the gravity Xsens subtracts for free acceleration (close enough to local g for a body model)
@@ -205,8 +198,8 @@ def _vectors(table: Table, layout: Layout, rows: np.ndarray, t: np.ndarray, quat
         acc, filled = _fill(t, acc[rows])
         source["acc_from"] = "Acc"
     elif free is not None:
-        free, filled = _fill(t, rotate(EARTH_TO_ENU[frame][None], free[rows]))
-        acc = rotate(conjugate(quat), free + np.array([0.0, 0.0, G]))
+        free, filled = _fill(t, quat_rotate(EARTH_TO_ENU[frame][None], free[rows]))
+        acc = quat_rotate(quat_conjugate(quat), free + np.array([0.0, 0.0, G]))
         source["acc_from"] = "FreeAcc"
     if gyr is not None:
         gyr, filled_gyr = _fill(t, gyr[rows] * layout.gyro_to_rad)
