@@ -63,9 +63,6 @@ class ModelConfig:
     # where absent). Zero at first, so a model fine-tuned from one without it starts as
     # that model; their orientations reach the model as known segment orientations.
     points: bool = False
-    # HAD's hierarchical refinement of the output (torso, then arms, then legs;
-    # inference/model/hierarchy.py). Zero at first, like ``points``.
-    hmr: bool = False
     T: int = 1000
 
     @classmethod
@@ -83,6 +80,8 @@ class ModelConfig:
     @classmethod
     def from_dict(cls, d: dict) -> ModelConfig:
         names = {f.name for f in fields(cls)}
+        if d.get("hmr"):  # HAD's refinement stage, tried and removed (docs/model.md)
+            raise ValueError("a model with HAD's refinement stage (hmr): the stage is no longer part of the denoiser")
         return cls(**{k: v for k, v in d.items() if k in names})
 
 

@@ -65,10 +65,6 @@ class Denoiser(nn.Module):
         self.decoder = nn.TransformerDecoder(layer, num_layers=cfg.layers)
         self.norm = nn.LayerNorm(d)
         self.out_proj = nn.Linear(d, cfg.features)
-        if cfg.hmr:
-            from inference.model.hierarchy import HierarchicalRefinement
-
-            self.hmr = HierarchicalRefinement(d)
         if cfg.skip:
             ab = cosine_alpha_bar(cfg.T).float()
             self.register_buffer("skip_a", ab.sqrt(), persistent=False)
@@ -111,8 +107,6 @@ class Denoiser(nn.Module):
         else:
             h = self._lean_decoder(tokens, cond)
         out = self.out_proj(self.norm(h[:, 2:]))
-        if self.config.hmr:
-            out = self.hmr(out)
         if self.config.skip:
             a = self.skip_a[t].to(out.dtype)[:, None, None]
             b = self.skip_b[t].to(out.dtype)[:, None, None]

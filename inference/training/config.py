@@ -169,7 +169,7 @@ class TrainConfig:
     # the position input layer's learning rate as a multiple of the schedule's: at a
     # fine-tune's 1e-4 it grew to a quarter of the other inputs' weight norm in 2000 steps
     points_lr_scale: float = 1.0
-    # parameter name prefixes to train (e.g. ["hmr."]); every other parameter is frozen.
+    # parameter name prefixes to train (e.g. ["points_proj."]); every other parameter is frozen.
     # Empty: train all. A stage grown onto a trained model and trained alone has that
     # model as its exact control (docs/model.md, "HAD's hierarchical refinement")
     train_only: list[str] = field(default_factory=list)
