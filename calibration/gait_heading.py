@@ -32,6 +32,7 @@ import numpy as np
 from inference.body.rotations import quat_to_matrix, so3_log
 
 from .core import _free_acc_G
+from .heading import axis_forward, heading_change, peak_forward, still_mean, turn_back
 
 SWING_SEGMENTS = ("l_thigh", "r_thigh", "l_shank", "r_shank")
 MIN_WALK_M = 1.0  # shorter than this and a bias of 0.05 m/s^2 is a few degrees of heading
@@ -80,15 +81,6 @@ def velocity(a: np.ndarray, fps: float) -> np.ndarray:
     return v - ramp * v[-1]
 
 
-def turn_back(v: np.ndarray, yaw: np.ndarray | None) -> np.ndarray:
-    """(N,2) horizontal vectors turned by -yaw (rad): into the heading the subject had at
-    the stand. ``yaw`` None: unchanged (a straight walk)."""
-    if yaw is None:
-        return v
-    c, s = np.cos(yaw), np.sin(yaw)
-    return np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1]], axis=1)
-
-
 def walk_displacements(a_G: np.ndarray, present: np.ndarray, fps: float, walk: tuple[int, int],
                        bias: tuple[int, int], turn: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per sensor, the horizontal displacement over frames ``walk`` (still at both ends) in
@@ -116,29 +108,6 @@ def walk_displacements(a_G: np.ndarray, present: np.ndarray, fps: float, walk: t
     return disp, thirds
 
 
-def _peak_forward(w: np.ndarray) -> np.ndarray:
-    """Forward (2,) from horizontal angular velocities (N,2): the mean of the fastest tenth
-    points right; forward = z x right."""
-    mag = np.linalg.norm(w, axis=-1)
-    right = w[mag >= np.quantile(mag, 0.9)].mean(0)
-    return np.array([-right[1], right[0]])
-
-
-def _axis_forward(w: np.ndarray, sign_from: np.ndarray | None = None) -> np.ndarray:
-    """Forward (2,) from the principal axis of horizontal angular velocities (N,2), its sign
-    that of the fastest tenth's mean (of ``sign_from`` when given): a stretch of a log whose
-    peaks read backwards (a slower walk back) still gives the axis."""
-    axis = np.linalg.eigh(w.T @ w)[1][:, -1]
-    if float(axis @ _rot90(_peak_forward(w if sign_from is None else sign_from))) < 0:
-        axis = -axis
-    return np.array([-axis[1], axis[0]])
-
-
-def _rot90(f: np.ndarray) -> np.ndarray:
-    """The right (2,) of a forward: forward turned by -90 deg (the inverse of z x right)."""
-    return np.array([f[1], -f[0]])
-
-
 def swing_forward(quat: np.ndarray, present: np.ndarray, fps: float, window: tuple[int, int],
                   turn: np.ndarray | None = None, frames: np.ndarray | None = None,
                   axis: bool = False) -> tuple[np.ndarray, np.ndarray]:
@@ -146,7 +115,7 @@ def swing_forward(quat: np.ndarray, present: np.ndarray, fps: float, window: tup
     and the same from each third of the frames (S,3,2) (module docstring). ``turn`` (T,)
     the subject's turn since the stand (rad), ``frames`` (T,) bool: only these count (the
     walking ones of a log). ``axis``: the principal axis of the rate, signed by the peaks
-    of the whole (``_axis_forward``), for logs whose walks differ in pace."""
+    of the whole (``heading.axis_forward``), for logs whose walks differ in pace."""
     a, b = window
     S = quat.shape[1]
     fwd = np.full((S, 2), np.nan)
@@ -166,9 +135,9 @@ def swing_forward(quat: np.ndarray, present: np.ndarray, fps: float, window: tup
         w = w[use]
         if len(w) < MIN_SWING_FRAMES:
             continue
-        fwd[k] = _axis_forward(w) if axis else _peak_forward(w)
+        fwd[k] = axis_forward(w) if axis else peak_forward(w)
         for j, part in enumerate(np.array_split(w, 3)):
-            thirds[k, j] = _axis_forward(part, w) if axis else _peak_forward(part)
+            thirds[k, j] = axis_forward(part, w) if axis else peak_forward(part)
     return fwd, thirds
 
 
@@ -192,14 +161,6 @@ def pick_direction(sites: Sequence[str], disp: np.ndarray, disp_thirds: np.ndarr
 
 
 # ------------------------------------------------------------------ logs: any walking, with turns
-
-
-def heading_change(R: np.ndarray, ok: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    """(T,) how far (rad) one sensor has turned about the vertical since it was ``ref``
-    (3,3); NaN where it did not deliver. Independent of the sensor's own heading offset."""
-    dR = R @ ref.T
-    yaw = np.arctan2(dR[:, 1, 0] - dR[:, 0, 1], dR[:, 0, 0] + dR[:, 1, 1])
-    return np.where(ok, yaw, np.nan)
 
 
 def still_frames(rate: np.ndarray, present: np.ndarray, fps: float) -> np.ndarray:
@@ -266,17 +227,14 @@ def gait_headings(sites: Sequence[str], quat: np.ndarray, rate: np.ndarray, pres
     R = quat_to_matrix(np.where(ok[..., None], quat, [1.0, 0, 0, 0]))
     legs = [k for k, s in enumerate(sites) if s in SWING_SEGMENTS]
     steps = max((count_steps(rate[:, k], ok[:, k], fps) for k in legs), default=0)
-    from .core import mean_rotation
-
     def turn_of(k: int) -> np.ndarray:
-        ref = mean_rotation(np.where(ok[still, k][:, None, None], R[still, k], np.nan)[:, None])[0]
-        return heading_change(R[:, k], ok[:, k], ref)
+        return heading_change(R[:, k], ok[:, k], still_mean(R[:, k], ok[:, k], still))
 
     anchor = next((sites.index(s) for s in ("pelvis", "torso") if s in sites and ok[still, sites.index(s)].any()),
                   None)
     turn = turn_of(anchor) if anchor is not None else None
     moving = ~still_frames(rate, ok, fps)
-    moving[: still.stop] = False
+    moving[still] = False
     straight = moving & _not_turning(turn, fps)  # a leg pivoting in a turn swings about no lateral axis
     swing = np.full((S, 2), np.nan)
     swing_thirds = np.full((S, 3, 2), np.nan)
@@ -288,8 +246,8 @@ def gait_headings(sites: Sequence[str], quat: np.ndarray, rate: np.ndarray, pres
     a_G = _free_acc_G(quat, free_acc, acc)
     disp = np.zeros((S, 2))
     parts: list[list[np.ndarray]] = [[] for _ in range(S)]
-    long_bouts = [(a, b) for a, b in _bouts(~moving, still.stop) if (b - a) / fps > MAX_BOUT_S]
-    bouts = [(a, b) for a, b in _bouts(~moving, still.stop) if (b - a) / fps <= MAX_BOUT_S]
+    long_bouts = [(a, b) for a, b in _bouts(~moving, 0) if (b - a) / fps > MAX_BOUT_S]
+    bouts = [(a, b) for a, b in _bouts(~moving, 0) if (b - a) / fps <= MAX_BOUT_S]
     for a, b in bouts:
         d, th = walk_displacements(a_G, ok, fps, (a, b), (still.start, still.stop), turn)
         disp += np.nan_to_num(d)

@@ -26,12 +26,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from inference.body.rotations import quat_multiply
+from inference.body.rotations import matrix_about_axis, matrix_to_quat, quat_multiply
 from inference.body.skeleton import parse_sites
 
 from .core import Calibration, CalibrationError
 from .gait_heading import WARN_DEG, GaitHeadings, consensus_forward, gait_headings, signed_angle_deg
-from .standing import calibrate_standing, forward_from_motion, still_start
+from .heading import forward_from_motion
+from .standing import calibrate_standing, still_stand
 
 MODES = ("standing", "walk", "auto")
 
@@ -50,7 +51,7 @@ class LogCalibration:
 
 def calibrate_log(sites: Sequence[str], quat: np.ndarray, rate: np.ndarray, present: np.ndarray, fps: float,
                   mode: str = "auto", acc: np.ndarray | None = None,
-                  free_acc: np.ndarray | None = None) -> LogCalibration:
+                  free_acc: np.ndarray | None = None, name: str = "the log") -> LogCalibration:
     """Calibrate a log that starts with a still stand (module docstring). quat (T,S,4)
     R_GS, rate (T,S,3) rad/s in the sensor frame (the gyro, or the rate from orientation),
     acc (T,S,3) specific force, present (T,S)."""
@@ -59,7 +60,7 @@ def calibrate_log(sites: Sequence[str], quat: np.ndarray, rate: np.ndarray, pres
     sites = tuple(parse_sites(list(sites)))
     quat = np.asarray(quat, float)
     present = np.asarray(present, bool)
-    still = still_start(rate, present, fps)
+    still = still_stand(rate, present, fps, name=name)
     gait = gait_headings(sites, quat, rate, present, fps, still, free_acc=free_acc, acc=acc)
     notes: list[str] = []
     method = mode
@@ -77,8 +78,8 @@ def calibrate_log(sites: Sequence[str], quat: np.ndarray, rate: np.ndarray, pres
     else:  # every sensor the gait spoke for turned into the frame most agree on, so the knees see one frame
         off = np.where(np.all(np.isfinite(gait.forward), -1) & (method == "walk"),
                        np.arctan2(gait.forward[:, 1], gait.forward[:, 0]) - np.arctan2(shared[1], shared[0]), 0.0)
-        half = np.stack([np.cos(-off / 2), 0 * off, 0 * off, np.sin(-off / 2)], -1)  # Rz(-off): into the shared frame
-        shared_q = quat_multiply(half[None], quat)
+        into_shared = matrix_to_quat(matrix_about_axis(np.tile([0.0, 0.0, 1.0], (len(off), 1)), -off))
+        shared_q = quat_multiply(into_shared[None], quat)
     try:
         forward, forward_from = forward_from_motion(sites, shared_q, rate, present, still)
     except CalibrationError:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from calibration import CalibrationError
-from calibration.standing import calibrate_standing, forward_from_knees, forward_from_shanks, still_start
+from calibration.standing import calibrate_standing, forward_from_knees, forward_from_shanks, still_stand
 from inference.body.motion import Motion
 from inference.body.rotations import matrix_angle_between
 from inference.body.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX
@@ -43,7 +43,7 @@ def session(kind="walk", heading_deg=70.0, seed=3, back_s=0.0):
 def test_forward_comes_from_the_knees_and_the_bones_come_out_right():
     motion, sig = session(heading_deg=70.0)
     present = np.ones(sig.quat.shape[:2], bool)
-    still = still_start(sig.gyro, present, FPS)
+    still = still_stand(sig.gyro, present, FPS)
     assert 1.2 * FPS <= still.stop <= 1.6 * FPS
     f = forward_from_knees(SITES, sig.quat, present, still)
     assert np.degrees(np.arctan2(f[1], f[0])) == pytest.approx(70.0, abs=4.0)
@@ -68,7 +68,7 @@ def test_a_walk_back_after_a_turn_still_votes_for_the_forward_at_calibration():
                          sites=SITES)
     for s in (sig, sig_out):
         present = np.ones(s.quat.shape[:2], bool)
-        f = forward_from_knees(SITES, s.quat, present, still_start(s.gyro, present, FPS))
+        f = forward_from_knees(SITES, s.quat, present, still_stand(s.gyro, present, FPS))
         assert np.degrees(np.arctan2(f[1], f[0])) == pytest.approx(-40.0, abs=5.0)
 
 
@@ -80,7 +80,7 @@ def test_without_thighs_the_forward_comes_from_the_shanks_swing():
         sig = synthesize(stand_then("walk", heading, seconds=3.0, back_s=back_s), NoiseModel(mounting_deg=40.0),
                          rng=6, sites=lower)
         present = np.ones(sig.quat.shape[:2], bool)
-        f = forward_from_shanks(lower, sig.quat, sig.gyro, present, still_start(sig.gyro, present, FPS))
+        f = forward_from_shanks(lower, sig.quat, sig.gyro, present, still_stand(sig.gyro, present, FPS))
         assert np.degrees(np.arctan2(f[1], f[0])) == pytest.approx(heading, abs=8.0)
         cal = calibrate_standing(lower, sig.quat, acc=sig.specific_force, gyro=sig.gyro, rate=FPS)
         assert cal.meta["forward_from"] == "shank swing"
@@ -92,7 +92,19 @@ def test_a_session_that_never_bends_a_knee_or_never_stands_still_is_refused():
     with pytest.raises(CalibrationError, match="knees never bent|forward"):
         calibrate_standing(SITES, sig.quat, acc=sig.specific_force, gyro=sig.gyro, present=present, rate=FPS)
     walk = synthesize(generate("walk", seconds=4.0), NoiseModel(), rng=1, sites=SITES)
-    with pytest.raises(CalibrationError, match="still for only"):
+    with pytest.raises(CalibrationError, match="no still stand of 1 s found in 0-4.0 s of the log"):
         calibrate_standing(SITES, walk.quat, acc=walk.specific_force, gyro=walk.gyro, rate=FPS)
     with pytest.raises(CalibrationError, match="thigh and a shank"):
         forward_from_knees(("pelvis", "l_foot"), sig.quat[:, [0, 5]], present[:, [0, 5]], slice(0, 60))
+
+
+def test_a_still_stand_anywhere_serves_and_the_refusal_says_where_it_looked():
+    """A trial recorded as people record them starts walking; its stand may come later."""
+    gyro = np.full((600, 2, 3), np.deg2rad(40.0))
+    gyro[300:400] = 0.0  # 1.67 s still at 5 s
+    present = np.ones((600, 2), bool)
+    assert still_stand(gyro, present, 60.0) == slice(300, 400)
+    gyro[350:355] = np.deg2rad(40.0)  # broken into 0.83 s and 0.75 s
+    with pytest.raises(CalibrationError, match=r"^no still stand of 1 s found in 0-10.0 s of walk_003 \(longest "
+                                               r"still: 0.83 s at 5.0 s"):
+        still_stand(gyro, present, 60.0, name="walk_003")

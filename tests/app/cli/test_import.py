@@ -16,7 +16,7 @@ from app.cli.importing import site_for
 from app.cli.main import main
 from app.recording import read_recording
 from app.replay import replay_recording
-from calibration.standing import forward_from_knees, forward_from_shanks, still_start
+from calibration.standing import forward_from_knees, forward_from_shanks, still_stand
 from inference.body.motion import Motion
 from inference.body.rotations import matrix_about_axis, matrix_angle_between
 from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX, SITE_SEGMENT_INDEX
@@ -105,7 +105,7 @@ def test_the_real_log_reconstructs_to_a_body_that_walks_and_comes_back(shared_da
     quat = np.stack([rec.raw[s]["quat"] for s in rec.sites], axis=1).astype(np.float64)
     gyro = np.stack([rec.raw[s]["gyro"] for s in rec.sites], axis=1).astype(np.float64)
     present = np.all(np.isfinite(quat), axis=-1)
-    still = still_start(gyro, present, 60.0)
+    still = still_stand(gyro, present, 60.0)
     knees, swing = forward_from_knees(rec.sites, quat, present, still), forward_from_shanks(rec.sites, quat, gyro,
                                                                                           present, still)
     assert np.degrees(np.arccos(np.clip(knees @ swing, -1, 1))) < 5.0
