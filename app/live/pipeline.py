@@ -1,5 +1,6 @@
-"""The live chain: hub frames (60 Hz) -> calibration -> 60->20 Hz resampler -> 190-feature
-observation + mask -> ``Poser.step`` -> the arms' reach onto a VR rig's controllers -> sinks.
+"""The live chain: hub frames (60 Hz) -> calibration and the optional inputs into one live
+frame (``frame.py``) -> 60->20 Hz resampler -> 190-feature observation + mask ->
+``Poser.step`` -> the arms' reach onto a VR rig's controllers -> sinks.
 
 ``Pipeline`` is the chain without threads: ``push(frame)`` returns the poses that frame
 completed (0 or 1), so tests, offline replay and the threaded runner share one code
@@ -13,10 +14,12 @@ model's 11-frame moving average once. The simulated suit replays synthesis's
 ``meta["free_acc_raw"]`` (sim_devices.devices.base.SignalSource), so nothing here
 smooths twice; ``frames_from_signals`` (``sources.py``) follows the same rule for device-less replay.
 
-A VR rig's positions (``HubFrame.position``) are turned into the model's world with the
-calibration's yaw for the rig (``tracked.py``), resampled with the orientations (the
-20 Hz frame's own sample), and after the poser's answer each tracked hand's arm reaches
-its controller (``inference.body.reach``); ``reach=False`` leaves the answer as it is.
+The optional inputs enter the live frame at one stage (``FrameBuilder``): the insoles'
+contacts (``InsoleInput``), a VR rig's positions turned into the model's world with the
+calibration's yaw for the rig (``tracked.RigPoints``). The rest of the chain reads the
+frame's fields and never asks which inputs exist. After the poser's answer each tracked
+hand's arm reaches its controller (``inference.body.reach``); ``reach=False`` leaves the
+answer as it is.
 """
 
 from __future__ import annotations
@@ -30,12 +33,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from app.live.tracked import N_POINTS, RigPoints, position_input, reach
+from app.live.frame import FrameBuilder, InsoleInput, empty_frame, observation
+from app.live.tracked import RigPoints, reach
 from calibration import Calibration, Calibrator
 from drivers.hub import HubFrame
-from inference.body.rotations import matrix_to_rot6d
-from inference.body.skeleton import N_CONTACTS, N_SITES, SITE_INDEX, SITE_SEGMENT_INDEX, SITES
-from inference.features.layout import N_FEATURES, SL_ACC, SL_CONTACT, SL_ROT, observation_mask
+from inference.body.skeleton import SITE_INDEX
 from inference.poser.stride import SHANK_SITES
 from inference.signals.resample import StreamingResampler
 
@@ -51,11 +53,6 @@ POSE_SKIPPED_EVENT = "pose skipped"
 """The event a pipeline sends its sinks for each 20 Hz frame the live loop had no time to
 pose (``pass_over``), at that frame's time: a recording keeps them, so that a replay can
 leave out the same frames and give back the live reconstruction exactly."""
-# packed rest payload: R_WB (13*9) | observed (13) | contacts (4) | insole present (1) | tracked points (4*3)
-_NR = N_SITES * 9
-_INS = _NR + N_SITES + N_CONTACTS  # the insoles' present flag
-_POS = _INS + 1  # the tracked points in the model's world, NaN where not tracked
-_REST = _POS + 3 * N_POINTS
 
 
 @dataclass
@@ -200,8 +197,9 @@ class Pipeline:
         unknown = [s for s in self.sites if s not in SITE_INDEX]
         if unknown:
             raise ValueError(f"unknown sensor site(s) {unknown}")
-        self._site_idx = np.array([SITE_INDEX[s] for s in self.sites], dtype=int)
-        self._rig = RigPoints(self.sites)
+        # the one stage where a hub frame becomes a live frame, optional inputs and all
+        self._insoles = InsoleInput()
+        self._frames = FrameBuilder(self.sites, [self._insoles, RigPoints(self.sites)])
         self.calibrator = calibrator or Calibrator(self.sites)
         self.calibration: Calibration | None = None
         self.sinks: list[Sink] = list(sinks)
@@ -218,7 +216,6 @@ class Pipeline:
         # a calibration was in use and has been dropped, and the first frame that went back
         # to the calibrator has not been announced yet (see _calibrating)
         self._had_calibration = False
-        self.insoles = insoles
         self.set_active_sites(active_sites if active_sites is not None else self.sites, insoles)
         if calibration is not None:
             self.set_calibration(calibration, t=0.0)
@@ -234,6 +231,15 @@ class Pipeline:
         self._active = np.isin(self.sites, self.active_sites)
         if insoles is not None:
             self.insoles = bool(insoles)
+
+    @property
+    def insoles(self) -> bool:
+        """The insoles' contacts feed the poser."""
+        return self._insoles.enabled
+
+    @insoles.setter
+    def insoles(self, on: bool) -> None:
+        self._insoles.enabled = bool(on)
 
     def add_sink(self, sink: Sink) -> None:
         self.sinks.append(sink)
@@ -307,15 +313,14 @@ class Pipeline:
             if 0 < gap <= MAX_FILLED_GAP:
                 for k in range(gap):
                     t_fill = frame.t - (gap - k) * (1.0 / 60.0)
-                    out += self._resample(t_fill, np.full((N_SITES, 3), np.nan), self._empty_rest(), t_start,
-                                          pose=pose)
+                    out += self._resample(t_fill, empty_frame(), t_start, pose=pose)
                 self.stats.frames_filled += gap
             elif gap > MAX_FILLED_GAP or gap < 0:
                 self.resampler.reset()
                 self.stats.resampler_restarts += 1
         self._last_index = frame.index
-        acc, rest = self._observe(frame)
-        out += self._resample(frame.t, acc, rest, t_start, _newest_sample(frame), pose=pose)
+        live = self._frames.build(frame, self.calibration, self._active)  # type: ignore[arg-type]
+        out += self._resample(frame.t, live, t_start, _newest_sample(frame), pose=pose)
         return out
 
     def pass_over(self, frame: HubFrame) -> None:
@@ -349,69 +354,36 @@ class Pipeline:
         self._last_index = frame.index
         return True
 
-    @staticmethod
-    def _empty_rest() -> np.ndarray:
-        r = np.zeros(_REST)
-        r[:_NR] = np.nan
-        r[_POS:] = np.nan
-        return r
-
-    def _observe(self, frame: HubFrame) -> tuple[np.ndarray, np.ndarray]:
-        """Calibrated world orientation and acceleration on the 13-site layout (NaN where not
-        observed), packed for the resampler."""
-        R, a = self.calibration.apply(frame.quat, frame.free_acc, frame.acc, sites=self.sites)  # type: ignore[union-attr]
-        ok = frame.present & self._active & np.all(np.isfinite(R), axis=(-1, -2)) & np.all(np.isfinite(a), axis=-1)
-        acc13 = np.full((N_SITES, 3), np.nan)
-        acc13[self._site_idx[ok]] = a[ok]
-        rest = self._empty_rest()
-        R13 = rest[:_NR].reshape(N_SITES, 9)
-        R13[self._site_idx[ok]] = R[ok].reshape(-1, 9)
-        rest[_NR:_NR + N_SITES][self._site_idx[ok]] = 1.0
-        if self.insoles and frame.insole_present:
-            rest[_NR + N_SITES:_INS] = frame.contacts
-            rest[_INS] = 1.0
-        if frame.position is not None:
-            rest[_POS:] = self._rig.points(self.calibration, frame.position, ok).reshape(-1)  # type: ignore[arg-type]
-        return acc13, rest
-
-    def _resample(self, t: float, acc: np.ndarray, rest: np.ndarray, t_start: float,
-                  newest: float | None = None, pose: bool = True) -> list[LivePose]:
+    def _resample(self, t: float, frame: np.ndarray, t_start: float, newest: float | None = None,
+                  pose: bool = True) -> list[LivePose]:
+        """A live frame into the resampler (its accelerations averaged, the rest carried with
+        the sample each 20 Hz frame stands for); the 20 Hz frames it completes are posed."""
         out = []
-        for f20 in self.resampler.push(acc, rest, t):
+        for f20 in self.resampler.push(frame["accelerations"], frame, t):
             t20 = f20.t if f20.t is not None else t
             if not pose or (self.skip_pose is not None and self.skip_pose(t20)):
                 self.stats.poses_skipped += 1
                 if not pose:
                     self._emit("on_event", t20, POSE_SKIPPED_EVENT, "")
                 continue
-            out.append(self._pose(f20.index, t20, t if newest is None else newest, f20.acc, f20.rest, t_start))
+            frame20 = f20.rest.copy()
+            frame20["accelerations"] = f20.acc
+            out.append(self._pose(f20.index, t20, t if newest is None else newest, frame20, t_start))
         return out
 
-    def _pose(self, index: int, t: float, t_newest: float, acc: np.ndarray, rest: np.ndarray,
-              t_start: float) -> LivePose:
-        R = rest[:_NR].reshape(N_SITES, 3, 3)
-        observed = rest[_NR:_NR + N_SITES] > 0.5
-        observed &= np.all(np.isfinite(acc), axis=-1)
-        insoles = bool(rest[_INS] > 0.5)
-        x = np.zeros(N_FEATURES)
-        for k in np.nonzero(observed)[0]:
-            seg = SITE_SEGMENT_INDEX[k]
-            x[SL_ROT.start + 6 * seg: SL_ROT.start + 6 * seg + 6] = matrix_to_rot6d(R[k]).reshape(6)
-            x[SL_ACC.start + 3 * k: SL_ACC.start + 3 * k + 3] = acc[k]
-        if insoles:
-            x[SL_CONTACT] = rest[_NR + N_SITES:_INS]
-        mask = observation_mask([SITES[k] for k in np.nonzero(observed)[0]], insoles=insoles)
+    def _pose(self, index: int, t: float, t_newest: float, frame: np.ndarray, t_start: float) -> LivePose:
+        obs = observation(frame)
         t0 = time.perf_counter()
-        points = position_input(rest[_POS:].reshape(N_POINTS, 3))
-        pose = self.poser.step(x, mask, points)  # a model with a position input reads them
-        reached = reach(pose, self.poser.body, points, R, observed) if self.reach else None
+        points = obs.points
+        pose = self.poser.step(obs.x, obs.mask, points)  # a model with a position input reads them
+        reached = reach(pose, self.poser.body, points, frame["orientations"], obs.observed) if self.reach else None
         if reached is not None:
             pose = reached
         else:
             points = None
         t1 = time.perf_counter()
         latency = (self.clock() - t_newest) * 1e3 if self.clock is not None else None
-        lp = LivePose(pose=pose, t=t, t_newest=t_newest, index=index, observed_sites=observed, insoles=insoles,
+        lp = LivePose(pose=pose, t=t, t_newest=t_newest, index=index, observed_sites=obs.observed, insoles=obs.insoles,
                       latency_ms=latency, compute_ms=(t1 - t_start) * 1e3, points=points)
         self.stats.poses += 1
         self.stats.step_ms.append((t1 - t0) * 1e3)

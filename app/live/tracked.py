@@ -28,20 +28,21 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from app.live.frame import N_POINTS
 from calibration import Calibration
 from inference.body.conventions import mean_angle, rot_z, yaw_of
 from inference.body.reach import reach_hands
 from inference.body.skeleton import SITE_INDEX
-from inference.body.tracked import TRACKED_POINTS, point_features
+from inference.body.tracked import TRACKED_POINTS
 
 if TYPE_CHECKING:
+    from drivers.hub import HubFrame
     from inference.body.body import Body
     from inference.poser.poser import PoseFrame
 
 # the hub's site a rig's device is routed to (drivers.vmc.device.MODEL_SITES) -> the tracked point
 SITE_POINT: dict[str, str] = {"head": "head", "l_wrist": "l_hand", "r_wrist": "r_hand", "pelvis": "pelvis"}
 HAND_SITE: dict[str, str] = {"l_hand": "l_wrist", "r_hand": "r_wrist"}
-N_POINTS = len(TRACKED_POINTS)
 
 
 def rig_yaw(calibration: Calibration, sites: Sequence[str]) -> np.ndarray | None:
@@ -57,7 +58,8 @@ def rig_yaw(calibration: Calibration, sites: Sequence[str]) -> np.ndarray | None
 
 
 class RigPoints:
-    """The tracked points of a frame over ``sites`` (the hub's order), in the model's world.
+    """The tracked points of a frame over ``sites`` (the hub's order), in the model's world:
+    the live frame's ``positions`` input (``app.live.frame.FrameInput``).
 
     ``points(calibration, position, ok)``: (4, 3) in ``TRACKED_POINTS`` order, NaN where a
     point is not tracked or its site not usable in this frame (``ok``: present and active),
@@ -79,6 +81,10 @@ class RigPoints:
             self._R = rig_yaw(calibration, [s for s, seen in zip(self.sites, self._seen, strict=True) if seen])
         return self._R
 
+    def enter(self, frame: np.ndarray, hub: HubFrame, calibration: Calibration, ok: np.ndarray) -> None:
+        if hub.position is not None:
+            frame["positions"] = self.points(calibration, hub.position, ok)
+
     def points(self, calibration: Calibration, position: np.ndarray | None, ok: np.ndarray) -> np.ndarray:
         out = np.full((N_POINTS, 3), np.nan)
         if position is None or not self._rows:
@@ -95,21 +101,11 @@ class RigPoints:
         return out
 
 
-def position_input(points: np.ndarray) -> np.ndarray | None:
-    """The frame's position input (16,) (``point_features``) from its tracked points (4, 3)
-    in the model's world (NaN = not tracked), or None when the points cannot be read: no
-    headset (they are read against it)."""
-    flags = np.isfinite(points).all(axis=-1)
-    if not flags[0]:
-        return None
-    return point_features(np.where(flags[:, None], points, 0.0)[None], flags[None])[0]
-
-
 def reach(pose: PoseFrame, body: Body, features: np.ndarray | None, R13: np.ndarray,
           observed: np.ndarray) -> PoseFrame | None:
     """The poser's answer with each tracked hand's arm reaching its controller, or None when
     the frame has nothing to reach for (no position input, or no controller in it).
-    ``features``: the frame's ``position_input``; ``R13`` (13, 3, 3) its calibrated site
+    ``features``: the frame's position input (``Observation.points``); ``R13`` (13, 3, 3) its calibrated site
     orientations, ``observed`` (13,) which of them hold (the hands' orientations)."""
     if features is None:
         return None
@@ -125,4 +121,4 @@ def reach(pose: PoseFrame, body: Body, features: np.ndarray | None, R13: np.ndar
     return dataclasses.replace(pose, rot=R[0], joints=joints[0])
 
 
-__all__ = ["HAND_SITE", "RigPoints", "SITE_POINT", "position_input", "reach", "rig_yaw"]
+__all__ = ["HAND_SITE", "RigPoints", "SITE_POINT", "reach", "rig_yaw"]

@@ -99,7 +99,7 @@ def test_a_recalibration_pauses_the_replay_where_it_paused_live(tmp_path):
     from inference.signals.synthesis import NoiseModel
     from sim_devices.motions import generate
 
-    from .conftest import REC_PROTO, REC_SITES
+    from tests.app.conftest import REC_PROTO, REC_SITES
 
     act = generate("walk", seconds=2.0, seed=7)
     sig, truth = synthesize_session(act, REC_PROTO, noise=NoiseModel.typical(), rng=3, sites=REC_SITES)
@@ -150,7 +150,7 @@ def test_frames_live_had_no_time_for_are_left_out_again_so_the_replay_gives_back
     from inference.signals.synthesis import NoiseModel
     from sim_devices.motions import generate
 
-    from .conftest import REC_PROTO, REC_SITES
+    from tests.app.conftest import REC_PROTO, REC_SITES
 
     act = generate("walk", seconds=3.0, seed=2)
     sig, truth = synthesize_session(act, REC_PROTO, noise=NoiseModel.typical(), rng=5, sites=REC_SITES)
