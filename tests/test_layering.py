@@ -155,3 +155,19 @@ def test_circles_are_found():
     g = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
     assert circles(g) == [["a", "b", "c"]]
     assert circles({"a": {"b"}, "b": set()}) == []
+
+
+MAX_LINES = 600  # docs/design.md: a module past it is split by what its parts do
+SIZE_CHECKED = ("app", "drivers", "calibration")
+
+
+def test_no_module_is_over_600_lines():
+    long = sorted(f"{p.relative_to(REPO)}: {n}" for pkg in SIZE_CHECKED for p in (REPO / pkg).rglob("*.py")
+                  if (n := len(p.read_text().splitlines())) > MAX_LINES)
+    assert long == []
+
+
+def test_app_root_holds_no_loose_modules():
+    # docs/design.md, "The layers": every module of app/ sits in a package named for what it does
+    loose = sorted(p.name for p in (REPO / "app").glob("*.py"))
+    assert set(loose) <= {"__init__.py", "real_eval.py"}, loose
