@@ -142,7 +142,8 @@ def swing_forward(quat: np.ndarray, present: np.ndarray, fps: float, window: tup
 
 
 def pick_direction(sites: Sequence[str], disp: np.ndarray, disp_thirds: np.ndarray, swing: np.ndarray,
-                   swing_thirds: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[str]]:
+                   swing_thirds: np.ndarray, swing_sites: Sequence[str] = SWING_SEGMENTS,
+                   ) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """Per sensor the forward (S,2) its thirds agree on best, their spread (S,) deg, and
     where it came from ("displacement", "swing axis"): a thigh or shank has both witnesses,
     the others only their displacement."""
@@ -152,7 +153,7 @@ def pick_direction(sites: Sequence[str], disp: np.ndarray, disp_thirds: np.ndarr
         spread = np.nanmax(angle_between_2d(disp_thirds, disp[:, None, :]), axis=1)
     source = ["displacement"] * len(sites)
     for k, s in enumerate(sites):
-        if s not in SWING_SEGMENTS or not np.isfinite(swing[k]).all():
+        if s not in swing_sites or not np.isfinite(swing[k]).all():
             continue
         sw_spread = float(np.nanmax(angle_between_2d(swing_thirds[k], swing[k][None])))
         if not spread[k] <= sw_spread:  # the swing's thirds agree better (or the walk gave nothing)

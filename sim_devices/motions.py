@@ -462,6 +462,38 @@ def _hold(T: int, fps: float, body: Body, npose: bool) -> Motion:
     return Motion(rot=R, root=root, fps=fps, body=body)
 
 
+def leg_cycle(side: str = "l", cycles: int = 5, stand_s: float = 1.5, period_s: float = 1.6, height: float = 1.75,
+              fps: float = 60.0, seed: int = 0) -> Motion:
+    """A functional-calibration trial: the N-pose held, then one leg swung forward and back
+    ``cycles`` times with the knee bending (hip -15..35 deg, knee 0..70 deg, amplitudes +-8 %
+    by ``seed``), then the N-pose again. The leg's segments turn about the hip's and knee's
+    lateral axes, which is what the trial is recorded for: each sensor's flexion axis."""
+    if side not in ("l", "r"):
+        raise ValueError(f"side must be 'l' or 'r', not {side!r}")
+    rng = np.random.default_rng(seed)
+    body = Body.from_height(height)
+    n_stand, n_swing = int(round(stand_s * fps)), int(round(cycles * period_s * fps))
+    T = 2 * n_stand + n_swing
+    t = (np.arange(T) - n_stand) / fps
+    on = (t >= 0) & (t < cycles * period_s)
+    ph = 2 * np.pi * t / period_s
+    k = rng.uniform(0.92, 1.08, 2)
+    hip = np.where(on, np.deg2rad(25.0) * k[0] * np.sin(ph) + np.deg2rad(10.0) * (1 - np.cos(ph)) / 2, 0.0)
+    knee = np.where(on, np.deg2rad(70.0) * k[1] * (1 - np.cos(ph)) / 2, 0.0)
+    pose = _Pose.identity(T)
+    _arms(pose, np.zeros(T), np.zeros(T), np.zeros(T), np.zeros(T), down_l=np.full(T, np.deg2rad(80)),
+          down_r=np.full(T, np.deg2rad(80)))
+    pose.set(f"{side}_thigh", ry(-hip))
+    pose.set(f"{side}_shank", ry(knee))
+    R = pose.globals()
+    cp = contact_points(R, forward_kinematics(R, np.zeros(3), body.offsets), body)
+    stance = [2, 3] if side == "l" else [0, 1]  # the standing foot stays on the floor, the swinging one is free
+    root = np.zeros((T, 3))
+    root[:, 2] = -cp[:, stance, 2].min(-1)
+    return Motion(rot=R, root=root, fps=fps, body=body, name=f"leg_cycle_{side}", source="sim_devices.motions",
+                  meta={"kind": "leg_cycle", "side": side, "seed": seed, "height": height})
+
+
 # --------------------------------------------------------------------------- public API
 def generate(
     kind: str,
@@ -530,4 +562,4 @@ def generate_file(path: str | Path, kind: str, **kw) -> Path:
     return write_amass_npz(generate(kind, **kw), path)
 
 
-__all__ = ["KINDS", "generate", "write_amass_npz", "generate_file"]
+__all__ = ["KINDS", "generate", "generate_file", "leg_cycle", "write_amass_npz"]
