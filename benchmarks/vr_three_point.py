@@ -7,8 +7,8 @@ bootstrap intervals over clips.
         [--model diffusion] [--markdown runs/vr/three_point.md]
 
 Each (set, sensor set) result is kept in ``--cache`` (default beside --json) as it finishes,
-so a run that stops resumes where it was. The comparison the issue asks for: 3 points + 2
-shanks against 3 points alone and against 2 shanks alone, on lower-body PE and GA; a
+keyed by the model file's content hash and the seed, so a run that stops resumes where it
+was. The comparison the issue asks for: 3 points + 2 shanks against 3 points alone and against 2 shanks alone, on lower-body PE and GA; a
 difference whose interval holds 0 is not settled by the clips. The ", reach" rows are the
 same answers with each arm reaching its controller afterwards (``imucap evaluate --reach``,
 ``inference/body/reach.py``).
@@ -17,6 +17,7 @@ same answers with each arm reaching its controller afterwards (``imucap evaluate
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import pickle
 import sys
@@ -40,8 +41,7 @@ COMPARED = ("ga_deg", "lower_pe_cm", "mpjpe_cm", "hand_pe_cm", "upper_pe_cm")
 
 def run_set(held_out: str, label: str, model_spec: str, seed: int, cache: Path) -> list:
     """Per-clip metrics of one sensor set on one held-out set (cached)."""
-    stem = Path(model_spec).stem if model_spec in ("diffusion", "regressor") else Path(model_spec).parent.name
-    key = cache / f"{held_out}__{label.replace(' ', '_').replace('+', 'and')}__{stem}.pkl"
+    key = cache / f"{held_out}__{label.replace(' ', '_').replace('+', 'and')}__{model_key(model_spec)}__s{seed}.pkl"
     if key.exists():
         return pickle.loads(key.read_bytes())
     from app.evaluation.tracked_points import tracked_points_input, tracked_signals
@@ -62,6 +62,21 @@ def run_set(held_out: str, label: str, model_spec: str, seed: int, cache: Path) 
     metrics = [c.metrics for c in clips]
     print(f"vr_three_point: {held_out} {label}: {len(metrics)} clips in {time.time() - t0:.0f} s", file=sys.stderr)
     return store(key, metrics)
+
+
+def model_key(model_spec: str) -> str:
+    """The model's name in a cache key: its weights' content hash (two files in one folder, or one file
+    retrained in place, never share a key), after its readable name."""
+    from inference.poser.models import DEFAULT_WEIGHTS
+
+    if model_spec == "floor":
+        return "floor"
+    path = Path(DEFAULT_WEIGHTS.get(model_spec, model_spec))
+    files = sorted(q for q in path.rglob("*") if q.is_file()) if path.is_dir() else [path]
+    h = hashlib.sha256()
+    for q in files:
+        h.update(q.read_bytes())
+    return f"{path.stem}-{h.hexdigest()[:16]}"
 
 
 def store(key: Path, metrics: list) -> list:
