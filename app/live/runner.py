@@ -124,7 +124,7 @@ class LivePipeline:
                     for f in frames:
                         if len(self._q) >= self.queue_size:
                             self._q.popleft()
-                            self.pipeline.stats.dropped += 1
+                            self.pipeline.stats.dropped += 1  # under the lock, as the inference thread's
                         self._q.append(f)
                     self._cv.notify_all()
             wait = self.poll_interval
@@ -144,7 +144,8 @@ class LivePipeline:
             if self.max_lag is not None and batch:
                 newest = batch[-1].t
                 late = [f for f in batch if newest - f.t > self.max_lag]
-                self.pipeline.stats.dropped += len(late)
+                with self._cv:  # the ingest thread counts its drops into the same counter
+                    self.pipeline.stats.dropped += len(late)
                 for f in late:  # not reconstructed, but recorded and calibrated from
                     self.pipeline.pass_over(f)
                 batch = [f for f in batch if newest - f.t <= self.max_lag]
