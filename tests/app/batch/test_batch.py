@@ -1,4 +1,5 @@
-"""`imucap batch` over a small study: 20 recordings of different lengths, one damaged.
+"""`imucap batch` over a small study: 10 recordings of different lengths (1.2-2.0 s of walk each,
+as short as a replay with a few dozen poses), one damaged.
 
 The default process pool and a Dask cluster of two worker processes on 127.0.0.1 give
 byte-identical outputs; the damaged file is one failed row with its reason; a second run
@@ -27,16 +28,18 @@ from inference.loaders import load_motion
 
 pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("realtime_or_heavy")]
 CLI = [sys.executable, "-m", "app.cli.main"]
-N = 20
+N = 10
 SUBSET = "pelvis,l_shank,r_shank"
 
 
-@pytest.fixture(scope="module")
+# session-scoped: built once per worker even if the worker's order tears module fixtures down
+# between two of this module's tests (the suite once built ``pooled`` twice)
+@pytest.fixture(scope="session")
 def study(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("study")
     for k in range(N - 1):
         (root / f"P{k % 4:02d}").mkdir(exist_ok=True)
-        write_session(root / f"P{k % 4:02d}" / f"trial{k:02d}.h5", seconds=1.5 + 0.15 * k, seed=k)
+        write_session(root / f"P{k % 4:02d}" / f"trial{k:02d}.h5", seconds=1.2 + 0.1 * k, seed=k)
     whole = (root / "P00" / "trial00.h5").read_bytes()
     (root / "P03" / "damaged.h5").write_bytes(whole[:1500])  # a copy cut short in transfer
     return root
@@ -60,7 +63,7 @@ def summary_rows(out: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def pooled(study, tmp_path_factory) -> tuple[Path, dict]:
     out = tmp_path_factory.mktemp("pooled")
     return out, batch(study, out, "--workers", "2")
