@@ -19,12 +19,16 @@ goes to stderr. A metric that needs a longer clip than any given is null.
 validation subjects), read from $IMUCAP_DATA; a report's reproduce line keeps the name.
 ``segments`` gives each segment's GA (deg) over all frames.
 
-@real scores real recordings instead (app/real_eval.py): every x-IMU3 log under
-$IMUCAP_DATA/ximu3 is imported as ``imucap import`` does, replayed with each standard sensor
-set (pelvis+shanks, shanks, pelvis+shanks+feet, pelvis+thighs) and with every sensor, and
-each left-out segment is compared with what its own sensor measured: key ``held_out``
-(log -> set -> ``deg`` per left-out site, ``mean_deg``, ``frames``), and with --against the
-same for that model under ``against.held_out``. --sensors does not apply to it.
+@real scores real recordings instead (app/evaluation/real.py): every real log under
+$IMUCAP_DATA (x-IMU3 log folders under ximu3/, the OpenSense Xsens MTw trial under
+opensense/ with its sensor map) is imported as ``imucap import`` does, replayed with each
+standard sensor set (pelvis+shanks, shanks, pelvis+shanks+feet, pelvis+thighs) and with every
+sensor, and each left-out segment is compared with what its own sensor measured: key
+``held_out`` (log -> set -> ``deg`` per left-out site, ``mean_deg``, ``frames``; ``phases``:
+walking / turning / standing / other -> ``seconds`` and ``deg``; ``constant_deg`` and
+``dynamic_deg``: the mean rotation between reconstruction and sensor and the error left
+after it), and with --against the same for that model under ``against.held_out``.
+--sensors does not apply to it.
 
 --against SPEC scores a second model on the same clips, sensors and noise, and adds
 ``against``: its figures and, for GA, LA, JPE and the papers' metrics, --model minus it with a percentile
@@ -79,19 +83,20 @@ def data_paths(data: list) -> list:
 
 
 def real_held_out(spec: str, seed: int, progress: bool) -> dict:
-    """``held_out`` of --data @real for the model ``spec`` (app/real_eval.py); an error
+    """``held_out`` of --data @real for the model ``spec`` (app/evaluation/real.py); an error
     naming the folder when it holds no real log."""
     from app.cli.importing import import_paths
-    from app.real_eval import real_logs, score_logs
+    from app.evaluation.real import real_logs, score_logs
     from inference.training.data import data_root
 
     root = data_root()
     logs = real_logs(root)
     if not logs:
-        raise FileNotFoundError(f"--data @real: no x-IMU3 log folder under {root / 'ximu3'}")
+        raise FileNotFoundError(f"--data @real: no real log (x-IMU3 log folder under {root / 'ximu3'}, "
+                                f"OpenSense trial folder under {root / 'opensense'})")
 
-    def import_log(path, out):
-        import_paths([path], out, reconstruct=False)
+    def import_log(log, out):
+        import_paths([log.path], out, mapping=dict(log.mapping), reconstruct=False)
 
     def say(msg: str) -> None:
         if progress:
@@ -439,6 +444,12 @@ def _print_real(result: dict, as_json: bool) -> None:
             cells = ", ".join(f"{s} {v}" + (f" (against {other['deg'][s]})" if other else "")
                               for s, v in r["deg"].items())
             print(f"{name} {label}: {cells}; mean {r['mean_deg']} deg over {r['frames']} frames")
+            if "constant_deg" in r:
+                print("  constant / dynamic: " + ", ".join(f"{s} {r['constant_deg'][s]} / {r['dynamic_deg'][s]}"
+                                                           for s in r["deg"]))
+            for phase, p in r.get("phases", {}).items():
+                if p["seconds"]:
+                    print(f"  {phase} ({p['seconds']} s): " + ", ".join(f"{s} {v}" for s, v in p["deg"].items()))
 
 
 __all__ = ["register", "run", "real_held_out"]

@@ -257,7 +257,7 @@ def test_segments_name_each_segments_ga(capsys, data_dir):
 
 
 def test_real_set_scores_the_held_out_sites_of_each_real_log(capsys):
-    from app.real_eval import real_logs
+    from app.evaluation.real import real_logs
     from inference.training.data import data_root
 
     if not real_logs(data_root()):
@@ -272,9 +272,17 @@ def test_real_set_scores_the_held_out_sites_of_each_real_log(capsys):
     # the long axis alone leaves out the turn about the bone: never more than the whole angle
     axis = sets["pelvis+shanks"]["axis_deg"]
     assert all(axis[s] <= sets["pelvis+shanks"]["deg"][s] + 1e-6 for s in axis)
+    # per phase and constant / dynamic (app/evaluation/real.py); the log ends standing still
+    ps = sets["pelvis+shanks"]
+    assert set(ps["phases"]) == {"walking", "turning", "standing", "other"}
+    assert ps["phases"]["standing"]["seconds"] > 2.0 and ps["phases"]["walking"]["seconds"] > 2.0
+    assert set(ps["constant_deg"]) == set(ps["dynamic_deg"]) == set(ps["deg"])
+    if "opensense/xsens_mtw_walk" in res["held_out"]:  # the Xsens MTw trial, imported with its sensor map
+        os_sets = res["held_out"]["opensense/xsens_mtw_walk"]
+        assert set(os_sets["pelvis+shanks"]["deg"]) == {"torso", "l_thigh", "r_thigh", "l_foot", "r_foot"}
 
 
 def test_real_set_without_logs_is_a_clear_error(capsys, tmp_path, monkeypatch):
     monkeypatch.setenv("IMUCAP_DATA", str(tmp_path))
     code, _, err = _run(capsys, "--data", "@real", "--model", "floor", "--json")
-    assert code != 0 and "--data @real: no x-IMU3 log folder under" in err
+    assert code != 0 and "--data @real: no real log (x-IMU3 log folder under" in err
