@@ -65,10 +65,16 @@ SOLO_MODULES = {"app/capture/test_capture_e2e.py", "test_readme.py", "app/captur
                 "app/capture/test_capture_wireless.py", "app/capture/test_capture_vr.py"}
 
 
+# Real-data tests that only read files, in one process on one core, like any unit test: they
+# need not wait for the realtime group (the loaders' "every file loads" tests were 270 s of it).
+DATA_ONE_CORE_MODULES = {"inference/loaders/test_real_data.py", "inference/loaders/test_cmu.py"}
+
+
 def pytest_collection_modifyitems(config, items):
     for item in items:
         module = item.path.relative_to(REPO / "tests").as_posix()
         if module in SOLO_MODULES:
             item.add_marker(pytest.mark.solo)
-        if item.get_closest_marker("data") is not None or module in REALTIME_MODULES:
+        heavy_data = item.get_closest_marker("data") is not None and module not in DATA_ONE_CORE_MODULES
+        if heavy_data or module in REALTIME_MODULES:
             item.add_marker(pytest.mark.xdist_group("realtime_or_heavy"))

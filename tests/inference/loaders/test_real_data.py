@@ -23,17 +23,25 @@ def _check(m, fps):
     assert np.abs(RtR - np.eye(3)).max() < 1e-9
 
 
-def test_every_hdm05_file_loads(shared_data):
+# the file lists are read in shards, so that the two workers of the suite share them (every
+# file is still read, by exactly one shard)
+HDM05_SHARDS = 2
+BANDAI_SHARDS = 4
+
+
+@pytest.mark.parametrize("shard", range(HDM05_SHARDS))
+def test_every_hdm05_file_loads(shared_data, shard):
     files = find_motion_files(shared_data / "hdm05")
     assert len(files) >= 180
-    for f in files:
+    for f in files[shard::HDM05_SHARDS]:
         _check(load_motion(f), 120.0)
 
 
-def test_every_bandai_file_loads(shared_data):
+@pytest.mark.parametrize("shard", range(BANDAI_SHARDS))
+def test_every_bandai_file_loads(shared_data, shard):
     files = find_motion_files(shared_data / "bandai")
     assert len(files) >= 2300
-    for f in files:
+    for f in files[shard::BANDAI_SHARDS]:
         _check(load_motion(f), 30.0)
 
 
