@@ -3,7 +3,11 @@ serial transports): inertial and quaternion messages joined on their timestamps 
 samples, battery from the battery message.
 
 Time is the device's microsecond timestamp. The messages carry no packet counter, so
-lost samples are inferred from the timestamps at the URL's ``rate``. Loss of the link: an
+lost samples are inferred from the timestamps, at the period the stream itself shows
+(``StreamPeriod``: a grid fitted to the last samples' timestamps, robust to the losses it
+counts and to stamps late by part of a period); the URL's ``rate`` is only a first guess,
+and no loss is counted from it (the first steps are counted once the stream has shown its
+period). Loss of the link: an
 x-IMU3 streams without pause, so a stream silent for ``stale`` seconds is a lost link on
 every transport (the package's status callback did not report a TCP peer that closed;
 UDP has no connection at all); a disconnected status counts too. Reconnecting means
@@ -32,9 +36,9 @@ _DEG = np.pi / 180.0
 class Ximu3Device(Device):
     """``ximu3://udp/8000?ip=127.0.0.1&send_port=9000`` (receive on 8000, commands to the
     device at ip:send_port; send_port defaults to PORT+1000), ``ximu3://tcp/HOST:PORT``,
-    ``ximu3://serial/dev/ttyACM0?baud=115200``. ``rate`` (Hz, default 100) is the rate the
-    device was set to send at, for the loss count; ``stale`` (s, default 1.0) how long the
-    stream may be silent before it counts as lost."""
+    ``ximu3://serial/dev/ttyACM0?baud=115200``. ``rate`` (Hz, default 100) is a hint of the
+    rate the device sends at (the loss count measures it from the stream); ``stale`` (s,
+    default 1.0) how long the stream may be silent before it counts as lost."""
 
     scheme = "ximu3"
 
@@ -52,6 +56,7 @@ class Ximu3Device(Device):
         self._last_i: tuple[int, np.ndarray, np.ndarray] | None = None
         self._held_q: tuple[int, np.ndarray] | None = None
         self._last_ts: int | None = None
+        self._period = StreamPeriod()
         self._last_msg = 0.0
         self._ready: deque[Sample] = deque()
 
@@ -128,6 +133,7 @@ class Ximu3Device(Device):
         self._last_i = self._held_q = None
         self._ready.clear()
         self._last_ts = None
+        self._period = StreamPeriod()
         self._last_msg = time.monotonic()
 
     def _close(self) -> None:
@@ -200,21 +206,85 @@ class Ximu3Device(Device):
 
     def _sample(self, ts: int, quat: np.ndarray) -> Sample:
         extra: dict[str, Any] = {}
-        if self._last_ts is not None:
-            step = (ts - self._last_ts) * 1e-6 * self.rate
-            if step > 1.5:
-                missing = round(step) - 1
-                self.stats.counter_gaps += 1
-                self.stats.lost_packets += missing
-                extra["lost_before"] = missing
+        gaps, missing = self._period.add(ts)
+        if gaps:
+            self.stats.counter_gaps += gaps
+            self.stats.lost_packets += missing
+            extra["lost_before"] = missing
         self._last_ts = ts
         acc = gyro = free = None
         i = self._last_i
-        if i is not None and abs(i[0] - ts) * 1e-6 * self.rate < 1.0:
+        period_us = self._period.period_us or 1e6 / self.rate
+        if i is not None and abs(i[0] - ts) < period_us:
             gyro, acc = i[1], i[2]
             free = quat_rotate(quat, acc) - np.array([0.0, 0.0, G])
         return Sample(0.0, ts * 1e-6, self.device_id, None, quat=quat, free_acc=free, acc=acc, gyro=gyro,
                       battery=self.battery, extra=extra)
+
+
+class StreamPeriod:
+    """A stream's sample period from its own timestamps, and the samples missing before each.
+
+    Each sample gets an index on the stream's grid: the timestamp's distance from where the
+    grid puts the last sample, in periods, rounded (at least 1; ``missing`` = the index step
+    - 1). The grid is the least-squares line through the last ``window`` samples' indices
+    and timestamps (its slope the period), so it is not moved by a lost sample, and a
+    timestamp late or early by a fraction of a period (a device that stamps when it sends,
+    not when it samples) is still its own index. The first ``first`` timestamps are held until
+    the median of their steps gives a first period, then counted. When the median step of
+    the window leaves the period by a quarter (the device set to another rate), the grid
+    starts again from the newest steps."""
+
+    def __init__(self, window: int = 64, first: int = 9) -> None:
+        self.window, self.first = window, first
+        self._held: list[int] = []
+        self._idx: deque[int] = deque(maxlen=window)
+        self._ts: deque[int] = deque(maxlen=window)
+        self._steps: deque[int] = deque(maxlen=window)
+        self.period_us: float | None = None
+
+    def add(self, ts_us: int) -> tuple[int, int]:
+        """(gaps, samples missing) before the sample stamped ``ts_us`` (and those held till now)."""
+        last = self._ts[-1] if self._ts else (self._held[-1] if self._held else None)
+        if last is not None and ts_us <= last:
+            return 0, 0  # a repeated or reordered timestamp: no step of the stream
+        if last is not None:
+            self._steps.append(ts_us - last)
+        if self.period_us is None:
+            self._held.append(ts_us)
+            if len(self._held) < self.first:
+                return 0, 0
+            return self._restart(self._held)
+        median = float(np.median(self._steps))
+        if abs(median - self.period_us) > 0.25 * self.period_us:
+            self._restart(list(self._ts)[-self.first:])  # counted already: only the new sample is counted
+        return self._place(ts_us)
+
+    def _restart(self, stamps: list[int]) -> tuple[int, int]:
+        steps = np.diff(stamps)
+        self.period_us = float(np.median(steps))
+        self._held = []
+        self._idx.clear()
+        self._ts.clear()
+        self._idx.append(0)
+        self._ts.append(stamps[0])
+        gaps = missing = 0
+        for ts in stamps[1:]:
+            g, m = self._place(ts)
+            gaps, missing = gaps + g, missing + m
+        return gaps, missing
+
+    def _place(self, ts: int) -> tuple[int, int]:
+        p = self.period_us
+        idx, t = np.asarray(self._idx, float), np.asarray(self._ts, float)
+        if len(idx) >= 8:
+            di = idx - idx.mean()
+            p = self.period_us = float(np.dot(di, t - t.mean()) / np.dot(di, di))
+        grid_last = float(np.mean(t - idx * p)) + idx[-1] * p  # where the grid puts the last sample
+        k = max(1, round((ts - grid_last) / p))
+        self._idx.append(self._idx[-1] + k)
+        self._ts.append(ts)
+        return (1, k - 1) if k > 1 else (0, 0)
 
 
 def _ping_name(text: str) -> str | None:

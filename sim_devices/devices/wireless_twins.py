@@ -258,8 +258,11 @@ class SimXimu3(SimDevice):
                         pass
 
     def _make_packet(self, t: float, device_t: float, counter: int) -> bytes:
+        # sampled and stamped on the device's own tick, as the x-IMU3 does: a send late by the
+        # host's scheduling does not move its timestamp (the counter's tick, the loop's schedule)
+        t = counter / self.rate
         s = self.source.at(t)
-        ts = max(0, int(device_t * 1e6))
+        ts = max(0, int(self.device_time(t) * 1e6))
         out = x3.encode(x3.Message(x3.INERTIAL, ts, (*(s["gyro"] * 180.0 / 3.141592653589793),
                                                       *(s["specific_force"] / G))), self.binary)
         out += x3.encode(x3.Message(x3.QUATERNION, ts, tuple(s["quat"])), self.binary)
