@@ -8,10 +8,10 @@ bootstrap intervals over clips.
 
 Each (set, sensor set) result is kept in ``--cache`` (default beside --json) as it finishes,
 keyed by the model file's content hash and the seed, so a run that stops resumes where it
-was. The comparison the issue asks for: 3 points + 2 shanks against 3 points alone and against 2 shanks alone, on lower-body PE and GA; a
-difference whose interval holds 0 is not settled by the clips. The ", reach" rows are the
-same answers with each arm reaching its controller afterwards (``imucap evaluate --reach``,
-``inference/body/reach.py``).
+was. The comparison the issue asks for: 3 points + 2 shanks against 3 points alone and
+against 2 shanks alone, on lower-body PE and GA; a difference whose interval holds 0 is not
+settled by the clips. The ", reach" rows are the same answers with each arm reaching its
+controller afterwards (``imucap evaluate --reach``, ``inference/body/reach.py``).
 """
 
 from __future__ import annotations
