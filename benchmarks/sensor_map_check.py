@@ -42,7 +42,8 @@ FPS = 60.0
 
 
 def _corr_at(a, b, m, lag):
-    x, y, mm = a[max(0, lag):len(a) + min(0, lag)], b[max(0, -lag):len(b) + min(0, -lag)], m[max(0, lag):len(a) + min(0, lag)]
+    head, tail = slice(max(0, lag), len(a) + min(0, lag)), slice(max(0, -lag), len(b) + min(0, -lag))
+    x, y, mm = a[head], b[tail], m[head]
     return float(np.corrcoef(x[mm], y[mm])[0, 1])
 
 
@@ -69,8 +70,9 @@ def check(rec) -> dict:
                       for a in legs if not a.endswith("shank")}
     out["thigh_to_shank_lag_s"] = {side: best_lag(speed[f"{side}_thigh"], speed[f"{side}_shank"], moving, 0.3)[1]
                                    for side in "lr"}
-    c, lag, c0 = best_lag(speed["l_shank"], speed["r_shank"], moving, 1.0)
-    lag2 = min((L for L in range(int(0.2 * FPS), int(1.0 * FPS))), key=lambda L: -_corr_at(speed["l_shank"], speed["r_shank"], moving, L))
+    c0 = round(_corr_at(speed["l_shank"], speed["r_shank"], moving, 0), 2)
+    lag2 = max(range(int(0.2 * FPS), int(1.0 * FPS)),
+               key=lambda L: _corr_at(speed["l_shank"], speed["r_shank"], moving, L))
     out["shanks"] = {"corr_at_0": c0, "best_positive_lag_s": round(lag2 / FPS, 3),
                      "corr_there": round(_corr_at(speed["l_shank"], speed["r_shank"], moving, lag2), 2)}
     land = {}

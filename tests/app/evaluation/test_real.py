@@ -4,17 +4,16 @@ split of a held-out error, and the per-segment GA that ``imucap evaluate --json`
 
 from __future__ import annotations
 
-import numpy as np
-
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 from app.evaluation.real import OPENSENSE_MAP, REAL_SETS, held_out_sets, mean_over, real_logs, split_errors
 from inference.body.rotations import matrix_about_axis
 from inference.body.skeleton import N_SITES, SEGMENT_INDEX, SITE_INDEX
-from inference.training.data import data_root
 from inference.metrics.errors import evaluate_clip, segment_errors
+from inference.training.data import data_root
 
 
 def _device(folder, name):
