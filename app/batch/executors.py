@@ -1,13 +1,26 @@
-"""Where a batch's tasks run: a process pool over this machine's cores, or a Dask cluster.
+"""Where a batch's tasks run: worker processes on this machine, or a Dask cluster.
 
 Both take the same ``Task`` objects and give back each one's result as it finishes, in
-whatever order. Nothing here schedules, retries or watches workers by hand: the pool is
-the standard library's, and on a cluster Dask's scheduler reruns the task of a lost
-worker elsewhere (``task`` makes a rerun redo nothing already written).
+whatever order, and both survive a worker that dies under a task (a native crash in a
+file reader, the kernel's OOM killer, a SIGKILL): that task is one failed result with the
+reason, the others go on.
 
-The local pool starts its workers with ``spawn`` (a clean interpreter each: no copy of
-this process's threads or torch state) and one torch thread each; Ctrl-C reaches only
-this process (workers ignore SIGINT), which then stops handing out work.
+The local pool is a few ``multiprocessing`` processes (``spawn``: a clean interpreter
+each, no copy of this process's threads or torch state; one torch thread each), each fed
+one task at a time over its own pipe. It is not ``concurrent.futures``' pool on purpose:
+when a worker of that pool dies, the pool breaks, every other worker is ended and every
+pending future fails with ``BrokenProcessPool``, without saying whose task killed it.
+Here the pipe says which task a worker holds, the process's sentinel says it died (and
+its exit code how), and a new worker takes its place. Ctrl-C reaches only this process
+(workers ignore SIGINT): ``stop`` hands out no more tasks, ``stop(abandon=True)`` ends
+the running ones through ``Process.terminate`` (their outputs are whole or absent; their
+temporaries are removed).
+
+On a cluster, Dask's own machinery does the same: its nanny restarts a worker that died
+and the scheduler reruns the task elsewhere (``task`` makes a rerun redo nothing already
+written); a task that took down ``distributed.scheduler.allowed-failures`` workers comes
+back as ``KilledWorker``, a task that raised (``retries`` times) as its exception: both
+are that recording's failed result here.
 """
 
 from __future__ import annotations
@@ -15,11 +28,14 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import signal
+from collections import deque
 from collections.abc import Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from multiprocessing.connection import Connection, wait
 from typing import Any
 
-from app.batch.task import Task, run_task
+from app.batch.task import Task, crashed, failed, one_line, run_task
+
+_CTX = mp.get_context("spawn")
 
 
 def _init_worker() -> None:
@@ -27,42 +43,152 @@ def _init_worker() -> None:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 
+def _worker(conn: Connection) -> None:
+    """A worker's life: tasks in, results out, until told to stop (None) or the pipe closes."""
+    _init_worker()
+    while True:
+        try:
+            task = conn.recv()
+        except (EOFError, OSError):
+            return
+        if task is None:
+            return
+        conn.send(run_task(task))
+
+
+def how_it_died(exitcode: int | None) -> str:
+    if exitcode is None:
+        return "no exit code"
+    if exitcode < 0:
+        try:
+            return signal.Signals(-exitcode).name
+        except ValueError:
+            return f"signal {-exitcode}"
+    return f"exit code {exitcode}"
+
+
+class _Worker:
+    def __init__(self) -> None:
+        self.conn, child = _CTX.Pipe()
+        self.process = _CTX.Process(target=_worker, args=(child,), name="imucap-batch-worker", daemon=True)
+        try:  # born ignoring SIGINT: a Ctrl-C while it starts up must not end it with its first task
+            old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        except ValueError:  # not the main thread: its handler is not ours to swap
+            old = None
+        try:
+            self.process.start()
+        finally:
+            if old is not None:
+                signal.signal(signal.SIGINT, old)
+        child.close()
+        self.task: Task | None = None
+
+    def give(self, task: Task) -> bool:
+        try:
+            self.conn.send(task)
+        except OSError:  # it died idle
+            return False
+        self.task = task
+        return True
+
+    def result(self) -> dict[str, Any] | None:
+        """Its task's result when one is waiting in the pipe, else None (it died)."""
+        try:
+            if self.conn.poll():
+                return self.conn.recv()
+        except (EOFError, OSError):
+            pass
+        return None
+
+    def end(self, timeout: float = 5.0) -> None:
+        try:
+            self.conn.send(None)
+        except OSError:
+            pass
+        self.process.join(timeout)
+        if self.process.is_alive():
+            self.process.kill()
+            self.process.join(timeout)
+        self.conn.close()
+
+
 class LocalPool:
     """``workers`` processes on this machine (default: one per core)."""
 
     def __init__(self, workers: int | None = None) -> None:
         self.workers = max(1, workers or os.cpu_count() or 1)
-        self._pool: ProcessPoolExecutor | None = None
-        self._pending: set[Future] = set()
+        self._stopping = False
+        self._abandon = False
+        self._busy: list[_Worker] = []
+        self._run: Iterator[dict[str, Any]] | None = None
 
     @property
     def description(self) -> str:
         return f"{self.workers} local worker process(es)"
 
     def run(self, tasks: Sequence[Task]) -> Iterator[dict[str, Any]]:
-        self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=mp.get_context("spawn"),
-                                         initializer=_init_worker)
-        self._pending = {self._pool.submit(run_task, t) for t in tasks}
-        while self._pending:
-            done, self._pending = wait(self._pending, return_when=FIRST_COMPLETED)
-            for f in done:
-                if not f.cancelled():
-                    yield f.result()
-        self.close()
+        self._run = self._results(tasks)
+        return self._run
+
+    def _results(self, tasks: Sequence[Task]) -> Iterator[dict[str, Any]]:
+        todo = deque(tasks)
+        self._stopping = self._abandon = False
+        idle = [_Worker() for _ in range(min(self.workers, len(todo)))]
+        self._busy = busy = []
+        try:
+            while True:
+                while idle and todo and not self._stopping:
+                    w = idle.pop()
+                    if w.give(todo[0]):
+                        todo.popleft()
+                        busy.append(w)
+                    else:
+                        w.end(0.5)
+                        idle.append(_Worker())
+                if not busy:
+                    break
+                ready = set(wait([w.conn for w in busy] + [w.process.sentinel for w in busy]))
+                for w in [w for w in busy if w.conn in ready or w.process.sentinel in ready]:
+                    task, res = w.task, w.result()
+                    if res is not None:
+                        busy.remove(w)
+                        w.task = None
+                        idle.append(w)
+                        yield res
+                        continue
+                    w.process.join(5.0)
+                    if w.process.is_alive():
+                        continue  # the pipe closed but the process lives on: its sentinel will say
+                    busy.remove(w)
+                    w.conn.close()
+                    if not self._abandon:
+                        yield crashed(task, how_it_died(w.process.exitcode), w.process.pid)
+                    else:
+                        crashed(task, "ended", w.process.pid)  # its temporaries go; no result: not run
+                    if todo and not self._stopping:
+                        idle.append(_Worker())
+        finally:
+            for w in idle + busy:
+                w.end(0.5 if self._abandon else 5.0)
+            self._busy = []
 
     def stop(self, abandon: bool = False) -> None:
         """Hand out no more tasks; the running ones finish (``abandon``: end them now; their
         outputs are whole or absent, and the next run redoes them)."""
-        for f in list(self._pending):
-            f.cancel()
-        if abandon and self._pool is not None:
-            for p in list(getattr(self._pool, "_processes", {}).values()):
-                p.terminate()
+        self._stopping = True
+        if abandon:
+            self._abandon = True
+            for w in list(self._busy):
+                if w.process.is_alive():
+                    w.process.terminate()
 
     def close(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
-            self._pool = None
+        """End everything (after ``run`` was left early: its workers too)."""
+        if self._busy:
+            self.stop(abandon=True)
+        if self._run is not None:
+            self._run.close()
+            self._run = None
 
 
 class DaskCluster:
@@ -73,7 +199,7 @@ class DaskCluster:
         self.address = address
         self.retries = retries
         self._client: Any = None
-        self._futures: list[Any] = []
+        self._futures: dict[Any, Task] = {}
 
     @property
     def description(self) -> str:
@@ -81,6 +207,9 @@ class DaskCluster:
         return f"Dask scheduler {self.address} ({n} worker(s))"
 
     def connect(self) -> DaskCluster:
+        from drivers.extras import need
+
+        need("distributed", "imucap batch --cluster")
         from distributed import Client
 
         try:
@@ -94,16 +223,24 @@ class DaskCluster:
 
         if self._client is None:
             self.connect()
-        self._futures = [self._client.submit(run_task, t, pure=False, retries=self.retries) for t in tasks]
-        for f in as_completed(self._futures):
+        self._futures = {self._client.submit(run_task, t, pure=False, retries=self.retries): t for t in tasks}
+        for f in as_completed(list(self._futures)):
             if f.status == "cancelled":
                 continue
-            yield f.result()
+            try:
+                yield f.result()
+            except Exception as exc:  # noqa: BLE001 - KilledWorker (it took workers down with it), or it raised
+                task = self._futures[f]
+                name = type(exc).__name__
+                yield (crashed(task, f"{name}: {one_line(exc)}") if name == "KilledWorker"
+                       else failed(task, one_line(exc)))
         self.close()
 
     def stop(self, abandon: bool = False) -> None:  # noqa: ARG002 - a cluster's running tasks are its to end
-        if self._client is not None and self._futures:
-            self._client.cancel([f for f in self._futures if f.status == "pending"])
+        """Hand out no more tasks and give up the running ones (a worker in the middle of one
+        finishes it, its outputs whole, and the next run takes them from its journal)."""
+        if self._client is not None and self._futures:  # a running task's future is "pending" too
+            self._client.cancel([f for f in self._futures if f.status in ("pending", "lost")])
 
     def close(self) -> None:
         if self._client is not None:

@@ -103,17 +103,42 @@ class Options:
     held_out: bool = True
 
     def fingerprint(self) -> str:
-        """Changes whenever an option, or the model file named, changes: outputs made with
-        other options are not up to date."""
-        d: dict[str, Any] = asdict(self)
-        model = Path(self.settings.model)
-        if model.is_file():
-            st = model.stat()
-            d["model_file"] = [st.st_size, st.st_mtime_ns]
-        else:
-            from inference.poser.models import DEFAULT_WEIGHTS
+        """Changes whenever an option, imucap's version or the content of a model file the
+        options may load changes: outputs made otherwise are not up to date."""
+        import app
 
-            w = DEFAULT_WEIGHTS.get(self.settings.model)
-            if w is not None and Path(w).is_file():
-                d["model_file"] = [Path(w).stat().st_size, Path(w).stat().st_mtime_ns]
+        d: dict[str, Any] = asdict(self)
+        d["imucap"] = app.APP_VERSION
+        d["model_files"] = {str(p): file_digest(p) for p in model_files(self.settings.model)}
         return hashlib.sha256(json.dumps(d, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def model_files(spec: str) -> list[Path]:
+    """The weights files ``--model spec`` may load: the file named, or a shipped model's file
+    and, for the diffusion model, the one the low-latency mode swaps in."""
+    from app.live.latency import model_spec_for
+    from inference.poser.models import DEFAULT_WEIGHTS
+
+    out = []
+    for latency in ("centred", "low"):
+        chosen = model_spec_for(latency, spec)
+        path = Path(DEFAULT_WEIGHTS.get(chosen, chosen))
+        if path.is_file() and path not in out:
+            out.append(path)
+    return out
+
+
+_DIGESTS: dict[tuple[str, int, int], str] = {}
+
+
+def file_digest(path: Path) -> str:
+    """SHA-256 of a file's content (kept per size and modification time in this process)."""
+    st = path.stat()
+    key = (str(path.resolve()), st.st_size, st.st_mtime_ns)
+    if key not in _DIGESTS:
+        h = hashlib.sha256()
+        with open(path, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                h.update(block)
+        _DIGESTS[key] = h.hexdigest()
+    return _DIGESTS[key]

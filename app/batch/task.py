@@ -7,11 +7,15 @@ Safe to lose at any point and to run twice:
   (``.journal.jsonl``: the subset, its row, its files, the options' fingerprint); a task
   that runs again (a worker was lost, Ctrl-C, a crash) takes those subsets from the
   journal and writes none of their files again;
-- ``result.json``, written last, marks the recording done for these options and this
-  input: a later run skips it while the input and options stay the same.
+- ``result.json``, written last, marks the recording done for these options (imucap's
+  version and the model file's content among them) and this input: a later run skips it
+  while they stay the same, unless told to ``force`` it (then journal and result go first);
+- ``.running`` (the worker's pid and host) is in the folder while a worker re-runs it.
 
 A recording that cannot be re-run (damaged, never calibrated, unreadable) is one failed
 result with its reason in one line; it writes no result, so the next run tries it again.
+A worker that dies under a recording (a native crash, killed) fails that recording alone
+(``crashed``: the executor says so on the worker's behalf).
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from app.batch.plan import Options, subset_label
 
 RESULT = "result.json"
 JOURNAL = ".journal.jsonl"
+RUNNING = ".running"
 
 _MODELS: dict[str, Any] = {}  # per worker process: a model is loaded once, not per recording
 
@@ -40,6 +45,7 @@ class Task:
     fingerprint: str
     meta: dict[str, str] = field(default_factory=dict)
     truth: str | None = None
+    force: bool = False  # redo it even when an earlier result or journal holds
 
 
 def input_stamp(path: str | Path) -> list[int]:
@@ -55,11 +61,12 @@ def _read_json(path: Path) -> dict[str, Any] | None:
 
 
 def up_to_date(task: Task) -> dict[str, Any] | None:
-    """The earlier result of ``task`` when it still holds: same options, same input (size and
-    modification time), every file it lists present and no older than the input."""
+    """The earlier result of ``task`` when it still holds: done (a failure is tried again),
+    same options, same input (size and modification time), every file it lists present and
+    no older than the input; never for a task told to ``force``."""
     folder = Path(task.folder)
-    res = _read_json(folder / RESULT)
-    if not res or res.get("fingerprint") != task.fingerprint or res.get("status") not in ("done", "failed"):
+    res = None if task.force else _read_json(folder / RESULT)
+    if not res or res.get("fingerprint") != task.fingerprint or res.get("status") != "done":
         return None
     try:
         if res.get("stamp") != input_stamp(task.recording):
@@ -157,29 +164,49 @@ def run_task(task: Task) -> dict[str, Any]:
             return skipped(task, done)
         result = _run(task)
     except Exception as exc:  # a bad recording is a failed row, not a stopped study
-        # kept, with the input's stamp, so the same damaged file is not tried again until it changes
-        result = {"status": "failed", "reason": one_line(exc), "rows": [], "files": [],
-                  "fingerprint": task.fingerprint, "stamp": _stamp_or_none(task.recording)}
+        # not kept: the next run tries it again (the fault may have been the disk's, or the network's)
+        result = failed(task, one_line(exc))
+    finally:
+        _unmark(Path(task.folder))
     result.update(base, seconds=round(time.perf_counter() - t0, 3), cpu_s=round(time.process_time() - c0, 3))
-    if result["stamp"] is not None:
-        Path(task.folder).mkdir(parents=True, exist_ok=True)
+    if result["status"] == "done":
         _json_atomic(Path(task.folder) / RESULT, result)
     return result
 
 
 def skipped(task: Task, earlier: dict[str, Any]) -> dict[str, Any]:
-    """An earlier result that still holds: a recording done is "skipped", one that failed
-    stays failed (its row and reason are in the table again), and no work is done."""
-    status = "skipped" if earlier.get("status") == "done" else "failed"
-    return {**earlier, "recording": task.recording, "folder": task.folder, "meta": task.meta, "status": status,
+    """An earlier result that still holds: "skipped", its rows in the table again, no work done."""
+    return {**earlier, "recording": task.recording, "folder": task.folder, "meta": task.meta, "status": "skipped",
             "seconds": 0.0, "cpu_s": 0.0}
 
 
-def _stamp_or_none(path: str) -> list[int] | None:
-    try:
-        return input_stamp(path)
-    except OSError:
-        return None  # gone: nothing to remember it by
+def failed(task: Task, reason: str) -> dict[str, Any]:
+    return {"recording": task.recording, "folder": task.folder, "meta": task.meta, "status": "failed",
+            "reason": reason, "rows": [], "files": [], "fingerprint": task.fingerprint, "seconds": 0.0, "cpu_s": 0.0}
+
+
+def crashed(task: Task, how: str, pid: int | None = None) -> dict[str, Any]:
+    """The failed result of a task whose worker process died under it (``how``: "SIGSEGV",
+    "exit code 1", "KilledWorker ..."); its temporaries and mark (the dead worker's ``pid``) go."""
+    folder = Path(task.folder)
+    if pid is not None:
+        for left in [*folder.glob(f".*.tmp-{pid}"), *folder.glob(f".*.tmp-{pid}.*")]:
+            left.unlink(missing_ok=True)
+    _unmark(folder, pid)
+    return failed(task, f"the worker process died ({how}) while re-running this recording")
+
+
+def _mark(folder: Path) -> None:
+    import socket
+
+    _json_atomic(folder / RUNNING, {"pid": os.getpid(), "host": socket.gethostname(), "since": time.time()})
+
+
+def _unmark(folder: Path, pid: int | None = None) -> None:
+    """Remove ``.running`` when it is this process's (or ``pid``'s) mark."""
+    mark = _read_json(folder / RUNNING)
+    if mark is not None and mark.get("pid") == (os.getpid() if pid is None else pid):
+        (folder / RUNNING).unlink(missing_ok=True)
 
 
 def _run(task: Task) -> dict[str, Any]:
@@ -192,6 +219,12 @@ def _run(task: Task) -> dict[str, Any]:
     stamp = input_stamp(task.recording)
     rec = read_recording(task.recording)  # before any folder is made: a file that is no recording leaves none
     folder.mkdir(parents=True, exist_ok=True)
+    for left in folder.glob(".*.tmp-*"):  # a worker lost under this recording before left them (one task a folder)
+        left.unlink(missing_ok=True)
+    _mark(folder)
+    if task.force:
+        for old in (RESULT, JOURNAL):
+            (folder / old).unlink(missing_ok=True)
     journal = _journal(folder, task.fingerprint, stamp)
     body, note = body_for_recording(rec.metadata)
     opts = task.options

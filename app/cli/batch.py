@@ -9,15 +9,19 @@ simulator's truth file). Per recording: a replay with all its sensors and with e
 ``--sensors`` subset, exports of each (``--export bvh csv``), and the table's rows; in
 ``DIR/<recording>/`` and ``DIR/summary.csv`` (+ ``summary.parquet``).
 
-Running it again does only what is missing or out of date (inputs or options changed);
-Ctrl-C stops handing out recordings (again: ends the running ones), and the next run
-finishes the job. The default runs one worker per core here; ``--cluster`` sends the same
-tasks to a Dask scheduler (docs/batch.md).
+Running it again does only what is missing, failed or out of date (inputs, options,
+imucap's version or the model file changed); ``--force`` redoes every recording, or those
+matching a glob. A worker that dies under a recording fails that recording alone. Ctrl-C
+stops handing out recordings (again: ends the running ones), writes the table of what is
+done and exits 130; the next run finishes the job. The default runs one worker per core
+here; ``--cluster`` sends the same tasks to a Dask scheduler (docs/batch.md). Needs the
+``batch`` extra (``pip install 'imucap[batch]'``).
 """
 
 from __future__ import annotations
 
 import argparse
+import fnmatch
 import json
 import signal
 import sys
@@ -51,6 +55,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="skip the held-out error of subsets (saves one full replay per recording)")
     p.add_argument("--workers", type=int, default=0, help="local worker processes (default: one per core)")
     p.add_argument("--cluster", default=None, metavar="tcp://HOST:PORT", help="a Dask distributed scheduler")
+    p.add_argument("--force", nargs="?", const="*", default=None, metavar="GLOB",
+                   help="redo recordings even when up to date: all, or those whose path (or path below the "
+                        "inputs' common folder, or name) matches GLOB")
     p.add_argument("--json", action="store_true", help="print one JSON object at the end")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=run_batch)
@@ -105,7 +112,21 @@ class _Progress:
         self.bar.close()
 
 
+def forced(pattern: str | None, recording: Path, root: Path) -> bool:
+    """Whether ``--force pattern`` names ``recording`` (its path, its path below ``root``, or its name)."""
+    if pattern is None:
+        return False
+    try:
+        rel = recording.relative_to(root).as_posix()
+    except ValueError:
+        rel = recording.name
+    return any(fnmatch.fnmatchcase(name, pattern) for name in (recording.as_posix(), rel, recording.name))
+
+
 def run_batch(args: argparse.Namespace) -> int:
+    from drivers.extras import need
+
+    need("pyarrow", "imucap batch (its summary.parquet)")
     from app.batch.executors import DaskCluster, LocalPool
     from app.batch.plan import common_root, find_inputs, output_folder
     from app.batch.summary import write_summary
@@ -119,7 +140,7 @@ def run_batch(args: argparse.Namespace) -> int:
     root = common_root(inputs)
     fp = options.fingerprint()
     tasks = [Task(str(i.recording), str(output_folder(args.out, i, root)), options, fp, dict(i.meta),
-                  str(i.truth) if i.truth else None) for i in inputs]
+                  str(i.truth) if i.truth else None, forced(args.force, i.recording, root)) for i in inputs]
     # what is already done for these options is known here, without starting a worker
     finished = {t.recording: skipped(t, done) for t in tasks if (done := up_to_date(t)) is not None}
     todo = [t for t in tasks if t.recording not in finished]
@@ -140,10 +161,13 @@ def run_batch(args: argparse.Namespace) -> int:
     progress = _Progress(len(todo), not args.no_progress)
     results: dict[str, dict[str, Any]] = dict(finished)
     t0 = time.perf_counter()
+    broke: str | None = None
     try:
         for res in runner.run(todo) if todo else ():
             results[res["recording"]] = res
             progress.update(res)
+    except Exception as exc:  # noqa: BLE001 - the executor itself failed (a cluster gone): keep what is done
+        broke = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
     finally:
         signal.signal(signal.SIGINT, old)
         progress.close()
@@ -169,4 +193,8 @@ def run_batch(args: argparse.Namespace) -> int:
               + f"; {written[0]}")
         for f in summary["failed"]:
             print(f"  failed: {f['recording']}: {f['reason']}")
+    if broke is not None and not interrupts:
+        print(f"imucap batch: error: stopped by {broke}; {written[0]} holds the {len(ordered)} recording(s) "
+              "finished; run the same command to finish", file=sys.stderr)
+        return 1
     return 130 if interrupts else 0

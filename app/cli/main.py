@@ -8,6 +8,8 @@ import argparse
 import importlib
 import sys
 
+from drivers.extras import MissingExtra
+
 # modules that define `register(subparsers)`; a missing one is skipped so a partial
 # checkout still runs what it has
 _COMMAND_MODULES = (
@@ -36,8 +38,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (ValueError, FileNotFoundError, OSError) as exc:
-        # user-facing errors (bad file, bad site name, missing device): one clear line, no traceback
+    except (ValueError, FileNotFoundError, OSError, MissingExtra) as exc:
+        # user-facing errors (bad file, bad site name, missing device, an optional part not installed):
+        # one clear line, no traceback
         print(f"imucap {args.command}: error: {exc}", file=sys.stderr)
         return 2
 
