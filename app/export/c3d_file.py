@@ -34,7 +34,9 @@ def regular_frames(m: ExportMotion) -> np.ndarray:
 
 
 def write_c3d(path: str | os.PathLike, m: ExportMotion) -> Path:
-    import ezc3d
+    from drivers.extras import need
+
+    ezc3d = need("ezc3d", "writing .c3d")
 
     path = Path(path)
     k = regular_frames(m)

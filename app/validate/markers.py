@@ -83,7 +83,9 @@ def read_c3d(path: str | os.PathLike) -> Markers:
     untrusted input, and ezc3d (which writes our exports) ends the process with a
     segmentation fault on some malformed files (benchmarks/fuzz.py reference-c3d found
     one), where ``c3d`` raises an exception we turn into one line naming the file."""
-    import c3d
+    from drivers.extras import need
+
+    c3d = need("c3d", "reading a .c3d reference")
 
     spath = os.fspath(path)
 

@@ -28,6 +28,7 @@ import numpy as np
 
 from .._math import G, quat_rotate
 from ..base import Device, DeviceGone, Sample
+from ..extras import need
 
 _LOST = ("lost",)
 _DEG = np.pi / 180.0
@@ -87,6 +88,7 @@ class Ximu3Device(Device):
             rate, stale = float(params.get("rate", 100.0)), float(params.get("stale", 1.0))
         except ValueError:
             raise ValueError("ximu3 URL: rate and stale are numbers") from None
+        need("ximu3", "an x-IMU3 (ximu3://)")
         return cls(netloc, cfg, rate=rate, stale=stale, **kw)
 
     def describe(self) -> str:
