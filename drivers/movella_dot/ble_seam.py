@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from ..base import DeviceGone
+from ..extras import need
 from . import protocol as dot
 
 Notify = Callable[[bytes], None]
@@ -113,6 +114,8 @@ class BleakSeam:
     """Bluetooth LE through bleak (BlueZ over D-Bus on Linux, CoreBluetooth, WinRT)."""
 
     def scan(self, timeout: float) -> list[Advert]:
+        """DOTs advertising in range, from their advertisements alone (no connection)."""
+        need("bleak", "a Movella DOT over Bluetooth LE")
         from bleak import BleakScanner
 
         async def go() -> list[Advert]:
@@ -124,10 +127,10 @@ class BleakSeam:
                     out.append(Advert(dev.address, name, None, adv.rssi))
             return out
 
-        adverts: list[Advert] = _Loop.run(go(), timeout + 5.0)
-        return [_with_battery(self, a) for a in adverts]
+        return _Loop.run(go(), timeout + 5.0)
 
     def connect(self, address: str, on_lost: Lost, timeout: float) -> BleLink:
+        need("bleak", "a Movella DOT over Bluetooth LE")
         from bleak import BleakClient
 
         client = BleakClient(address, disconnected_callback=lambda _c: on_lost("BLE link lost"), timeout=timeout)
@@ -254,26 +257,23 @@ class SocketSeam:
         return SocketLink(self.path(address), on_lost)
 
 
-def _with_battery(seam: BleSeam, a: Advert) -> Advert:
-    """The advertisement with the battery level read over a short connection (a DOT does
-    not advertise it); without it when the sensor does not let us connect."""
+def read_battery(seam: BleSeam, address: str, timeout: float = 5.0) -> float | None:
+    """One DOT's battery level over a short connection, on demand (a DOT does not advertise
+    it, and a scan connects to none); None when the sensor does not let us connect."""
     try:
-        link = seam.connect(a.address, lambda _r: None, 5.0)
+        link = seam.connect(address, lambda _r: None, timeout)
     except OSError:
-        return a
+        return None
     try:
-        b = dot.decode_battery(link.read(dot.BATTERY))
-        return Advert(a.address, a.name, float(b.level), a.rssi)
+        return float(dot.decode_battery(link.read(dot.BATTERY)).level)
     except (OSError, dot.DotError):
-        return a
+        return None
     finally:
         link.disconnect()
 
 
-def scan(seam: BleSeam | None = None, timeout: float = 5.0, with_battery: bool = True) -> list[Advert]:
-    """DOTs in range through ``seam`` (bleak by default), each with its battery level."""
-    seam = seam or BleakSeam()
-    found = seam.scan(timeout)
-    if with_battery and isinstance(seam, SocketSeam):
-        found = [a if a.battery is not None else _with_battery(seam, a) for a in found]
-    return found
+def scan(seam: BleSeam | None = None, timeout: float = 5.0) -> list[Advert]:
+    """DOTs in range through ``seam`` (bleak by default), from their advertisements: no
+    connection is made (a battery level is there when the advertisement carries one;
+    ``read_battery`` asks one sensor)."""
+    return (seam or BleakSeam()).scan(timeout)

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..base import Device, DeviceGone, Sample, Unwrapper
+from ..extras import need
 from . import protocol as dot
 from .ble_seam import BleakSeam, BleLink, BleSeam, SocketSeam
 
@@ -30,7 +31,8 @@ _LOST = b""  # queue marker: the link went away
 
 
 class MovellaDotDevice(Device):
-    """``movella-dot://D4:22:CD:00:01:27`` (bleak), ``?ble=DIR`` for a simulated DOT whose
+    """``movella-dot://D4:22:CD:00:01:27`` (bleak; on macOS the CoreBluetooth UUID a scan lists,
+    ``movella-dot://6E400001-B5A3-F393-E0A9-E50E24DCCA9E``), ``?ble=DIR`` for a simulated DOT whose
     socket is in DIR, ``?rate=60`` the output rate asked for (1-120 Hz, the DOT's list),
     ``?mode=3`` the payload mode (2 or 3: both carry orientation and free acceleration)."""
 
@@ -66,10 +68,12 @@ class MovellaDotDevice(Device):
     @classmethod
     def from_url(cls, netloc: str, params: dict[str, str], **kw: Any) -> MovellaDotDevice:
         address = netloc.upper()
-        parts = address.split(":")
-        if len(parts) != 6 or not all(len(p) == 2 and all(c in "0123456789ABCDEF" for c in p) for p in parts):
-            raise ValueError(f"movella-dot URL needs the sensor's Bluetooth address AA:BB:CC:DD:EE:FF, not {netloc!r}")
+        if not is_ble_address(address):
+            raise ValueError(f"movella-dot URL needs the sensor's Bluetooth address (AA:BB:CC:DD:EE:FF, or on macOS "
+                             f"the CoreBluetooth UUID 8-4-4-4-12 hex digits that a scan lists), not {netloc!r}")
         folder = params.get("ble")
+        if not folder:
+            need("bleak", "a Movella DOT over Bluetooth LE (movella-dot://)")
         seam: BleSeam = SocketSeam(folder) if folder else BleakSeam()
         try:
             rate, mode = int(params.get("rate", 60)), int(params.get("mode", dot.MODE_COMPLETE_QUATERNION))
@@ -174,6 +178,17 @@ class MovellaDotDevice(Device):
         quat /= np.linalg.norm(quat)
         return Sample(0.0, t, self.device_id, None, quat=quat, free_acc=np.array(m.free_acc, dtype=float),
                       battery=self.battery, status=m.status, extra=extra)
+
+
+def is_ble_address(address: str) -> bool:
+    """A MAC address (BlueZ, Windows) or a CoreBluetooth device UUID (macOS: bleak names a
+    sensor by the UUID the system gives it, never by its MAC)."""
+    hexdigits = set("0123456789ABCDEFabcdef")
+    parts = address.split(":")
+    if len(parts) == 6 and all(len(p) == 2 and set(p) <= hexdigits for p in parts):
+        return True
+    groups = address.split("-")
+    return [len(g) for g in groups] == [8, 4, 4, 4, 12] and all(set(g) <= hexdigits for g in groups)
 
 
 def _with_rate(control: bytes, rate: int) -> bytes:

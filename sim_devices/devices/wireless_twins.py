@@ -109,8 +109,9 @@ class SimMovellaDot(SimDevice):
     def _request(self, c: socket.socket, msg: bytes) -> bytes:
         kind, key, value = msg[:1], msg[1:17], msg[17:]
         if kind == b"A":
+            # the advertisement's data: what a scan learns without connecting
             return b"a" + json.dumps({"name": "Movella DOT", "address": self.address, "rssi": -55,
-                                      "battery": None}).encode()
+                                      "battery": self.battery.level}).encode()
         char = str(uuidlib.UUID(bytes=key)) if len(key) == 16 else ""
         if kind == b"R":
             values = {dot.BATTERY: dot.encode_battery(self.battery), dot.CONTROL: dot.encode_control(self.control),
