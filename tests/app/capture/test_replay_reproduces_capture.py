@@ -13,8 +13,10 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -47,9 +49,12 @@ def capture(tmp: Path, latency: str, window: bool = False) -> Path:
             if line.startswith("simulating"):
                 break
         front = ["--quit-after", "28"] if window else ["--headless", "--seconds", "28", "--json"]
-        cap = subprocess.run([*CLI, "capture", "--setup", str(setup), "--record", str(rec), "--latency", latency,
-                              "--countdown", "1", *front],
-                             stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=180, env=env)
+        cmd = [*CLI, "capture", "--setup", str(setup), "--record", str(rec), "--latency", latency, "--countdown", "1",
+               *front]
+        if window:
+            cap = subprocess.run(cmd, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=180, env=env)
+        else:
+            cap = capture_until(cmd, rec, env)
     finally:
         sim.stdin.close()
         sim.wait(30)
@@ -58,6 +63,28 @@ def capture(tmp: Path, latency: str, window: bool = False) -> Path:
         assert json.loads(cap.stdout.strip().splitlines()[-1])["calibrated"], cap.stderr[-2000:]
     assert read_recording(rec).calibrations, cap.stderr[-2000:]
     return rec
+
+
+ENOUGH_POSES = 140  # the test wants over 100 live poses; the rest is margin for the last flush
+
+
+def capture_until(cmd: list[str], rec: Path, env: dict) -> subprocess.CompletedProcess:
+    """The headless capture, ended (Ctrl-C, as a user ends it) as soon as its recording holds a
+    calibration and ENOUGH_POSES poses, instead of after its fixed --seconds (the ceiling)."""
+    proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env)
+    deadline = time.monotonic() + 180
+    while proc.poll() is None and time.monotonic() < deadline:
+        try:
+            r = read_recording(rec) if rec.exists() else None
+        except Exception:  # noqa: BLE001 - a file being written may not read yet; ask again
+            r = None
+        if r is not None and r.calibrations and r.recon["t"].size >= ENOUGH_POSES:
+            proc.send_signal(signal.SIGINT)
+            break
+        time.sleep(0.5)
+    out, err = proc.communicate(timeout=60)
+    return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
 
 
 @pytest.mark.parametrize("front", ["headless", "window"])
