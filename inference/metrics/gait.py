@@ -5,9 +5,9 @@ Why these: they are what a coach asks first and what a glance from a few metres 
 in; each comes from the reconstruction alone (segment orientations and foot contacts), so
 it works with any sensor set that reconstructs the legs.
 
-- Knee flexion: the angle of the shank relative to the thigh (the rotation angle of
-  R_thigh^T R_shank), 0 standing straight. Ab/adduction and rotation of the knee are a few
-  degrees in gait, so this is flexion to within them.
+- Knee flexion: ``inference.metrics.joint_angles.knee_flexion_deg`` (ISB / OpenSim
+  ``knee_angle``: the flexion component of the shank in the thigh, 0 standing straight),
+  the same number validation, the exports and the gait report give.
 - Range: 95th minus 5th percentile over the window, robust to a single bad frame.
 - Cadence: foot strikes (a foot's contact, heel or toe, switching on: runners land on the
   forefoot) per minute over the window, both feet. A foot counts as coming down only after
@@ -22,10 +22,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from inference.body.rotations import matrix_angle_between
-from inference.body.skeleton import CONTACTS, SEGMENT_INDEX
+from inference.body.skeleton import CONTACTS
+from inference.metrics import joint_angles
 
-KNEES = (("l_thigh", "l_shank"), ("r_thigh", "r_shank"))
 FEET = ((CONTACTS.index("l_heel"), CONTACTS.index("l_toe")), (CONTACTS.index("r_heel"), CONTACTS.index("r_toe")))
 MIN_STRIKES = 3  # fewer strikes in the window: no cadence (standing, or not yet walking)
 MIN_SWING_S = 0.15  # a swing phase lasts ~0.4 s walking, longer running; a flicker a few frames
@@ -40,10 +39,9 @@ class GaitNumbers:
 
 
 def knee_flexion_deg(rot: np.ndarray) -> np.ndarray:
-    """(T, 24, 3, 3) global segment orientations -> (T, 2) knee flexion, left and right (deg)."""
-    rot = np.asarray(rot, dtype=np.float64)
-    out = [np.degrees(matrix_angle_between(rot[:, SEGMENT_INDEX[a]], rot[:, SEGMENT_INDEX[b]])) for a, b in KNEES]
-    return np.stack(out, axis=-1)
+    """(T, 24, 3, 3) global segment orientations -> (T, 2) knee flexion, left and right (deg),
+    as ``joint_angles.knee_flexion_deg``."""
+    return np.stack([joint_angles.knee_flexion_deg(rot, s) for s in joint_angles.SIDES], axis=-1)
 
 
 def foot_strikes(t: np.ndarray, contacts: np.ndarray) -> np.ndarray:
