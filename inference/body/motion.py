@@ -111,6 +111,68 @@ class Motion:
             raise ValueError(f"speed factor must be positive, got {factor}")
         return replace(self, fps=self.fps * float(factor), meta={**self.meta, "speed": float(factor)})
 
+    def held(self, before_s: float = 0.0, after_s: float = 0.0, settle_s: float = 0.0) -> Motion:
+        """The same movement with the subject standing still before and after it for
+        ``before_s`` / ``after_s`` seconds. Training augmentation: the clips are cut round the
+        movement, so a window of a long stand after a walk (what a real session holds at its
+        end) is rare in them, and a model that never saw one let unmeasured thighs stay bent
+        through seconds of stillness (docs/real_signals.md, "A standing body").
+
+        ``settle_s`` = 0: the first and last frames are held as they are (for clips that
+        start and end standing). ``settle_s`` > 0: the subject steps over ``settle_s`` seconds
+        from the N-pose, facing as the pelvis does, into the first frame, and from the last
+        frame back into it (for clips cut mid-stride, whose end frames are no stand)."""
+        if before_s < 0 or after_s < 0 or settle_s < 0:
+            raise ValueError(f"hold lengths must not be negative, got {before_s}, {after_s}, {settle_s}")
+        nb, na = int(round(before_s * self.fps)), int(round(after_s * self.fps))
+        if nb == 0 and na == 0:
+            return self
+        ns = max(int(round(settle_s * self.fps)), 1) if settle_s > 0 else 0
+
+        def stand(frame: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+            # the end frame as it is, or the N-pose facing the pelvis's way, feet on the floor
+            if not ns:
+                return np.repeat(self.rot[frame:frame + 1 or None], n, 0), np.repeat(
+                    self.root[frame:frame + 1 or None], n, 0)
+            from inference.body.body import npose_rotations
+            from inference.body.conventions import rot_z, yaw_of
+
+            R = rot_z(yaw_of(self.rot[frame, 0])) @ npose_rotations(1)[0]
+            z = -float(contact_points(R[None], forward_kinematics(R[None], np.zeros(3), self.body.offsets),
+                                      self.body)[..., 2].min())
+            xy = self.root[frame, :2]
+            return np.repeat(R[None], n, 0), np.tile([xy[0], xy[1], z], (n, 1))
+
+        def blend(R0: np.ndarray, p0: np.ndarray, R1: np.ndarray, p1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            from scipy.spatial.transform import Rotation, Slerp
+
+            w = (np.arange(ns) + 1) / (ns + 1)
+            w = w * w * (3 - 2 * w)
+            out = np.empty((ns, N_SEGMENTS, 3, 3))
+            for k in range(N_SEGMENTS):
+                out[:, k] = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([R0[k], R1[k]])))(w).as_matrix()
+            return out, p0 + w[:, None] * (p1 - p0)
+
+        rot, root = [self.rot], [self.root]
+        if nb:
+            Rs, ps = stand(0, nb)
+            if ns:
+                Rb, pb = blend(Rs[0], ps[0], self.rot[0], self.root[0])
+                rot.insert(0, Rb)
+                root.insert(0, pb)
+            rot.insert(0, Rs)
+            root.insert(0, ps)
+        if na:
+            Rs, ps = stand(-1, na)
+            if ns:
+                Ra, pa = blend(self.rot[-1], self.root[-1], Rs[0], ps[0])
+                rot.append(Ra)
+                root.append(pa)
+            rot.append(Rs)
+            root.append(ps)
+        return replace(self, rot=np.concatenate(rot), root=np.concatenate(root),
+                       meta={**self.meta, "held": (float(before_s), float(after_s), float(settle_s))})
+
     def scaled(self, factor: float) -> Motion:
         """The same joint angles and timing on a body ``factor`` times as large: bones, skin
         sites and root path scale, orientations do not. Training augmentation: the data

@@ -106,33 +106,62 @@ def held_out_files(name: str, root: Path | None = None) -> list[Path]:
 
 
 def _build(files: list[Path], progress: bool = True, speed: float = 1.0, repair: bool = False,
-           causal: bool = False, tag: str = "") -> FeatureDataset:
+           causal: bool = False, tag: str = "", hold: float = 0.0, settle: float = 0.0) -> FeatureDataset:
     """The cached feature dataset of ``files``, performed at ``speed`` (copies at another
     speed get their own cache and names ``<file>@x<speed>``, so a clip and its copies stay apart),
     with broken feet repaired (``plausibility.repair_feet``) when ``repair``, accelerations
-    through the low-latency mode's trailing filter when ``causal``."""
+    through the low-latency mode's trailing filter when ``causal``, and the subject standing
+    still ``hold`` seconds before and after the movement, stepping into and out of an N-pose
+    over ``settle`` seconds when ``settle`` (``Motion.held``; names ``<file>@hold<s>``) when ``hold``."""
     loader = None
-    if speed != 1.0 or repair:
+    if speed != 1.0 or repair or hold:
         from inference.loaders import load_motion
 
         def loader(f: Path):
             m = load_motion(f)
             if repair:
                 m = repair_feet(m)[0]
-            return m.at_speed(speed) if speed != 1.0 else m
+            m = m.at_speed(speed) if speed != 1.0 else m
+            return m.held(hold, hold, settle) if hold else m
 
-    variant = ",".join(v for v in ("" if speed == 1.0 else f"speed={speed:g}", "repair_feet" if repair else "", tag)
-                       if v)
+    variant = ",".join(v for v in ("" if speed == 1.0 else f"speed={speed:g}", "repair_feet" if repair else "", tag,
+                                   f"hold={hold:g}" if hold else "", f"settle={settle:g}" if settle else "") if v)
     ds = build_dataset(files, cache_root(), loader=loader, finder=lambda paths: [Path(p) for p in paths],
                        progress=progress, variant=variant, causal=causal)
     if speed != 1.0:
         ds.names = [f"{n}@x{speed:g}" for n in ds.names]
+    if hold:
+        ds.names = [f"{n}@hold{hold:g}" for n in ds.names]
     return ds
 
 
 def build_files(paths, progress: bool = True, causal: bool = False) -> FeatureDataset:
     """Feature dataset (cached) of every motion file under ``paths``."""
     return _build(find_motion_files([Path(p) for p in paths]), progress, causal=causal)
+
+
+def is_walk(name: str | Path) -> bool:
+    """Whether a Bandai clip is a walk of any kind (straight, back, sideways, turning)."""
+    stem = Path(name).name
+    return "_walk" in stem and not _is_hdm05(stem)
+
+
+def is_variant(name: str | Path) -> bool:
+    """Whether a clip name is one of ``train_set``'s real-motion copies (slowed walk, held stand)."""
+    return "@hold" in str(name) or ("@x" in str(name) and is_walk(str(name).split("@")[0]))
+
+
+def share_variants(ds: FeatureDataset, share: float) -> FeatureDataset:
+    """Give the real-motion copies (``is_variant``) ``share`` of the draws, the rest keeping
+    their proportions among themselves."""
+    extra = np.array([is_variant(n) for n in ds.names])
+    if not extra.any() or extra.all():
+        return ds
+    w = ds.weights.astype(np.float64).copy()
+    w[extra] *= share / w[extra].sum()
+    w[~extra] *= (1.0 - share) / w[~extra].sum()
+    ds.weights = w / w.sum()
+    return ds
 
 
 def _is_hdm05(name: str) -> bool:
@@ -199,6 +228,7 @@ def train_set(
     progress: bool = True, hdm05_share: float = HDM05_SHARE, hdm05_speeds: Sequence[float] = (),
     energy_per: str = "trial", drop_implausible: bool = False, repair_implausible: bool = False,
     cmu: bool = False, causal: bool = False, cmu_shares: dict[str, float] | None = None,
+    slow_walks: Sequence[float] = (), stand_hold: float = 0.0, variant_share: float = 0.25,
 ) -> FeatureDataset:
     """The training split. ``hdm05_speeds``: extra copies of the HDM05 clips performed at
     these speed factors (``Motion.at_speed``), sharing the HDM05 half of the draws. Two
@@ -224,7 +254,15 @@ def train_set(
     shared ``SHARES_WITH_CMU`` between the three sources, or ``cmu_shares`` (source -> share).
 
     ``causal``: accelerations through the trailing filter of the low-latency mode (a model
-    for ``--latency low``; TrainConfig.causal passes it)."""
+    for ``--latency low``; TrainConfig.causal passes it).
+
+    Motion like real sessions' (docs/real_signals.md): real logs hold slow short steps,
+    turns on the spot and long stands after walking, which the brisk, tightly cut training
+    clips hold little of. ``slow_walks``: copies of every Bandai walk (straight, back,
+    sideways, turning) performed at these speed factors (< 1: slower); ``stand_hold``: copies
+    of those walks and of the HDM05 clips with the subject standing still this many seconds
+    before and after (the walks stepping into and out of an N-pose over 0.6 s, as they are cut
+    mid-stride). Together these copies take ``variant_share`` of the draws."""
     if energy_per not in ("trial", "window"):
         raise ValueError(f"energy_per must be 'trial' or 'window', not {energy_per!r}")
     files = train_files()
@@ -236,6 +274,16 @@ def train_set(
     if cmu:
         base = FeatureDataset.concat([base, _build(cmu_train_files(), progress, repair=repair_implausible,
                                                    causal=causal, tag=CMU_CACHE_TAG)])
+    walks = [f for f in files if is_walk(f)]
+    extras = [_build(walks, progress, float(s), repair_implausible, causal) for s in slow_walks]
+    if stand_hold:
+        # walks are cut mid-stride: they step into and out of a stand; HDM05 clips start and end standing
+        extras.append(_build(walks, progress, repair=repair_implausible, causal=causal, hold=float(stand_hold),
+                             settle=0.6))
+        extras.append(_build([f for f in files if _is_hdm05(str(f))], progress, repair=repair_implausible,
+                             causal=causal, hold=float(stand_hold)))
+    if extras:
+        base = FeatureDataset.concat([base, *extras])
     if energy_per == "window":
         base.weights = clip_weights(base.energy, [len(c) for c in base.clips])
     if drop_implausible:
@@ -243,9 +291,9 @@ def train_set(
         if progress:
             print(f"train_set: {len(dropped)} clip(s) with implausible frames never drawn: {', '.join(dropped)}",
                   file=sys.stderr)
-    if cmu:
-        return balance_shares(base, cmu_shares or SHARES_WITH_CMU)
-    return balance_sources(base, hdm05_share)
+    base = (balance_shares(base, cmu_shares or SHARES_WITH_CMU) if cmu
+            else balance_sources(base, hdm05_share))
+    return share_variants(base, variant_share) if extras else base
 
 
 def val_set(progress: bool = True, cmu: bool = False, causal: bool = False) -> FeatureDataset:

@@ -67,3 +67,44 @@ def test_cmu_split_is_by_subject(shared_data):
     assert {cmu_subject(f) for f in val} == set(CMU_VAL_SUBJECTS)
     assert not {cmu_subject(f) for f in train} & set(CMU_VAL_SUBJECTS)
     assert not any(f.name.startswith("09_10") for f in train + val)
+
+
+def test_real_motion_copies_get_their_share():
+    from inference.training.splits import is_variant, is_walk, share_variants
+
+    names = ["/d/bandai/d1/dataset-1_walk_normal_001.bvh", "/d/bandai/d2/dataset-2_run_active_002.bvh",
+             "/d/bandai/d2/dataset-2_walk-turn-left_active_003.bvh@x0.6",
+             "/d/bandai/d1/dataset-1_walk-back_normal_001.bvh@hold3",
+             "/d/hdm05/bd/HDM_bd_squat_001_120.amc@hold3", "/d/hdm05/bd/HDM_bd_squat_001_120.amc@x1.25"]
+    assert [is_walk(n.split("@")[0]) for n in names] == [True, False, True, True, False, False]
+    # a slowed walk and a held stand are copies; HDM05's tempo copies are not
+    assert [is_variant(n) for n in names] == [False, False, True, True, True, False]
+    ds = share_variants(balance_sources(_ds(names), 0.5), 0.25)
+    assert ds.weights[[2, 3, 4]].sum() == pytest.approx(0.25)
+    assert ds.weights.sum() == pytest.approx(1.0)
+    # without copies nothing moves
+    plain = balance_sources(_ds(names[:2]), 0.5)
+    np.testing.assert_allclose(share_variants(plain, 0.25).weights, plain.weights)
+
+
+def test_train_set_builds_the_real_motion_copies(shared_data, tmp_path, monkeypatch):
+    """The slowed walks and the held stands are built from the walks (and HDM05 for the
+    stands), named apart, and drawn at the asked share."""
+    from inference.training import splits
+
+    monkeypatch.setenv("IMUCAP_CACHE", str(tmp_path))
+    bandai = sorted(p for p in (shared_data / "bandai" / "d1").iterdir() if "_walk_normal" in p.name)[:2]
+    bandai += sorted(p for p in (shared_data / "bandai" / "d1").iterdir() if "_run_normal" in p.name)[:1]
+    hdm = sorted((shared_data / "hdm05" / "bd").glob("*.amc*"))[:1]
+    monkeypatch.setattr(splits, "train_files", lambda root=None: bandai + hdm)
+    ds = splits.train_set(progress=False, slow_walks=[0.6], stand_hold=2.0, variant_share=0.3)
+    names = [str(n) for n in ds.names]
+    assert sum(n.endswith("@x0.6") for n in names) == 2  # the two walks, not the run
+    assert sum(n.endswith("@hold2") for n in names) == 3  # the two walks and the HDM05 clip
+    extra = np.array([splits.is_variant(n) for n in names])
+    assert ds.weights[extra].sum() == pytest.approx(0.3)
+    # a held copy is 2 s longer at each end than its clip (and the settle of a walk), at 20 Hz
+    base = {n: len(c) for n, c in zip(names, ds.clips) if "@" not in n}
+    for n, c in zip(names, ds.clips):
+        if n.endswith("@hold2"):
+            assert len(c) >= base[n.removesuffix("@hold2")] + 2 * 40 - 2
