@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 
 import numpy as np
@@ -69,17 +71,32 @@ def _run(capsys, *argv):
     return code, cap.out, cap.err
 
 
-def test_points_and_shanks_against_each_alone(capsys, tmp_path):
-    d = tmp_path / "data"
-    d.mkdir()
+@pytest.fixture(scope="module")
+def evaluated(tmp_path_factory):
+    """``imucap evaluate --json`` of one 8 s walk, each sensor/point set run once for the module
+    (the points alone are both tests' reference)."""
+    d = tmp_path_factory.mktemp("data")
     write_motion_bvh(d / "walk.bvh", generate("walk", seconds=8.0, seed=2))
+    runs: dict[tuple[str, ...], dict] = {}
+
+    def run(*argv: str) -> dict:
+        if argv not in runs:
+            out, err = io.StringIO(), io.StringIO()
+            with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+                code = main(["evaluate", "--data", str(d), *argv, "--json", "--threads", "1", "--no-progress"])
+            assert code == 0, err.getvalue()
+            runs[argv] = json.loads(out.getvalue())
+        return runs[argv]
+
+    return run
+
+
+def test_points_and_shanks_against_each_alone(evaluated):
     runs = {}
     for label, sensors, points in (("both", "l_shank,r_shank", "head,l_hand,r_hand"),
                                    ("points", "none", "head,l_hand,r_hand"),
                                    ("shanks", "l_shank,r_shank", "")):
-        code, out, err = _run(capsys, "--data", str(d), "--sensors", sensors, "--points", points, "--json")
-        assert code == 0, err
-        runs[label] = json.loads(out)
+        runs[label] = evaluated("--sensors", sensors, "--points", points)
     assert runs["both"]["points"] == ["head", "l_hand", "r_hand"]
     assert runs["both"]["sensors"] == ["l_shank", "r_shank"] and runs["points"]["sensors"] == []
     # the points observe the head and both forearms: the whole body's error falls with them
@@ -88,16 +105,10 @@ def test_points_and_shanks_against_each_alone(capsys, tmp_path):
     assert runs["both"]["lower_pe_cm"] < runs["points"]["lower_pe_cm"]
 
 
-def test_the_arms_reach_puts_the_hands_on_their_controllers(capsys, tmp_path):
-    d = tmp_path / "data"
-    d.mkdir()
-    write_motion_bvh(d / "walk.bvh", generate("walk", seconds=8.0, seed=2))
+def test_the_arms_reach_puts_the_hands_on_their_controllers(evaluated):
     runs = {}
-    for label, extra in (("model", []), ("reach", ["--reach"])):
-        code, out, err = _run(capsys, "--data", str(d), "--sensors", "none", "--points", "head,l_hand,r_hand",
-                              "--json", *extra)
-        assert code == 0, err
-        runs[label] = json.loads(out)
+    for label, extra in (("model", ()), ("reach", ("--reach",))):
+        runs[label] = evaluated("--sensors", "none", "--points", "head,l_hand,r_hand", *extra)
     assert runs["reach"]["reach"] and not runs["model"]["reach"]
     # the controller's few millimetres of tracking error and the hand's grip, not the model's guess
     assert runs["reach"]["hand_pe_cm"] < 3.0 < runs["model"]["hand_pe_cm"]
