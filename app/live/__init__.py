@@ -1,6 +1,8 @@
-"""The live path in the app: hub frames -> calibration -> resampler -> poser -> sinks
-(``pipeline``), run on its own threads (``runner``), fed by a hub or by other frame sources
-(``sources``). ``docs/design.md`` draws the whole path."""
+"""The live path in the app: hub frames -> calibration and the optional inputs into one typed
+live frame (``frame``) -> resampler -> poser -> sinks (``pipeline``), run on its own threads
+(``runner``), fed by a hub or by other frame sources (``sources``); beside it the latency
+modes (``latency``), the model and thread choice (``model_choice``) and the gait sink
+(``gait``). ``docs/design.md`` draws the whole path."""
 
 from app.live.pipeline import (
     POSE_SKIPPED_EVENT,
