@@ -9,7 +9,7 @@ Header: ``DataRate=``, ``DataType=Quaternion``, ``version=3``, ``OpenSimVersion=
 
 What each quaternion is: the calibrated orientation at the sensor's site, with the
 sensor-to-segment mounting taken out, i.e. the orientation of the OpenSim body the IMU
-sits on (``app.export.opensim``: G_os = M R Q^T M^T), in OpenSim's ground (X forward,
+sits on (``inference.metrics.joint_angles.opensim_frames``: G_os = M R Q^T M^T), in OpenSim's ground (X forward,
 Y up, Z right). So in OpenSense leave ``sensor_to_opensim_rotations`` at 0 0 0, and the
 IMU placer finds each IMU aligned with its body when the placement frame is the model's
 default pose (stand the subject still, arms by the sides, at the start, or pick such a
@@ -28,8 +28,8 @@ import numpy as np
 
 from app.export.c3d_file import regular_frames
 from app.export.common import ExportMotion, atomic_target, continuous_quaternions
-from app.export.opensim import M_OS, opensim_default_pose
-from inference.body.skeleton import SEGMENT_INDEX, SITE_SEGMENT
+from inference.body.skeleton import SITE_SEGMENT
+from inference.metrics.joint_angles import opensim_frames
 
 SUFFIX = "_orientations.sto"
 
@@ -48,10 +48,7 @@ def imu_sites(m: ExportMotion) -> list[str]:
 
 def body_quaternions(rot: np.ndarray, sites: list[str]) -> np.ndarray:
     """(T, S, 4) OpenSim body orientations in ground at ``sites``, continuous in time."""
-    Q = opensim_default_pose()
-    idx = [SEGMENT_INDEX[SITE_SEGMENT[s]] for s in sites]
-    G = M_OS @ rot[:, idx] @ np.swapaxes(Q[idx], -1, -2) @ M_OS.T
-    return continuous_quaternions(G)
+    return continuous_quaternions(opensim_frames(rot, [SITE_SEGMENT[s] for s in sites]))
 
 
 def sto_text(rate: float, time: np.ndarray, names: list[str], quat: np.ndarray) -> str:

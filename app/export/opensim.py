@@ -30,19 +30,9 @@ model's rotation1/2/3, in OpenSim's frames: X forward, Y up, Z to the subject's 
                                                 0 = palm forward, pronation positive
     (arm_*_l, elbow_flex_l, pro_sup_l likewise)
 
-How the angles are computed. Our world is X forward, Y left, Z up; OpenSim's ground is X
-forward, Y up, Z right, so a vector maps as v_os = M v with M = [[1,0,0],[0,0,1],[0,-1,0]]
-(a proper rotation). In OpenSim's default pose (every coordinate 0: upright, legs
-straight, arms hanging with palms forward) every body frame is aligned with ground; in
-ours (the T-pose) every segment frame is the identity. So each OpenSim body frame is our
-segment frame turned by that segment's orientation Q in OpenSim's default pose:
-G_os = M R Q^T M^T, with Q = identity for pelvis, legs and trunk, the arm lowered 90 deg
-about the forward axis for the upper arm (as ``body.npose_rotations``), and additionally
-turned 90 deg about the vertical to palms forward for the forearm (our T-pose has the
-palms down, SMPL's convention). A joint's rotation is L = G_os[parent]^T G_os[child],
-decomposed as L = Rz(a) Rx(b) Ry(c) (``matrix_to_euler(L, "ZXY")``); each coordinate is
-one of a, b, c with the model axis's sign. Every column is unwrapped over time (no
-360-degree jumps when the subject turns round).
+How the angles are computed: ``inference.metrics.joint_angles`` (the one definition of
+every joint angle imucap shows or writes; its docstring has the frames, the Z-X-Y
+decomposition and the signs): this module writes its ``coordinates_deg`` as columns.
 
 Approximations (say so when publishing numbers from this file):
 - One segment pair per joint, principal axes: the model's slightly oblique axes (ankle
@@ -69,29 +59,8 @@ from pathlib import Path
 import numpy as np
 
 from app.export.common import ExportMotion, atomic_target
-from inference.body.conventions import rot_z
-from inference.body.rotations import matrix_about_axis, matrix_to_euler
-from inference.body.skeleton import N_SEGMENTS, SEGMENT_INDEX
+from inference.metrics.joint_angles import JOINTS, M_OS, coordinates_deg, opensim_default_pose
 
-# ours (X fwd, Y left, Z up) -> OpenSim ground (X fwd, Y up, Z right)
-M_OS = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
-
-# (OpenSim joint, parent segment or None for ground, child segment,
-#  ((coordinate, index into the Z-X-Y angles, sign), ...))
-JOINTS: tuple[tuple[str, str | None, str, tuple[tuple[str, int, int], ...]], ...] = (
-    ("ground_pelvis", None, "pelvis", (("pelvis_tilt", 0, 1), ("pelvis_list", 1, 1), ("pelvis_rotation", 2, 1))),
-    ("hip_r", "pelvis", "r_thigh", (("hip_flexion_r", 0, 1), ("hip_adduction_r", 1, 1), ("hip_rotation_r", 2, 1))),
-    ("knee_r", "r_thigh", "r_shank", (("knee_angle_r", 0, -1),)),
-    ("ankle_r", "r_shank", "r_foot", (("ankle_angle_r", 0, 1),)),
-    ("hip_l", "pelvis", "l_thigh", (("hip_flexion_l", 0, 1), ("hip_adduction_l", 1, -1), ("hip_rotation_l", 2, -1))),
-    ("knee_l", "l_thigh", "l_shank", (("knee_angle_l", 0, -1),)),
-    ("ankle_l", "l_shank", "l_foot", (("ankle_angle_l", 0, 1),)),
-    ("back", "pelvis", "spine3", (("lumbar_extension", 0, 1), ("lumbar_bending", 1, 1), ("lumbar_rotation", 2, 1))),
-    ("acromial_r", "spine3", "r_upperarm", (("arm_flex_r", 0, 1), ("arm_add_r", 1, 1), ("arm_rot_r", 2, 1))),
-    ("elbow_r", "r_upperarm", "r_forearm", (("elbow_flex_r", 0, 1), ("pro_sup_r", 2, 1))),
-    ("acromial_l", "spine3", "l_upperarm", (("arm_flex_l", 0, 1), ("arm_add_l", 1, -1), ("arm_rot_l", 2, -1))),
-    ("elbow_l", "l_upperarm", "l_forearm", (("elbow_flex_l", 0, 1), ("pro_sup_l", 2, -1))),
-)
 TRANSLATIONS = ("pelvis_tx", "pelvis_ty", "pelvis_tz")
 
 
@@ -104,42 +73,20 @@ def coordinate_names() -> list[str]:
     return names
 
 
-def _rx(deg: float) -> np.ndarray:
-    return matrix_about_axis(np.array([1.0, 0.0, 0.0]), np.deg2rad(deg))
-
-
-def opensim_default_pose() -> np.ndarray:
-    """(24, 3, 3) our global segment orientations in OpenSim's default pose: upright, arms
-    hanging (lowered 90 deg about the forward axis), forearms and hands turned palms
-    forward (our T-pose has palms down). Mirror-symmetric left/right by construction."""
-    Q = np.broadcast_to(np.eye(3), (N_SEGMENTS, 3, 3)).copy()
-    for side, down, palm in (("l", -90.0, 90.0), ("r", 90.0, -90.0)):
-        Q[SEGMENT_INDEX[f"{side}_upperarm"]] = _rx(down)
-        for seg in ("forearm", "hand", "fingers"):
-            Q[SEGMENT_INDEX[f"{side}_{seg}"]] = rot_z(np.deg2rad(palm)) @ _rx(down)
-    return Q
-
-
 def opensim_coordinates(rot: np.ndarray, root: np.ndarray) -> tuple[list[str], np.ndarray]:
     """(names, values (T, 29)): OpenSim coordinates of global orientations rot (T, 24, 3, 3)
     and pelvis positions root (T, 3) in our world; angles in degrees, translations in m."""
     rot = np.asarray(rot, dtype=np.float64)
     root = np.asarray(root, dtype=np.float64)
     T = rot.shape[0]
-    Q = opensim_default_pose()
-    G = M_OS @ rot @ np.swapaxes(Q, -1, -2) @ M_OS.T  # OpenSim body frames in ground
-    cols: dict[str, np.ndarray] = {}
-    for _, parent, child, coords in JOINTS:
-        Gc = G[:, SEGMENT_INDEX[child]]
-        L = Gc if parent is None else np.swapaxes(G[:, SEGMENT_INDEX[parent]], -1, -2) @ Gc
-        eul = np.unwrap(matrix_to_euler(L, "ZXY"), axis=0) if T else np.zeros((0, 3))
-        for name, k, sign in coords:
-            cols[name] = sign * np.rad2deg(eul[:, k])
+    names = coordinate_names()
+    if not T:
+        return names, np.zeros((0, len(names)))
+    cols = coordinates_deg(rot)
     p = root @ M_OS.T
     for k, name in enumerate(TRANSLATIONS):
         cols[name] = p[:, k]
-    names = coordinate_names()
-    return names, np.stack([cols[n] for n in names], axis=-1) if T else np.zeros((0, len(names)))
+    return names, np.stack([cols[n] for n in names], axis=-1)
 
 
 def mot_text(name: str, time: np.ndarray, names: list[str], values: np.ndarray) -> str:

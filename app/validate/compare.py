@@ -5,8 +5,9 @@ Per segment: the mean and RMS over frames of the angle between the two orientati
 (geodesic, deg) where the reference has the segment's orientation, else between the two
 segment directions (``kinematics.DIRECTIONS``: markers do not show a bone's twist);
 ``segment_error`` says which. The hands, fingers and toes are left out, as in every
-metric here (``inference.metrics.errors.EVAL_SEGMENTS``). Per joint (``l_knee``, ...):
-the RMS of the flexion-angle difference, the range (max - min) of each side over the
+metric here (``inference.metrics.errors.EVAL_SEGMENTS``). Per joint (``l_knee``, ...;
+the angles of ``inference.metrics.joint_angles``, paired as ``kinematics`` says):
+the RMS of the angle difference, the range (max - min) of each side over the
 trial, and per window of ``WINDOW_S`` the two ranges, for Bland-Altman.
 """
 
@@ -17,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from app.validate.kinematics import directions, joint_angles
+from app.validate.kinematics import directions, paired_joint_angles
 from app.validate.reference import Reference
 from inference.body.rotations import matrix_angle_between
 from inference.body.skeleton import METRIC_EXCLUDED, SEGMENT_INDEX, SEGMENTS
@@ -29,13 +30,15 @@ WINDOW_S = 2.0
 class Track:
     """One side's motion on the recording's clock: times (T,) s since the recording's first
     raw frame, orientations (T, 24, 3, 3) or None, joint centres (T, 24, 3), the joint
-    names it has."""
+    names it has; frames: segment frames from markers (``Reference.frames``) or None."""
 
     t: np.ndarray
     rot: np.ndarray | None
     joints: np.ndarray
     have_joints: set[str]
     have_rot: set[str] = field(default_factory=lambda: set(SEGMENTS))
+    frames: np.ndarray | None = None
+    have_frames: set[str] = field(default_factory=set)
 
 
 def reference_at(ref: Reference, t: np.ndarray) -> tuple[np.ndarray, Track]:
@@ -47,12 +50,11 @@ def reference_at(ref: Reference, t: np.ndarray) -> tuple[np.ndarray, Track]:
     for j in range(ref.joints.shape[1]):
         for c in range(3):
             J[:, j, c] = np.interp(tq, ref.t, ref.joints[:, j, c])
-    rot = None
-    if ref.rot is not None:
-        k = np.clip(np.searchsorted(ref.t, tq), 1, len(ref.t) - 1)
-        k -= (tq - ref.t[k - 1]) < (ref.t[k] - tq)
-        rot = ref.rot[k]
-    return inside, Track(tq, rot, J, ref.have_joints, ref.have_rot)
+    k = np.clip(np.searchsorted(ref.t, tq), 1, len(ref.t) - 1)
+    k -= (tq - ref.t[k - 1]) < (ref.t[k] - tq)
+    rot = None if ref.rot is None else ref.rot[k]
+    frames = None if ref.frames is None else ref.frames[k]
+    return inside, Track(tq, rot, J, ref.have_joints, ref.have_rot, frames, ref.have_frames)
 
 
 def range_deg(x: np.ndarray) -> float:
@@ -82,7 +84,7 @@ def compare(rec: Track, ref: Track, fps: float) -> dict[str, Any]:
         e = e[np.isfinite(e)]
         if len(e):
             out_seg[s], out_rms[s] = round(float(e.mean()), 3), round(float(np.sqrt(np.mean(e * e))), 3)
-    a_rec, a_ref = joint_angles(rec.joints, rec.have_joints), joint_angles(ref.joints, ref.have_joints)
+    a_rec, a_ref = paired_joint_angles(rec, ref)
     joints: dict[str, dict[str, Any]] = {}
     n_win = max(int(round(WINDOW_S * fps)), 2)
     for j in sorted(set(a_rec) & set(a_ref)):

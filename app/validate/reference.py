@@ -36,7 +36,9 @@ class Reference:
     """t: (T,) s on the reference's clock; joints: (T, 24, 3) joint centres (indexed as
     ``kinematics.JOINT_INDEX``), Z up, m, NaN where the file has none; have_joints: the
     joint names it has; rot: (T, 24, 3, 3) global orientations or None; have_rot: the
-    segments whose orientation it has; mapping: lines 'ours <- theirs' to print."""
+    segments whose orientation it has; mapping: lines 'ours <- theirs' to print; frames:
+    (T, 24, 3, 3) segment frames its markers define (``frames.py``), for joint angles
+    only, or None; have_frames: the segments they cover."""
 
     path: str
     format: str
@@ -47,6 +49,8 @@ class Reference:
     have_rot: set[str] = field(default_factory=set)
     mapping: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    frames: np.ndarray | None = None
+    have_frames: set[str] = field(default_factory=set)
 
     @property
     def fps(self) -> float:

@@ -19,7 +19,7 @@ import numpy as np
 from app.validate.compare import WINDOW_S
 from app.validate.run import Validation
 
-JOINT_ORDER = ("l_hip", "r_hip", "l_knee", "r_knee", "l_elbow", "r_elbow")
+JOINT_ORDER = ("l_hip", "r_hip", "l_knee", "r_knee", "l_ankle", "r_ankle", "l_elbow", "r_elbow")
 PLOT_SECONDS = 15.0  # of the angles over time: a trial's first strides, readable; the tables cover all of it
 
 
@@ -147,8 +147,10 @@ def markdown(v: Validation, plots: dict[str, Path | None], command: str | None =
     lines += [f"| {name} | {r['mean_deg']:.2f} |" if r["mean_deg"] is not None else f"| {name} | |"
               for name, r in rows]
     joints = [j for j in JOINT_ORDER if j in v.subsets[0]["joints"]]
-    lines += ["", "## Joints: flexion angle", "",
-              "RMS of imucap minus reference, and the range of motion (max - min over the trial) of each.", ""]
+    lines += ["", "## Joints: hip and knee flexion, ankle dorsiflexion, elbow flexion", "",
+              "Defined once for imucap (`inference/metrics/joint_angles.py`: the ISB joint coordinate system as "
+              "OpenSim's models use it). RMS of imucap minus reference, and the range of motion (max - min over "
+              "the trial) of each.", ""]
     lines += ["| | " + " | ".join(f"{j} RMS / range / ref range" for j in joints) + " |",
               "|---|" + "---|" * len(joints)]
     for name, r in rows:

@@ -18,14 +18,17 @@ from app.validate.align import (
     heading_from_rotations,
 )
 from app.validate.compare import Track, bland_altman, compare, reference_at
-from app.validate.kinematics import JOINT_INDEX, directions, joint_angles
+from app.validate.kinematics import JOINT_INDEX, directions, paired_joint_angles
 from app.validate.reference import Reference, read_reference
 from inference.body.body import Body, forward_kinematics, npose_rotations
-from inference.body.conventions import heading_of, rot_z
+from inference.body.conventions import rot_z
 from inference.body.skeleton import SEGMENT_INDEX, SEGMENTS
 from inference.metrics.errors import EVAL_SEGMENTS
 
 ALL_JOINTS = set(JOINT_INDEX)
+# the angles the clock is found from: large and well reconstructed from few sensors (the
+# ankle, rarely measured, would only add noise to the correlation)
+OFFSET_JOINTS = ("knee", "hip", "elbow")
 
 
 @dataclass
@@ -92,8 +95,9 @@ def align(run: Track, ref: Reference, time_offset: float | None = None, heading_
     """Clock first (joint angles need no heading), then the heading (module docstrings of
     ``align.py``)."""
     if time_offset is None:
-        lag, corr, used = find_time_offset(run.t, joint_angles(run.joints, run.have_joints), ref.t,
-                                           joint_angles(ref.joints, ref.have_joints))
+        a_run, a_ref = paired_joint_angles(run, ref)
+        keep = [j for j in a_run if j.split("_")[1] in OFFSET_JOINTS]
+        lag, corr, used = find_time_offset(run.t, {j: a_run[j] for j in keep}, ref.t, {j: a_ref[j] for j in keep})
     else:
         lag, corr, used = float(time_offset), None, []
     inside, r = reference_at(ref, run.t + lag)
@@ -114,27 +118,33 @@ def align(run: Track, ref: Reference, time_offset: float | None = None, heading_
 def turned(track: Track, yaw_deg: float, inside: np.ndarray) -> Track:
     Z = rot_z(np.deg2rad(yaw_deg))
     rot = None if track.rot is None else Z @ track.rot[inside]
-    return Track(track.t[inside], rot, track.joints[inside] @ Z.T, track.have_joints, track.have_rot)
+    frames = None if track.frames is None else Z @ track.frames[inside]
+    return Track(track.t[inside], rot, track.joints[inside] @ Z.T, track.have_joints, track.have_rot, frames,
+                 track.have_frames)
 
 
-def reference_facing(r: Track) -> float:
-    """The reference's mean facing (rad about Z): its pelvis's forward axis, or the normal
-    of its hip line, as a circular mean over the trial."""
+def reference_facing(r: Track) -> np.ndarray:
+    """(T,) the reference's facing at each frame (rad about Z): its pelvis's forward axis,
+    or the normal of its hip line; frames where neither is known take the nearest known
+    facing (the trial's mean when none is)."""
     if r.rot is not None and "pelvis" in r.have_rot:
         fwd = r.rot[:, SEGMENT_INDEX["pelvis"], :, 0]
     else:
         left = r.joints[:, JOINT_INDEX["l_hip"]] - r.joints[:, JOINT_INDEX["r_hip"]]
         fwd = np.cross(left, [0.0, 0.0, 1.0])
-    fwd = fwd[np.all(np.isfinite(fwd), axis=-1)]
-    n = np.linalg.norm(fwd[:, :2], axis=-1, keepdims=True)
-    m = (fwd[:, :2] / np.where(n > 1e-9, n, 1.0)).mean(axis=0) if len(fwd) else np.array([1.0, 0.0])
-    return float(heading_of(m))
+    n = np.linalg.norm(fwd[:, :2], axis=-1)
+    ok = np.isfinite(n) & (n > 1e-6)
+    if not ok.any():
+        return np.zeros(len(fwd))
+    yaw = np.unwrap(np.arctan2(fwd[ok, 1], fwd[ok, 0]))
+    idx = np.arange(len(fwd))
+    return np.interp(idx, idx[ok], yaw)
 
 
-def standing_track(t: np.ndarray, body: Body, yaw: float) -> Track:
-    """A subject standing still, arms by the sides, facing ``yaw``: the baseline a number
-    has to beat to mean anything."""
-    R = rot_z(yaw) @ npose_rotations(len(t))
+def standing_track(t: np.ndarray, body: Body, yaw: float | np.ndarray) -> Track:
+    """A subject standing still, arms by the sides, facing ``yaw`` (rad; one value, or one
+    per frame to turn with the subject): the baseline a number has to beat to mean anything."""
+    R = rot_z(np.broadcast_to(np.asarray(yaw, float), (len(t),)))[:, None] @ npose_rotations(len(t))
     J = forward_kinematics(R, np.zeros((len(t), 3)), body.offsets)
     return Track(t, R, J, set(ALL_JOINTS))
 
@@ -166,11 +176,13 @@ def validate(rec_path: str | os.PathLike, reference: str | os.PathLike, subsets:
         res = {"sensors": list(run.sensors), **res}
         res["bland_altman"] = {j: bland_altman(v["window_ranges_deg"]) for j, v in res["joints"].items()}
         out.append(res)
-        curves[",".join(run.sensors)] = (rec_track.t, joint_angles(rec_track.joints, rec_track.have_joints))
-        curves["reference"] = (r.t - al.time_offset_s, joint_angles(r.joints, r.have_joints))
+        a_rec, a_ref = paired_joint_angles(rec_track, r)
+        curves[",".join(run.sensors)] = (rec_track.t, a_rec)
+        curves["reference"] = (r.t - al.time_offset_s, a_ref)
     inside, r = reference_at(ref, lead.track.t + al.time_offset_s)
     base = standing_track(lead.track.t[inside], body, reference_facing(r))
-    baseline = {"sensors": [], "what": "standing still, arms by the sides, facing the reference's mean heading",
+    baseline = {"sensors": [], "what": "standing still, arms by the sides, turned with the reference's heading "
+                                       "frame by frame",
                 **compare(base, r, fps)}
     return Validation(str(rec_path), ref, al, out, baseline, curves)
 

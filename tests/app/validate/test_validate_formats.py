@@ -17,15 +17,19 @@ from app.export.bvh import bvh_text
 from app.export.opensim import mot_text, opensim_coordinates
 from app.recording import read_recording
 from app.replay import ReplaySettings, build_replay_poser, replay_recording
-from app.validate.kinematics import JOINT_INDEX, directions, joint_angles
+from app.validate.frames import hinge_frames
+from app.validate.kinematics import JOINT_ANGLES, JOINT_INDEX, angle_of, directions
 from inference.body.body import Body, forward_kinematics
 from inference.body.rotations import matrix_angle_between
 from inference.body.skeleton import METRIC_EXCLUDED, SEGMENT_INDEX, SEGMENTS
+from inference.metrics import joint_angles as ja
 from inference.signals.synthesis import synthesize
 from sim_devices.xsens_export import write_mvnx
 from tests.app.validate.conftest import HEADING_DEG, SHIFT_FRAMES, T0
 
 ALL = set(JOINT_INDEX)
+ANGLES = {"knee": ja.knee_flexion_deg, "hip": lambda R, s: ja.hip_angles_deg(R, s)[0],
+          "ankle": ja.ankle_dorsiflexion_deg, "elbow": ja.elbow_flexion_deg}
 
 
 @pytest.fixture(scope="module")
@@ -46,10 +50,28 @@ def known(walk):
     seg = np.rad2deg(matrix_angle_between(R, Rt)).mean(axis=0)
     d, dt = directions(J, ALL), directions(Jt, ALL)
     dirs = {s: float(np.rad2deg(np.arccos(np.clip((d[s] * dt[s]).sum(-1), -1, 1))).mean()) for s in d}
-    a, at = joint_angles(J, ALL), joint_angles(Jt, ALL)
+    # joint angles: the one module on both sides' orientations (a reference with orientations)
+    a = {f"{s}_{j}": f(R, s) for s in "lr" for j, f in ANGLES.items()}
+    at = {f"{s}_{j}": f(Rt, s) for s in "lr" for j, f in ANGLES.items()}
     rms = {j: float(np.sqrt(np.mean((a[j] - at[j]) ** 2))) for j in a}
     return {"orientation": {s: float(seg[SEGMENT_INDEX[s]]) for s in SEGMENTS if s not in METRIC_EXCLUDED},
-            "direction": dirs, "rms": rms}
+            "direction": dirs, "rms": rms, "R": R, "J": J, "Jt": Jt}
+
+
+def centre_rms(known: dict, have: set[str]) -> dict[str, float]:
+    """Joint-angle RMS when the reference has joint centres only (``have``): both sides'
+    segment frames built from the centres they share, then the one module."""
+    P = {j: known["J"][:, JOINT_INDEX[j]] for j in have}
+    Pt = {j: known["Jt"][:, JOINT_INDEX[j]] for j in have}
+    F, Ft = hinge_frames(P), hinge_frames(Pt)
+    out = {}
+    for joint, (p, c, _) in JOINT_ANGLES.items():
+        if p in F and c in F:
+            x = angle_of(np.stack([F.get(s, np.broadcast_to(np.eye(3), F[p].shape)) for s in SEGMENTS], 1), joint)
+            y = angle_of(np.stack([Ft.get(s, np.broadcast_to(np.eye(3), F[p].shape)) for s in SEGMENTS], 1), joint)
+            d = (x - y)[np.isfinite(x - y)]
+            out[joint] = float(np.sqrt(np.mean(d ** 2)))
+    return out
 
 
 def _validate(capsys, walk, ref, *extra) -> dict:
@@ -58,7 +80,8 @@ def _validate(capsys, walk, ref, *extra) -> dict:
     return json.loads(cap.out)
 
 
-def _check(out: dict, walk, known: dict, fps: float, kind: str, segments=None, joints=None, tol=0.5) -> None:
+def _check(out: dict, walk, known: dict, fps: float, kind: str, segments=None, joints=None, tol=0.5,
+           rms=None) -> None:
     assert out["time_offset_s"] == pytest.approx(walk.expected_offset(), abs=1.0 / fps)
     assert out["time_offset_correlation"] > 0.9
     assert out["heading_deg"] == pytest.approx(HEADING_DEG, abs=2.0)
@@ -66,8 +89,9 @@ def _check(out: dict, walk, known: dict, fps: float, kind: str, segments=None, j
     want = known[kind]
     for s in segments or want:
         assert full["segments"][s] == pytest.approx(want[s], abs=tol), s
-    for j in joints or known["rms"]:
-        assert full["joints"][j]["rms_deg"] == pytest.approx(known["rms"][j], abs=tol), j
+    rms = rms or known["rms"]
+    for j in joints or rms:
+        assert full["joints"][j]["rms_deg"] == pytest.approx(rms[j], abs=tol), j
     # and the numbers mean something: the measured segments beat standing still
     base = out["baseline"]
     for s in ("l_thigh", "r_shank"):
@@ -142,7 +166,9 @@ def test_c3d_of_joint_centres(walk, known, tmp_path, capsys):
     assert set(full["segments"]) == {"pelvis", "l_thigh", "r_thigh", "l_shank", "r_shank", "l_foot", "r_foot",
                                      "l_upperarm", "r_upperarm", "l_forearm", "r_forearm"}
     assert set(full["segment_error"].values()) == {"direction"}
-    _check(out, walk, known, ref.fps, "direction", segments=sorted(full["segments"]))
+    rms = centre_rms(known, set(lab))
+    assert set(full["joints"]) == set(rms) == {f"{s}_{j}" for s in "lr" for j in ("knee", "hip", "elbow")}
+    _check(out, walk, known, ref.fps, "direction", segments=sorted(full["segments"]), rms=rms)
 
 
 def test_opensim_mot(walk, known, tmp_path, capsys):
@@ -156,7 +182,7 @@ def test_opensim_mot(walk, known, tmp_path, capsys):
     # three rotations each: the same orientations as the truth; the hinges keep only their flexion
     _check(out, walk, known, ref.fps, "orientation", segments=["pelvis", "l_thigh", "r_thigh", "l_upperarm",
                                                                 "r_upperarm"],
-           joints=["l_knee", "r_knee", "l_hip", "r_hip"], tol=1.0)
+           joints=["l_knee", "r_knee", "l_hip", "r_hip", "l_ankle", "r_ankle"], tol=1.0)
 
 
 def test_offset_and_heading_can_be_given(walk, known, tmp_path, capsys):
