@@ -1,0 +1,71 @@
+"""A recording (and optionally an earlier one) -> the report's HTML (and PDF) and its figures as JSON."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from app.recording import read_recording
+
+from .analysis import GaitAnalysis, analyse_recording, figures
+from .angles import ANGLES
+from .compare import compare
+from .confidence import confidence_of, worn_sites
+from .html import ReportInput, render
+from .normal import load_band
+from .plots import cycle_figure, timeline_figure
+from .session import session_info
+
+
+@dataclass
+class Report:
+    html: Path
+    pdf: Path | None
+    summary: dict[str, Any]
+
+
+def report_input(path: str | Path) -> ReportInput:
+    """One recording read and analysed, its plots not yet drawn."""
+    rec = read_recording(path)
+    an: GaitAnalysis = analyse_recording(rec)
+    info = session_info(rec)
+    sites = worn_sites(rec.recon.get("observed_sites"), tuple(info.sensors))
+    conf = confidence_of(sites, rec.recon.get("spread_deg"))
+    return ReportInput(info, an, figures(an), conf, load_band())
+
+
+def summary_json(r: ReportInput) -> dict[str, Any]:
+    return {"sensors": list(r.confidence.sites), **r.figures, "session": r.info.as_json(),
+            "confidence": r.confidence.as_json(),
+            "comparison_band": None if r.band is None else {"trials": r.band.trials, "strides": r.band.strides,
+                                                            "sources": r.band.sources}}
+
+
+def make_report(path: str | Path, out: str | Path, compare_with: str | Path | None = None,
+                pdf: bool = False) -> Report:
+    r = report_input(path)
+    r.images["timeline"] = timeline_figure(r.analysis)
+    if r.analysis.summary.walking():
+        r.images["cycles"] = cycle_figure(r.analysis, r.band)
+    summary = summary_json(r)
+    if compare_with is not None:
+        before = report_input(compare_with)
+        r.earlier = before
+        r.rows = compare(before.analysis, before.confidence, r.analysis, r.confidence)
+        r.images["compare_cycles"] = cycle_figure(r.analysis, r.band, angles=tuple(a for a in ANGLES
+                                                  if not a.startswith("pelvis")), other=before.analysis,
+                                                  labels=("after", "before"))
+        summary["compare"] = {"file": str(before.info.path), "rows": [w.as_json() for w in r.rows],
+                              "marked": sum(w.marked for w in r.rows)}
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(render(r), encoding="utf-8")
+    pdf_path = None
+    if pdf:
+        from .browser import print_pdf
+
+        pdf_path = print_pdf(out, out.with_suffix(".pdf"))
+    summary["html"] = str(out)
+    summary["pdf"] = None if pdf_path is None else str(pdf_path)
+    return Report(out, pdf_path, summary)

@@ -1,0 +1,169 @@
+"""Gait events (foot strike, foot off) from foot contact signals, debounced.
+
+A foot is in stance while its heel or its toe touches the ground (``inference.body.skeleton.CONTACTS``
+order: l_heel, l_toe, r_heel, r_toe): stance runs from the first point down (foot strike, the heel in a
+normal walk) to the last one up (foot off, the toe). The signal is whatever the recording holds, best
+first (``contact_source``):
+
+- ``insoles``: the insoles' own heel/toe contacts (60 Hz), when they were worn;
+- ``model``: the poser's contact values (20 Hz, ``recon/contact_prob`` in [0, 1], a contact above
+  ``inference.poser.models.CONTACT_THRESHOLD``); with both shanks worn these come from the shank contact
+  detector (``inference/poser/contact_detector.py``), otherwise from the model's own contact features.
+- for a motion with its truth (synthesized walks): the heel/toe points' speed below
+  ``inference.signals.synthesis.CONTACT_SPEED`` (``truth_contact_values``).
+
+Where a continuous value crosses the threshold between two frames, the event time is interpolated
+linearly between them: at 20 Hz that halves the quantisation (50 ms frames) of the timing.
+
+Debouncing (``debounce``), in this order: a gap in contact shorter than ``MIN_SWING_S`` is closed (the
+heel lifting a frame before the toe lands, a contact flickering at heel strike); a contact shorter than
+``MIN_STANCE_S`` is dropped (a foot brushing the ground in swing). A stance that touches either end of
+the data, or a stretch where the signal is missing, has no event at that end: it is cut, not seen to
+begin or end.
+
+Why not a library: gaitmap (the maintained one for foot-worn IMUs) needs numpy < 2.1, pandas and numba,
+and detects events from a foot sensor's raw gyroscope, which most sensor sets here do not have; the
+model's contacts are a per-frame signal that needs only the threshold and the debouncing above.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from inference.body.skeleton import CONTACTS
+from inference.poser.models import CONTACT_THRESHOLD
+
+SIDES = ("l", "r")
+FOOT_POINTS = {"l": (CONTACTS.index("l_heel"), CONTACTS.index("l_toe")),
+               "r": (CONTACTS.index("r_heel"), CONTACTS.index("r_toe"))}
+MIN_SWING_S = 0.15  # a walking swing lasts ~0.4 s: a shorter gap in contact is a flicker, not a swing
+MIN_STANCE_S = 0.12  # a walking stance lasts ~0.6 s (running ~0.25): a shorter contact is a brush in swing
+GAP_FACTOR = 2.5  # consecutive samples further apart than this many median periods: the data has a gap
+
+
+@dataclass(frozen=True)
+class Stance:
+    """One contact of a foot: [start, end] in s; ``strike`` / ``off``: whether that end is a real event
+    (False where the stance touches the data's start or end, or a gap)."""
+
+    start: float
+    end: float
+    strike: bool = True
+    off: bool = True
+
+
+@dataclass
+class FootEvents:
+    """The stances of one foot, in time order; ``source`` says which signal gave them."""
+
+    side: str
+    stances: list[Stance]
+    source: str
+
+    @property
+    def strikes(self) -> np.ndarray:
+        return np.array([s.start for s in self.stances if s.strike], dtype=np.float64)
+
+    @property
+    def offs(self) -> np.ndarray:
+        return np.array([s.end for s in self.stances if s.off], dtype=np.float64)
+
+
+def _runs(t: np.ndarray, value: np.ndarray, threshold: float, gap_s: float) -> list[Stance]:
+    """Stretches where ``value > threshold``, their ends interpolated between frames; NaN values and gaps
+    in ``t`` longer than ``gap_s`` cut a run without an event at the cut."""
+    out: list[Stance] = []
+    n = len(t)
+    if n == 0:
+        return out
+    finite = np.isfinite(value)
+    on = finite & (value > threshold)
+    cut_after = np.zeros(n, dtype=bool)  # data missing between sample i and i + 1
+    cut_after[:-1] = (np.diff(t) > gap_s) | ~finite[:-1] | ~finite[1:]
+    cut_after[-1] = True
+
+    def crossing(i: int) -> float:
+        """Time at which the value crosses the threshold between sample i and i + 1."""
+        a, b = float(value[i]), float(value[i + 1])
+        if b == a:
+            return float(0.5 * (t[i] + t[i + 1]))
+        w = min(max((threshold - a) / (b - a), 0.0), 1.0)
+        return float(t[i] + w * (t[i + 1] - t[i]))
+
+    i = 0
+    while i < n:
+        if not on[i]:
+            i += 1
+            continue
+        j = i
+        while j + 1 < n and on[j + 1] and not cut_after[j]:
+            j += 1
+        seen_start = i > 0 and not cut_after[i - 1]
+        seen_end = j < n - 1 and not cut_after[j]
+        start = crossing(i - 1) if seen_start else float(t[i])
+        end = crossing(j) if seen_end else float(t[j])
+        out.append(Stance(start, end, seen_start, seen_end))
+        i = j + 1
+    return out
+
+
+def debounce(stances: list[Stance], min_swing_s: float = MIN_SWING_S,
+             min_stance_s: float = MIN_STANCE_S) -> list[Stance]:
+    """Close gaps shorter than ``min_swing_s`` between seen ends, then drop stances shorter than
+    ``min_stance_s`` whose both ends were seen (a cut stance may be longer than what is left of it)."""
+    merged: list[Stance] = []
+    for s in stances:
+        if merged and merged[-1].off and s.strike and s.start - merged[-1].end < min_swing_s:
+            last = merged.pop()
+            s = Stance(last.start, s.end, last.strike, s.off)
+        merged.append(s)
+    return [s for s in merged if not (s.strike and s.off and s.end - s.start < min_stance_s)]
+
+
+def foot_events(t: np.ndarray, values: np.ndarray, source: str, threshold: float = CONTACT_THRESHOLD,
+                min_swing_s: float = MIN_SWING_S, min_stance_s: float = MIN_STANCE_S) -> dict[str, FootEvents]:
+    """Both feet's events from (T, 4) contact values (bool or in [0, 1]) at times ``t`` (s, increasing)."""
+    t = np.asarray(t, dtype=np.float64)
+    v = np.asarray(values, dtype=np.float64)
+    if v.ndim != 2 or v.shape[1] != len(CONTACTS) or len(t) != len(v):
+        raise ValueError(f"contacts must be (T, {len(CONTACTS)}) beside T times, not {v.shape} and {t.shape}")
+    gap = GAP_FACTOR * float(np.median(np.diff(t))) if len(t) > 1 else np.inf
+    out = {}
+    for side in SIDES:
+        heel, toe = FOOT_POINTS[side]
+        foot = np.fmax(v[:, heel], v[:, toe])  # either point down: the foot is down
+        foot[~(np.isfinite(v[:, heel]) | np.isfinite(v[:, toe]))] = np.nan
+        stances = debounce(_runs(t, foot, threshold, gap), min_swing_s, min_stance_s)
+        out[side] = FootEvents(side, stances, source)
+    return out
+
+
+def truth_contact_values(contact_points: np.ndarray, fps: float) -> np.ndarray:
+    """(T, 4) contact values of a motion's heel/toe points (T, 4, 3): 1 - speed / CONTACT_SPEED, so that
+    the threshold 0 sits at the labels' speed and the crossing is interpolated like the model's values.
+    ``foot_events(t, values, "truth", threshold=0.0)`` gives the truth's events."""
+    from inference.signals.synthesis import CONTACT_SPEED
+
+    p = np.asarray(contact_points, dtype=np.float64)
+    if len(p) < 2:
+        return np.ones(p.shape[:2])
+    speed = np.linalg.norm(np.gradient(p, 1.0 / fps, axis=0), axis=-1)
+    return 1.0 - speed / CONTACT_SPEED
+
+
+def contact_source(recon: dict, raw: dict | None = None) -> tuple[np.ndarray, np.ndarray, str]:
+    """(t, values, source) of a recording's best contact signal: the insoles' contacts where they were
+    worn (and present for most of the reconstruction), else the poser's contact values."""
+    if raw is not None and "insoles" in raw:
+        ins = raw["insoles"]
+        present = np.asarray(ins.get("present", []), dtype=bool)
+        if len(present) and present.mean() > 0.5 and "contacts" in ins:
+            vals = np.asarray(ins["contacts"], dtype=np.float64).copy()
+            vals[~present] = np.nan
+            return np.asarray(raw["t"], dtype=np.float64), vals, "insoles"
+    prob = recon.get("contact_prob")
+    if prob is None or not np.isfinite(np.asarray(prob, dtype=np.float64)).any():
+        prob = recon["contacts"]
+    return np.asarray(recon["t"], dtype=np.float64), np.asarray(prob, dtype=np.float64), "model"
