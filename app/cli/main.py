@@ -15,7 +15,7 @@ from drivers.extras import MissingExtra
 _COMMAND_MODULES = (
     "app.cli.data", "app.cli.devices", "app.cli.train", "app.cli.evaluate", "app.cli.bench", "app.cli.demo",
     "app.cli.replay", "app.cli.importing", "app.cli.advise", "app.cli.capture", "app.cli.setup", "app.cli.gui",
-    "app.cli.batch", "app.cli.validate",
+    "app.cli.batch", "app.cli.validate", "app.cli.report",
 )
 
 
