@@ -78,3 +78,23 @@ def pytest_collection_modifyitems(config, items):
         heavy_data = item.get_closest_marker("data") is not None and module not in DATA_ONE_CORE_MODULES
         if heavy_data or module in REALTIME_MODULES:
             item.add_marker(pytest.mark.xdist_group("realtime_or_heavy"))
+    if getattr(config.option, "loadgroup", False):  # an xdist worker under --dist loadgroup
+        _name_groups(items)
+
+
+def _name_groups(items) -> None:
+    """Put each test's xdist_group into its node id (``nodeid@group``), which is what
+    ``--dist loadgroup`` schedules by. xdist 3.8 writes it to ``item._nodeid``, which pytest 9
+    no longer reads (a node's id is ``item._id``): without this every group was silently
+    spread over both workers, and a module's expensive fixtures were built on each
+    (docs/testing.md)."""
+    try:
+        from _pytest.nodeid import coerce_node_id
+    except ImportError:  # a pytest that still reads _nodeid: xdist's own hook does it
+        return
+    for item in items:
+        names = sorted({str(m.args[0] if m.args else m.kwargs.get("name", "default"))
+                        for m in item.iter_markers("xdist_group")})
+        suffix = "@" + "_".join(names)
+        if names and not item.nodeid.endswith(suffix):
+            item._id = coerce_node_id(item.nodeid + suffix)
