@@ -157,7 +157,8 @@ class LiveSession:
         lat = sorted(s.watch.latency)
         st = s.live.stats() if s.live is not None else {}
         return {"fps": s.fps(), "latency_ms": lat[len(lat) // 2] if lat else None,
-                "dropped": int(st.get("dropped", 0)), "frames": s.watch.poses}
+                "dropped": int(st.get("dropped", 0)), "skipped": int(st.get("poses_skipped", 0)),
+                "frames": s.watch.poses}
 
     def device_rows(self) -> list[DeviceRow]:
         s = self.session

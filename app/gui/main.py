@@ -487,7 +487,8 @@ class MainWindow(QtWidgets.QMainWindow):
         perf = perf or {}
         self.fps_label.setText(f"{fmt(perf.get('fps'), '.1f')} frames/s")
         self.latency_label.setText(f"latency {fmt(perf.get('latency_ms'), '.0f', ' ms')}")
-        self.dropped_label.setText(f"dropped {perf.get('dropped', 0)}")
+        # dropped: hub frames the loop let go; skipped: 20 Hz poses it had no time for
+        self.dropped_label.setText(f"dropped {perf.get('dropped', 0)}, skipped {perf.get('skipped', 0)}")
 
     def _event(self, ev: SessionEvent) -> None:
         stamp = time.strftime("%H:%M:%S")

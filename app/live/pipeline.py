@@ -213,6 +213,8 @@ class Pipeline:
         # replay: True for the times of 20 Hz frames that are to be left out, as live left
         # them out (app.replay reads them from the recording's POSE_SKIPPED_EVENTs)
         self.skip_pose: Callable[[float], bool] | None = None
+        # push_newest: the 20 Hz frames completed so far, waiting for it to pose the newest
+        self._pending: list[tuple] | None = None
         # a calibration was in use and has been dropped, and the first frame that went back
         # to the calibrator has not been announced yet (see _calibrating)
         self._had_calibration = False
@@ -304,6 +306,25 @@ class Pipeline:
             return []
         return self._take(frame, t_start, pose=True)
 
+    def push_newest(self, frames: Sequence[HubFrame]) -> list[LivePose]:
+        """Frames that waited for the live loop, oldest first: each goes in as with ``push``
+        (sinks, calibration, resampler), but of the 20 Hz frames they complete only the
+        newest is posed; the older ones are skipped as ``pass_over`` skips them
+        (``poses_skipped``, ``POSE_SKIPPED_EVENT``), their time already past. A loop that
+        keeps up finds one frame at a time and poses every 20 Hz frame; one whose pose came
+        late computes the next from the freshest data instead of working through a queue,
+        so it is never more than the one late pose behind."""
+        self._pending = []
+        try:
+            for f in frames:
+                self.push(f)
+        finally:
+            pending, self._pending = self._pending, None
+        for _index, t20, *_ in pending[:-1]:
+            self.stats.poses_skipped += 1
+            self._emit("on_event", t20, POSE_SKIPPED_EVENT, "")
+        return [self._pose(*pending[-1])] if pending else []
+
     def _take(self, frame: HubFrame, t_start: float, pose: bool) -> list[LivePose]:
         """A calibrated frame into the resampler (packets lost before it as unobserved
         samples); the 20 Hz frames it completes are posed, or with ``pose`` False skipped."""
@@ -368,7 +389,11 @@ class Pipeline:
                 continue
             frame20 = f20.rest.copy()
             frame20["accelerations"] = f20.acc
-            out.append(self._pose(f20.index, t20, t if newest is None else newest, frame20, t_start))
+            args = (f20.index, t20, t if newest is None else newest, frame20, t_start)
+            if self._pending is not None:  # push_newest decides which of them is posed
+                self._pending.append(args)
+                continue
+            out.append(self._pose(*args))
         return out
 
     def _pose(self, index: int, t: float, t_newest: float, frame: np.ndarray, t_start: float) -> LivePose:

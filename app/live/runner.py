@@ -36,10 +36,18 @@ class LivePipeline:
     Pipeline. ``latest()`` is what a GUI timer reads; ``stats()`` a snapshot of the
     counters. Exceptions on either thread stop the run and are kept in ``error``.
 
+    The inference thread takes every frame waiting at once (``Pipeline.push_newest``): all
+    go through the calibration and the resampler, and only the newest 20 Hz frame they
+    complete is posed, the older ones skipped and counted (``poses_skipped``). A pose that
+    took longer than a frame period therefore costs the frames it overlapped, never a
+    backlog: the loop is at most that one pose behind.
+
     ``max_lag`` (s): when the inference thread comes back to the queue, frames older than
     the newest by more than this are dropped (counted) instead of worked through. A poser
     slower than real time then shows the newest motion at a lower frame rate rather than
     an ever older one (the resampler restarts across the hole; the poser continues).
+    ``max_lag=None`` turns both off: every frame is pushed and posed in turn, however late
+    (a list of frames worked through, as the synchronous chain would).
     """
 
     def __init__(self, pipeline: Pipeline, source: FrameSource, queue_size: int = 3600,
@@ -149,10 +157,16 @@ class LivePipeline:
                 for f in late:  # not reconstructed, but recorded and calibrated from
                     self.pipeline.pass_over(f)
                 batch = [f for f in batch if newest - f.t <= self.max_lag]
-            for f in batch:
-                if self._stop.is_set():
-                    break
-                for lp in self.pipeline.push(f):
+            if self.max_lag is None:  # every frame posed, however late
+                for f in batch:
+                    if self._stop.is_set():
+                        break
+                    for lp in self.pipeline.push(f):
+                        self._latest = lp
+            elif batch and not self._stop.is_set():
+                # of the 20 Hz frames the batch completes, the newest is posed and the older
+                # ones skipped: a late pose makes the next from fresh data, not a queue
+                for lp in self.pipeline.push_newest(batch):
                     self._latest = lp
 
     def wait_for(self, predicate: Callable[[], bool], timeout: float) -> bool:
