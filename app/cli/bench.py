@@ -10,6 +10,10 @@ values) measured in the same run, so the two figures share the machine's load.
 
 ``onnx_p50_ms``/``onnx_p99_ms``: the same loop with the model call through ONNX Runtime
 (when installed; what live sessions then use), right after the torch figures.
+``variants``: the model call on torch and ONNX Runtime, on 1 and 2 intra-op threads, and with
+the linear layers in int8 (ONNX Runtime's dynamic quantizer, torch's ``quantize_dynamic``),
+all stepped in turn on the same frames, each row's p50 / p99 as a ratio to plain torch and its
+poses' difference from torch's (``mean_deg``, ``max_deg``; ``--no-variants`` skips it).
 ``--sizes``: which larger denoiser would fit the live budget: the loop with the model's own
 settings (steps, mirror averaging, runtime) but random weights of each size, all stepped in
 turn with the model itself, each row's p50 also as a ratio to it.
@@ -123,6 +127,104 @@ def bench_runtimes(model, steps=None, frames: int = 200, warmup: int = 10, seed:
     return out
 
 
+VARIANTS = ("torch", "torch-2t", "onnx", "onnx-2t", "onnx-int8", "torch-int8")
+"""The rows of ``bench_variants``: the model call on torch or ONNX Runtime, on 1 intra-op
+thread or 2 (``-2t``), and with the linear layers' weights in int8 (``-int8``: ONNX
+Runtime's dynamic quantizer, or torch's ``quantize_dynamic``)."""
+
+
+class _VariantPoser:
+    """A live Poser whose model call is one variant's; ``step`` runs with torch on the
+    variant's thread count (torch's setting is global, so each step sets it)."""
+
+    def __init__(self, model, variant: str, body, steps, seed: int, mirror: bool | None) -> None:
+        import dataclasses
+
+        import torch
+        from torch import nn
+
+        from inference.features.layout import N_FEATURES
+        from inference.features.mirror import MirrorAveraged
+        from inference.model.onnx_runtime import OnnxNet
+        from inference.poser.poser import Poser
+
+        self.variant = variant
+        self.threads = 2 if variant.endswith("-2t") else 1
+        runtime = "onnx" if variant.startswith("onnx") else "torch"
+        if variant == "torch-int8":
+            q = torch.ao.quantization.quantize_dynamic(model.model, {nn.Linear}, dtype=torch.qint8).eval()
+            model = dataclasses.replace(model, model=q)
+        torch.set_num_threads(self.threads)
+        self.poser = Poser(model, body=body, steps=steps, seed=seed, mirror=mirror, runtime="torch",
+                           freeze=variant != "torch-int8")
+        if runtime == "onnx":
+            p = self.poser
+            eager = MirrorAveraged(model.model, model.norm_mean, model.norm_std) if p.mirror else model.model
+            p._net = OnnxNet(eager, 1, p.window, N_FEATURES, model.config.mask_input, threads=self.threads,
+                             quantize=variant.endswith("int8"))
+            p.runtime = "onnx"
+        torch.set_num_threads(1)
+
+    def step(self, features, mask):
+        import torch
+
+        torch.set_num_threads(self.threads)
+        try:
+            return self.poser.step(features, mask)
+        finally:
+            torch.set_num_threads(1)
+
+
+def rotation_gap_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle (deg) between rotation matrices ``a`` and ``b`` (..., 3, 3), elementwise, from
+    ``|a - b|_F = 2 sqrt(2) sin(angle / 2)`` (arccos of the trace loses small angles)."""
+    d = np.linalg.norm(np.asarray(a, np.float64) - np.asarray(b, np.float64), axis=(-2, -1))
+    return np.degrees(2.0 * np.arcsin(np.clip(d / (2.0 * np.sqrt(2.0)), 0.0, 1.0)))
+
+
+def bench_variants(model, steps=None, frames: int = 200, warmup: int = 10, seed: int = 0,
+                   mirror: bool | None = None, variants: tuple[str, ...] = VARIANTS) -> dict:
+    """Each variant of the model call (``VARIANTS``) as a live Poser, all stepped in turn on
+    the same frames of the generated walk (``_interleaved``'s order), and what each changes:
+    per row p50_ms, p99_ms, ratio_p50 / ratio_p99 to the first row, and its poses against
+    the first row's, frame by frame (each poser on its own history, as live): the segments'
+    orientation difference, mean and max over frames and segments (``mean_deg``,
+    ``max_deg``), and the largest per-frame mean (``frame_max_deg``)."""
+    import torch
+
+    motion, inp = _walk(frames + warmup, seed)
+    posers = {v: _VariantPoser(model, v, motion.body, steps, seed, mirror) for v in variants}
+    names = list(posers)
+    n = inp.features.shape[0]
+    ms = {v: np.empty(frames) for v in names}
+    rot = {v: np.empty((frames, 24, 3, 3)) for v in names}
+    threads_before = torch.get_num_threads()
+    for i in range(warmup + frames):
+        k = i % n
+        r = i % len(names)
+        for v in names[r:] + names[:r]:
+            t0 = time.perf_counter()
+            pf = posers[v].step(inp.features[k], inp.mask[k])
+            if i >= warmup:
+                ms[v][i - warmup] = (time.perf_counter() - t0) * 1e3
+                rot[v][i - warmup] = pf.rot
+    torch.set_num_threads(threads_before)
+    base = names[0]
+    rows = []
+    for v in names:
+        gap = rotation_gap_deg(rot[v], rot[base])
+        p50, p99 = float(np.percentile(ms[v], 50)), float(np.percentile(ms[v], 99))
+        rows.append({"variant": v, "runtime": posers[v].poser.runtime, "threads": posers[v].threads,
+                     "int8": v.endswith("int8"), "p50_ms": round(p50, 3), "p99_ms": round(p99, 3),
+                     "ratio_p50": round(p50 / float(np.percentile(ms[base], 50)), 3),
+                     "ratio_p99": round(p99 / float(np.percentile(ms[base], 99)), 3),
+                     "mean_deg": round(float(gap.mean()), 4), "max_deg": round(float(gap.max()), 4),
+                     "frame_max_deg": round(float(gap.mean(axis=1).max()), 4)})
+    first = posers[base].poser
+    return {"base": base, "steps": len(first.steps), "mirror": first.mirror, "frames": int(frames),
+            "interleaved": True, "rows": rows}
+
+
 def parse_sizes(text: str) -> list[tuple[int, int, int]]:
     """``"6/128/512,4/192/768"`` -> [(6, 128, 512), (4, 192, 768)]: layers / width / FF."""
     sizes = []
@@ -195,7 +297,8 @@ def _config_label(model) -> str:
 
 def run_bench(model_spec: str = "diffusion", steps=None, frames: int = 200, paper_frames: int = 10,
               threads: int = 0, random_weights: bool = False, paper: bool = True, warmup: int = 10,
-              mirror: bool | None = None, confidence: bool = True, onnx: bool = True) -> dict:
+              mirror: bool | None = None, confidence: bool = True, onnx: bool = True,
+              variants: bool = True) -> dict:
     """The `imucap bench` measurement (see the module docstring); returns its JSON object."""
     import torch
 
@@ -227,6 +330,10 @@ def run_bench(model_spec: str = "diffusion", steps=None, frames: int = 200, pape
         # against torch, frame for frame in turn, so a load change hits both alike
         o = bench_runtimes(model, st, frames, warmup, mirror=mirror)
         out.update(onnx_p50_ms=o["onnx_p50_ms"], onnx_p99_ms=o["onnx_p99_ms"], onnx=o)
+    if variants and onnx and model is not None and model.kind == "diffusion" and onnxruntime_available():
+        # threads 1 / 2 and int8 weights, each alone beside the plain call, with what each
+        # changes in the poses
+        out["variants"] = bench_variants(model, st, frames, warmup, mirror=mirror)
     if out["mirror"]:
         # what the mirror averaging costs, measured in the same run
         out["without_mirror"] = bench_poser(model, st, frames, warmup, label=_config_label(model), mirror=False)
@@ -259,6 +366,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-paper", action="store_true", help="skip the paper-size model")
     p.add_argument("--no-confidence", action="store_true", help="skip the loop with the per-segment spread on")
     p.add_argument("--no-onnx", action="store_true", help="skip the loop through ONNX Runtime (onnx_p50_ms)")
+    p.add_argument("--no-variants", action="store_true",
+                   help="skip the model call's variants (threads 1/2, int8 weights; key variants)")
     p.add_argument("--sizes", default=None, metavar="L/D/FF,...",
                    help="instead: the live loop with the model's settings but randomly initialised denoisers "
                         "of these sizes (layers/width/FF), stepped in turn with the model itself, as ratios to it")
@@ -283,7 +392,8 @@ def run(args: argparse.Namespace) -> int:
     if args.sizes is not None:
         return _run_sizes(args)
     res = run_bench(args.model, args.steps, args.frames, args.paper_frames, args.threads, args.random_weights,
-                    not args.no_paper, max(0, args.warmup), args.mirror, not args.no_confidence, not args.no_onnx)
+                    not args.no_paper, max(0, args.warmup), args.mirror, not args.no_confidence, not args.no_onnx,
+                    not args.no_variants)
     if args.json:
         print(json.dumps(res))
     else:
@@ -298,6 +408,12 @@ def run(args: argparse.Namespace) -> int:
             print(f"ONNX Runtime vs torch, frame for frame in turn: p50 {o['onnx_p50_ms']:.1f} vs "
                   f"{o['torch_p50_ms']:.1f} ms (x{o['speedup_p50']:.2f}), p99 {o['onnx_p99_ms']:.1f} vs "
                   f"{o['torch_p99_ms']:.1f} ms")
+        if "variants" in res:
+            print("the model call's variants, stepped in turn (ratio to the first; poses against its):")
+            for r in res["variants"]["rows"]:
+                print(f"  {r['variant']:>11}  p50 {r['p50_ms']:6.1f} ms  p99 {r['p99_ms']:6.1f} ms  "
+                      f"x{r['ratio_p50']:.2f} / x{r['ratio_p99']:.2f}  poses mean {r['mean_deg']:.3f} deg, "
+                      f"max {r['max_deg']:.2f} deg")
         for key in ("without_mirror", "confidence", "paper"):
             if key in res:
                 print(line(res[key]))
@@ -332,4 +448,5 @@ def _run_sizes(args: argparse.Namespace) -> int:
     return 0
 
 
-__all__ = ["bench_poser", "bench_sizes", "parse_sizes", "paper_model", "run_bench", "register", "run"]
+__all__ = ["VARIANTS", "bench_poser", "bench_sizes", "bench_variants", "rotation_gap_deg", "parse_sizes",
+           "paper_model", "run_bench", "register", "run"]

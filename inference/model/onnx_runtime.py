@@ -65,10 +65,13 @@ class OnnxNet:
     """``module`` (a denoiser, or a wrapper called like one: ``(z, t, height[, mask])``)
     exported for one input shape and run by ONNX Runtime; called like the module, returns
     a torch tensor. ``threads``: ONNX Runtime's intra-op threads (default torch's own
-    setting, which the live loop keeps at 1)."""
+    setting, which the live loop keeps at 1). ``quantize``: the exported graph's weights
+    (MatMul, Gemm) quantized to int8 with ONNX Runtime's dynamic quantizer (activations
+    quantized per call); ``imucap bench`` measures it beside the float graph and
+    docs/latency.md says why it is not the default."""
 
     def __init__(self, module: nn.Module, batch: int, window: int, features: int, mask_input: bool,
-                 threads: int | None = None) -> None:
+                 threads: int | None = None, quantize: bool = False) -> None:
         import onnxruntime as ort
 
         self.config = getattr(module, "config", None)
@@ -90,12 +93,17 @@ class OnnxNet:
             torch.onnx.export(module, example, buf, dynamo=False, opset_version=OPSET, input_names=names,
                               output_names=["x0"])
         module.train(was_training)
+        graph = buf.getvalue()
+        if quantize:
+            graph = quantize_dynamic_int8(graph)
+        self.threads = max(1, threads if threads is not None else torch.get_num_threads())
+        self.quantized = quantize
         opts = ort.SessionOptions()
-        opts.intra_op_num_threads = max(1, threads if threads is not None else torch.get_num_threads())
+        opts.intra_op_num_threads = self.threads
         opts.inter_op_num_threads = 1
         opts.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
         opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-        self.session = ort.InferenceSession(buf.getvalue(), opts, providers=["CPUExecutionProvider"])
+        self.session = ort.InferenceSession(graph, opts, providers=["CPUExecutionProvider"])
 
     def __call__(self, z: Tensor, t: Tensor, height: Tensor, mask: Tensor | None = None) -> Tensor:
         feeds: dict[str, Any] = {
@@ -109,6 +117,27 @@ class OnnxNet:
         return torch.from_numpy(self.session.run(None, feeds)[0])
 
 
+def quantize_dynamic_int8(graph: bytes) -> bytes:
+    """An ONNX graph with its MatMul / Gemm weights in int8 (ONNX Runtime's dynamic
+    quantizer: per-tensor weight scales, activations quantized on the fly)."""
+    import tempfile
+    from pathlib import Path
+
+    import onnx
+    from onnxruntime.quantization import QuantType, quantize_dynamic
+    from onnxruntime.quantization.shape_inference import quant_pre_process
+
+    with tempfile.TemporaryDirectory() as tmp:
+        src, pre, dst = Path(tmp, "f32.onnx"), Path(tmp, "pre.onnx"), Path(tmp, "int8.onnx")
+        src.write_bytes(graph)
+        try:
+            quant_pre_process(str(src), str(pre), skip_symbolic_shape=True)
+        except Exception:  # noqa: BLE001 - the pre-pass only helps; quantize the graph as exported
+            pre = src
+        quantize_dynamic(str(pre), str(dst), op_types_to_quantize=["MatMul", "Gemm"], weight_type=QuantType.QInt8)
+        return onnx.load(str(dst)).SerializeToString()
+
+
 def onnx_net(module: nn.Module, batch: int, window: int, features: int, mask_input: bool) -> OnnxNet | None:
     """``OnnxNet`` of ``module``, or None (with a warning) when the export or the session
     fails: the caller then runs torch, so a model ONNX cannot take still runs."""
@@ -120,4 +149,4 @@ def onnx_net(module: nn.Module, batch: int, window: int, features: int, mask_inp
         return None
 
 
-__all__ = ["RUNTIMES", "onnxruntime_available", "resolve_runtime", "OnnxNet", "onnx_net"]
+__all__ = ["RUNTIMES", "onnxruntime_available", "resolve_runtime", "OnnxNet", "onnx_net", "quantize_dynamic_int8"]

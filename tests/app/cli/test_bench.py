@@ -68,3 +68,34 @@ def test_bench_sizes_names_a_size_it_cannot_read():
         cli_bench.parse_sizes("6/128/512,6/130/512")
     with pytest.raises(ValueError, match="is not LAYERS/WIDTH/FF"):
         cli_bench.parse_sizes("6x128")
+
+
+def test_bench_variants_time_threads_and_int8_beside_plain_torch_with_their_pose_difference(capsys):
+    pytest.importorskip("onnxruntime")
+    code = main(["bench", "--json", "--random-weights", "--frames", "3", "--warmup", "1", "--threads", "1",
+                 "--steps", "2", "--no-paper", "--no-confidence"])
+    res = json.loads(capsys.readouterr().out)
+    v = res["variants"]
+    assert code == 0 and v["interleaved"] and v["base"] == "torch" and v["steps"] == 2
+    rows = {r["variant"]: r for r in v["rows"]}
+    assert list(rows) == list(cli_bench.VARIANTS)
+    assert rows["torch"]["ratio_p50"] == 1.0 and rows["torch"]["max_deg"] == 0.0
+    assert rows["onnx-2t"]["threads"] == 2 and rows["onnx-2t"]["runtime"] == "onnx"
+    assert rows["onnx-int8"]["int8"] and not rows["onnx"]["int8"]
+    # float32 ONNX Runtime gives torch's poses; int8 weights move them, measurably
+    assert rows["onnx"]["max_deg"] < 0.05 and rows["onnx-2t"]["max_deg"] < 0.05
+    assert all(0 < r["p50_ms"] <= r["p99_ms"] for r in rows.values())
+    # the threads the live loop runs on are given back after the variants
+    assert res["threads"] == 1
+    code = main(["bench", "--json", "--random-weights", "--frames", "3", "--warmup", "1", "--threads", "1",
+                 "--steps", "2", "--no-paper", "--no-confidence", "--no-variants"])
+    assert "variants" not in json.loads(capsys.readouterr().out)
+
+
+def test_rotation_gap_reads_small_angles():
+    from inference.body.rotations import axis_angle_to_matrix
+
+    a = np.eye(3)
+    b = np.asarray(axis_angle_to_matrix(np.array([0.0, 0.0, np.radians(0.01)])))
+    assert cli_bench.rotation_gap_deg(a, a) == 0.0
+    assert abs(cli_bench.rotation_gap_deg(a, b) - 0.01) < 1e-6
