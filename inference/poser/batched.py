@@ -168,6 +168,15 @@ def _pad(x: Tensor, n: int) -> Tensor:
 def _inpaint(poser: Poser, wins: Tensor, masks: Tensor, heights: Tensor, chunk: int) -> Tensor:
     """The answers (c, N, F) of c <= chunk windows, in one call of a fixed batch shape."""
     c = wins.shape[0]
+    if poser.chain_mirror:
+        # mirror averaging of whole chains (Poser._predict_chains), the chunk's windows and
+        # their mirror images in one batch
+        P, idx = poser.mirror_op.mirror, poser.mirror_op.idx
+        w, m, h = _pad(wins, chunk), _pad(masks, chunk), _pad(heights, chunk)
+        out = inpaint(poser.net_for(2 * chunk, mirror=False), torch.cat([w, P(w)]), torch.cat([m, m[..., idx]]),
+                      torch.cat([h, h]), poser.steps, schedule=poser.schedule, mode=poser.inpaint_mode,
+                      mask_input=poser.model.config.mask_input, start="mean")
+        return (0.5 * (out[:chunk] + P(out[chunk:])))[:c]
     out = inpaint(poser.net_for(chunk), _pad(wins, chunk), _pad(masks, chunk), _pad(heights, chunk),
                   poser.steps, schedule=poser.schedule, mode=poser.inpaint_mode,
                   mask_input=poser.model.config.mask_input, start="mean")

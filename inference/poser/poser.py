@@ -172,7 +172,9 @@ class Poser:
     ``default_steps(model)``. seed: the inpainting noise generator's seed, so a replay is
     reproducible. root_xy0: where the root path starts. confidence: a per-segment spread
     with each frame (``confidence.ConfidenceSettings``, True for its defaults; diffusion
-    models only); the pose itself is the same with it on or off.
+    models only); the pose itself is the same with it on or off. mirror_chains: with mirror
+    averaging, average whole inpainting chains of the window and its mirror image instead of
+    each model call (``_predict_chains``; None: the model file's ``mirror_chains``, off).
     """
 
     def __init__(
@@ -197,6 +199,7 @@ class Poser:
         pelvis_odometry: Odometry | str | os.PathLike | None = "default",
         confidence: ConfidenceSettings | bool | None = None,
         runtime: str = "torch",
+        mirror_chains: bool | None = None,
     ) -> None:
         self.model = model
         # the frame-by-frame call through ONNX Runtime where that is faster (live sessions ask
@@ -261,6 +264,14 @@ class Poser:
         else:
             self._mean = torch.zeros(N_FEATURES)
             self._std = torch.ones(N_FEATURES)
+        chains = mirror_chains if mirror_chains is not None else bool(meta.get("mirror_chains", False))
+        self.chain_mirror = (chains and self.kind == "diffusion" and bool(self.mirror)
+                             and self.noise_mode == "mean" and not self.takes_points)
+        self.mirror_op = None
+        if self.chain_mirror:
+            from inference.features.mirror import MirrorAveraged
+
+            self.mirror_op = MirrorAveraged(model.model, model.norm_mean, model.norm_std)
         self._height = torch.tensor([self.body.height], dtype=torch.float32)
         self._offsets = torch.as_tensor(self.body.offsets, dtype=torch.float32)
         self._contact_offsets = torch.as_tensor(self.body.contact_offsets, dtype=torch.float32)
@@ -370,6 +381,8 @@ class Poser:
 
     # ------------------------------------------------------------------ one step
     def _predict(self, win: Tensor, mask: Tensor) -> Tensor:
+        if self.chain_mirror:
+            return self._predict_chains(win, mask)
         if self.kind == "diffusion":
             if self.noise_mode == "fixed":
                 self._gen.manual_seed(self.seed)
@@ -380,6 +393,20 @@ class Poser:
         if self.kind == "regressor":
             return regress(self._net, win, mask, self._height)
         return torch.where(mask, win, self._stand_win)
+
+    def _predict_chains(self, win: Tensor, mask: Tensor) -> Tensor:
+        """Mirror averaging of whole inpainting chains: the window and its mirror image are
+        inpainted side by side (one batch of two) and the answers averaged, the second
+        mirrored back. Equivariant exactly: a standing body measured symmetric gets
+        symmetric legs, which averaging each model call does not give, since the chains'
+        common start (the data mean) is not its own mirror image."""
+        P = self.mirror_op.mirror
+        w2 = torch.cat([win, P(win)])
+        m2 = torch.cat([mask, mask[..., self.mirror_op.idx]])
+        out = inpaint(self.net_for(2, mirror=False), w2, m2, self._height.expand(2), self.steps, generator=self._gen,
+                      schedule=self.schedule, mode=self.inpaint_mode, mask_input=self.model.config.mask_input,
+                      start="mean")
+        return 0.5 * (out[:1] + P(out[1:]))
 
     def step(self, features: np.ndarray | Tensor, observed_mask: np.ndarray | Tensor,
              points: np.ndarray | Tensor | None = None) -> PoseFrame:
