@@ -4,15 +4,16 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
-if ! command -v xvfb-run >/dev/null || ! command -v strace >/dev/null; then
+if ! command -v xvfb-run >/dev/null || ! command -v strace >/dev/null || ! command -v chromium >/dev/null; then
   # Xvfb and the libraries Qt's xcb platform plugin needs; strace for the tests that watch
-  # where the simulator and a capture send (tests/socket_watch.py)
+  # where the simulator and a capture send (tests/socket_watch.py); chromium for the gait report's
+  # PDF and its browser test (tests/app/report/test_report.py)
   export DEBIAN_FRONTEND=noninteractive
   SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
   $SUDO apt-get update -qq
   $SUDO apt-get install -y -qq xvfb xauth libgl1-mesa-dri libegl1 libxkbcommon-x11-0 libxcb-cursor0 \
     libxcb-icccm4 libxcb-keysyms1 libxcb-image0 libxcb-render-util0 libxcb-xinerama0 libxcb-randr0 \
-    libxcb-shape0 libxcb-xkb1 libdbus-1-3 libfontconfig1 strace >/dev/null
+    libxcb-shape0 libxcb-xkb1 libdbus-1-3 libfontconfig1 strace chromium >/dev/null
 fi
 .venv/bin/ruff check .
 XVFB=(xvfb-run -a -s "-screen 0 1280x1024x24")

@@ -12,6 +12,7 @@ from .analysis import GaitAnalysis, analyse_recording, figures
 from .angles import ANGLES
 from .compare import compare
 from .confidence import confidence_of, worn_sites
+from .feet import feet_check
 from .html import ReportInput, render
 from .normal import load_band
 from .plots import cycle_figure, timeline_figure
@@ -32,7 +33,9 @@ def report_input(path: str | Path) -> ReportInput:
     info = session_info(rec)
     sites = worn_sites(rec.recon.get("observed_sites"), tuple(info.sensors))
     conf = confidence_of(sites, rec.recon.get("spread_deg"))
-    return ReportInput(info, an, figures(an), conf, load_band())
+    fig = figures(an)
+    fig["feet_check"] = feet_check(rec, an.events)
+    return ReportInput(info, an, fig, conf, load_band())
 
 
 def summary_json(r: ReportInput) -> dict[str, Any]:

@@ -138,7 +138,7 @@ def strides_section(r: ReportInput) -> str:
         body = _no_walk(r)
     ex = fig["excluded"]
     left = "; ".join(f"{n} {k}" for k, n in ex.items() if n) or "none"
-    return (f'<section id="strides"><h2>Strides</h2>{body}'
+    return (f'<section id="strides"><h2>Strides</h2>{body}{feet_table(fig.get("feet_check"))}'
             f"<p>Strides left out of the figures: {e(left)} (a turn: the pelvis turned more than {TURN_DEG:.0f} deg "
             f"in the stride; standing: longer than {MAX_STRIDE_S} s, slower than {MIN_SPEED_MPS} m/s or stance over "
             f"{MAX_STANCE_PCT:.0f} %; not walking: shorter than {MIN_STRIDE_S} s or stance under "
@@ -146,6 +146,20 @@ def strides_section(r: ReportInput) -> str:
             f"{_img(r.images.get('timeline'), 'strides over time')}"
             "<p class='muted'>Symmetry index: 100 (L - R) / mean(L, R); 0 is symmetric, positive means the left is "
             "larger.</p></section>")
+
+
+def feet_table(check: dict[str, Any] | None) -> str:
+    """The foot sensors' still periods against the stances found (``feet.check``)."""
+    if not check:
+        return ""
+    rows = "".join(
+        f"<tr><td class='l'>{'left' if side == 'l' else 'right'}</td><td>{c['still_steps']}</td><td>{c['covered']}"
+        f"</td><td>{c['found_stances']}</td><td>{c['found_without_still']}</td><td>{f(c['strike_lead_ms'], 0)}</td>"
+        f"<td>{f(c['off_lag_ms'], 0)}</td></tr>" for side, c in check.items())
+    return ("<p>Checked against the foot sensors (a still foot is a foot on the ground):</p><table><tr>"
+            "<th class='l'>foot</th><th>steps the sensor saw</th><th>inside a stance found</th><th>stances found</th>"
+            "<th>found with no still foot</th><th>strike before still (ms)</th><th>off after still (ms)</th></tr>"
+            f"{rows}</table>")
 
 
 def _status(conf: Confidence, angle: str, side: str) -> str:
@@ -179,6 +193,16 @@ def cycles_section(r: ReportInput) -> str:
             "the motion capture imucap learns from, <b>not clinical normative data</b>.")
     plot = _img(r.images.get("cycles"), "joint angles over the gait cycle") or \
         "<p class='warn'>No walking stride: no gait cycle to draw.</p>"
+    span = lambda c: "&mdash;" if c is None or len(c) == 0 else f"{c.min():.1f} to {c.max():.1f}"  # noqa: E731
+    rows = ""
+    for a in ANGLES:
+        mean = {side: (r.analysis.cycles[side][a].mean(axis=0) if len(r.analysis.cycles[side][a]) else None)
+                for side in SIDES}
+        b = None if band is None or band.get(a) is None else band.get(a)[0]
+        rows += (f"<tr><td class='l'>{ANGLES[a][0]} ({e(ANGLES[a][1])})</td><td>{span(mean['l'])}</td>"
+                 f"<td>{span(mean['r'])}</td><td>{span(b)}</td></tr>")
+    plot += ("<table><tr><th class='l'>mean curve, deg</th><th>left</th><th>right</th><th>comparison band</th></tr>"
+             f"{rows}</table>")
     return (f'<section id="cycles" class="page"><h2>Joint angles over the gait cycle</h2>{plot}'
 
             f"<p class='muted'>Coloured: this walk's mean &plusmn; SD over its walking strides; the dotted line is "

@@ -27,7 +27,7 @@ from .analysis import analyse
 from .events import truth_contact_values
 
 BAND_FILE = Path(__file__).with_name("normal_band.json")
-MIN_STRIDES = 3  # walking strides of one foot at least, for a trial to count
+MIN_STRIDES = 1  # walking strides of each foot at least (CMU's takes are 2-3 s: one or two strides a foot)
 MIN_WALKING_SHARE = 0.6  # of a trial's strides (both feet) classified walking
 SPEED_MPS = (0.8, 1.8)  # an ordinary adult walk (a trial's mean walking speed)
 FPS = 60.0

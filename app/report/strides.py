@@ -35,7 +35,7 @@ MAX_STRIDE_S = 2.5  # a very slow walk's stride is ~1.6-2 s
 MIN_STRIDE_S = 0.6  # ~200 steps/min: faster is a run or a hop
 MIN_SPEED_MPS = 0.1  # slower: stepping on the spot
 MAX_STANCE_PCT = 85.0  # walking 55-70 %
-MIN_STANCE_PCT = 45.0  # below half the stride, both feet are in the air at times: a run
+MIN_STANCE_PCT = 35.0  # walking 55-65 % (a speed-threshold contact reads ~50); a run ~30 %, a jog 2-5 % here
 KINDS = ("walking", "turning", "standing", "not walking")
 PARAMETERS = ("time_s", "stance_pct", "swing_pct", "double_support_pct", "length_m", "speed_mps")
 
