@@ -1,16 +1,18 @@
 """`imucap validate`: a recording's reconstruction against a lab's reference system.
 
     imucap validate REC.h5 --reference FILE [--sensors SET ...] [--json] [--report DIR]
-                    [--model M] [--steps K] [--seed S] [--time-offset S] [--heading DEG]
+                    [--model M] [--steps K] [--seed S] [--offset S] [--heading DEG]
                     [--height M] [--threads N]
 
 The reference: an MVN BVH or MVNX take, a BVH from another system (mapped onto our
 skeleton by joint names; the mapping is printed), C3D or TRC markers or joint centres,
 an OpenSim .mot/.sto (Rajagopal coordinate names), or imucap's truth .npz. The recording
 is re-run once per ``--sensors`` set (default: every recorded sensor); the time offset
-comes from correlating joint angles, the heading is one yaw for the trial, and both can
-be given. ``--json`` prints one object (time_offset_s, heading_deg, subsets, baseline);
-``--report DIR`` writes report.md with plots and validation.json. docs/validation.md.
+comes from correlating joint angles (a warning names the candidates when the best peak
+is low or another is nearly as high, e.g. one stride away on a steady walk), the heading
+is one yaw for the trial, and both can be given (``--offset``, ``--heading``). ``--json``
+prints one object (time_offset_s, heading_deg, subsets, baseline, warnings); ``--report
+DIR`` writes report.md with plots and validation.json. docs/validation.md.
 """
 
 from __future__ import annotations
@@ -33,8 +35,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--model", default="diffusion", help="diffusion | regressor | floor | PATH.pt (default diffusion)")
     p.add_argument("--steps", default=None, help="diffusion steps (default: as recorded)")
     p.add_argument("--seed", type=int, default=None, help="inpainting seed (default: the session's)")
-    p.add_argument("--time-offset", type=float, default=None, metavar="S",
-                   help="reference clock minus the recording's (s): skip the search")
+    p.add_argument("--offset", "--time-offset", dest="time_offset", type=float, default=None, metavar="S",
+                   help="reference clock minus the recording's (s): skip the search (e.g. one of the candidates "
+                        "a warning names)")
     p.add_argument("--heading", type=float, default=None, metavar="DEG",
                    help="yaw turning the recording's world onto the reference's: skip the search")
     p.add_argument("--height", type=float, default=None, help="subject height in m (default: from the recording)")
@@ -58,6 +61,8 @@ def run_validate(args: argparse.Namespace) -> int:
                  progress=progress)
     for line in v.reference.mapping:
         print(f"validate: mapping {line}", file=sys.stderr)
+    for w in v.alignment.warnings:
+        print(f"validate: warning: {w}", file=sys.stderr)
     s = v.summary()
     if args.report:
         from app.validate.report import write_report

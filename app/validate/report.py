@@ -134,6 +134,10 @@ def markdown(v: Validation, plots: dict[str, Path | None], command: str | None =
                  f", correlation {corr:.3f} of {', '.join(s['time_offset_joints'])}"),
               f"- heading (turns the recording's world onto the reference's): **{s['heading_deg']:.2f} deg** "
               f"(from {s['heading_from']})", ""]
+    if len(s["time_offset_candidates"]) > 1:
+        lines += ["Offset candidates (the search's best peaks): " + ", ".join(
+            f"{c['time_offset_s']:+.3f} s ({c['correlation']:.3f})" for c in s["time_offset_candidates"]), ""]
+    lines += [f"**Warning:** {w}" for w in s["warnings"]] + ([""] if s["warnings"] else [])
     if v.reference.mapping:
         lines += ["Mapping (ours <- reference):", "", *[f"    {m}" for m in v.reference.mapping], ""]
     for n in v.reference.notes:

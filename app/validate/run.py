@@ -13,9 +13,9 @@ import numpy as np
 
 from app.validate.align import (
     Alignment,
-    find_time_offset,
     heading_from_directions,
     heading_from_rotations,
+    search_time_offset,
 )
 from app.validate.compare import Track, bland_altman, compare, reference_at
 from app.validate.kinematics import JOINT_INDEX, directions, paired_joint_angles
@@ -57,6 +57,9 @@ class Validation:
                 "time_offset_s": round(a.time_offset_s, 4),
                 "time_offset_correlation": None if a.correlation is None else round(a.correlation, 4),
                 "time_offset_joints": a.joints, "time_offset_given": a.time_given,
+                "time_offset_candidates": [{"time_offset_s": round(o, 4), "correlation": round(c, 4)}
+                                           for o, c in a.candidates],
+                "warnings": list(a.warnings),
                 "heading_deg": round(a.heading_deg, 3), "heading_from": a.heading_from,
                 "heading_given": a.heading_given,
                 "mapping": ref.mapping, "notes": ref.notes,
@@ -97,14 +100,15 @@ def align(run: Track, ref: Reference, time_offset: float | None = None, heading_
     if time_offset is None:
         a_run, a_ref = paired_joint_angles(run, ref)
         keep = [j for j in a_run if j.split("_")[1] in OFFSET_JOINTS]
-        lag, corr, used = find_time_offset(run.t, {j: a_run[j] for j in keep}, ref.t, {j: a_ref[j] for j in keep})
+        lag, corr, used, cands, warns = search_time_offset(run.t, {j: a_run[j] for j in keep}, ref.t,
+                                                           {j: a_ref[j] for j in keep})
     else:
-        lag, corr, used = float(time_offset), None, []
+        lag, corr, used, cands, warns = float(time_offset), None, [], [], []
     inside, r = reference_at(ref, run.t + lag)
     if not inside.any():
         raise ValueError(f"{ref.path}: no reference frame overlaps the recording at a time offset of {lag:.3f} s")
     if heading_deg is not None:
-        return Alignment(lag, corr, used, float(heading_deg), "given", time_offset is not None, True)
+        return Alignment(lag, corr, used, float(heading_deg), "given", time_offset is not None, True, cands, warns)
     segs = [i for i in EVAL_SEGMENTS if SEGMENTS[i] in ref.have_rot]
     if r.rot is not None and segs:
         yaw, how = heading_from_rotations(run.rot[inside][:, segs], r.rot[:, segs]), "orientations"
@@ -112,7 +116,7 @@ def align(run: Track, ref: Reference, time_offset: float | None = None, heading_
         yaw = heading_from_directions(directions(run.joints[inside], run.have_joints),
                                       directions(r.joints, r.have_joints))
         how = "segment directions"
-    return Alignment(lag, corr, used, float(np.rad2deg(yaw)), how, time_offset is not None, False)
+    return Alignment(lag, corr, used, float(np.rad2deg(yaw)), how, time_offset is not None, False, cands, warns)
 
 
 def turned(track: Track, yaw_deg: float, inside: np.ndarray) -> Track:
