@@ -5,9 +5,13 @@ in our world (Z up, X the subject's forward at calibration), and events: ``Foot 
 and ``Foot Off`` per side from the contacts (context ``Left``/``Right``), as Vicon
 labels them. Written with ezc3d, the maintained C3D library, not by hand.
 
-Frame 0 is the first exported frame; a gap the live poser left (dropped frames) is
-filled by the nearest frame, since a C3D's frames are equally spaced (``time`` of each
-frame = first + k / rate).
+Frame 0 is the first exported frame; a C3D's frames are equally spaced (``time`` of each
+frame = first + k / rate), so a gap the live poser left (dropped frames) becomes frames
+marked as not measured: their points are written as NaN, which ezc3d stores as residual
+-1 (the C3D standard's invalid point; ezc3d reads it back as NaN, the ``c3d`` package as a
+negative residual). Events come from the contacts debounced as the gait numbers debounce
+them (``inference.metrics.gait.debounced_contact``): one strike and one off per step even
+when the contact flickers.
 """
 
 from __future__ import annotations
@@ -33,6 +37,13 @@ def regular_frames(m: ExportMotion) -> np.ndarray:
     return np.clip(k, 0, m.n_frames - 1)
 
 
+def filled(m: ExportMotion, k: np.ndarray) -> np.ndarray:
+    """(len(k),) bool: output frames with no motion frame of their own (the nearest one,
+    more than half a frame away, stands in for them)."""
+    grid = m.time[0] + np.arange(len(k)) / m.fps if m.n_frames else np.zeros(0)
+    return np.abs(m.time[k] - grid) > 0.5 / m.fps
+
+
 def write_c3d(path: str | os.PathLike, m: ExportMotion) -> Path:
     from drivers.extras import need
 
@@ -41,6 +52,7 @@ def write_c3d(path: str | os.PathLike, m: ExportMotion) -> Path:
     path = Path(path)
     k = regular_frames(m)
     pos = marker_positions(m.rot, m.joints, m.body)[k] * SCALE  # (T, N, 3)
+    pos[filled(m, k)] = np.nan  # not measured: residual -1
     names = marker_names()
     c = ezc3d.c3d()
     c["parameters"]["POINT"]["RATE"]["value"] = [float(m.fps)]
@@ -64,4 +76,4 @@ def write_c3d(path: str | os.PathLike, m: ExportMotion) -> Path:
     return path
 
 
-__all__ = ["write_c3d", "regular_frames", "UNITS"]
+__all__ = ["write_c3d", "regular_frames", "filled", "UNITS"]

@@ -20,6 +20,7 @@ import numpy as np
 
 from inference.body.body import Body, points_on_segments
 from inference.body.skeleton import SEGMENT_INDEX, SEGMENTS
+from inference.metrics.gait import debounced_contact
 
 JOINT_NAMES: dict[str, str] = {
     "pelvis": "pelvis", "l_thigh": "l_hip", "r_thigh": "r_hip", "spine1": "spine1", "l_shank": "l_knee",
@@ -57,10 +58,13 @@ def marker_positions(rot: np.ndarray, joints: np.ndarray, body: Body) -> np.ndar
 def contact_events(time: np.ndarray, contacts: np.ndarray) -> list[tuple[float, str, str]]:
     """(time s, context 'Left'/'Right', 'Foot Strike' | 'Foot Off') from the contact
     flags (l_heel, l_toe, r_heel, r_toe): a strike when the foot's first point lands after
-    both were up, an off when its last point leaves: the events gait software names so."""
+    both were up, an off when its last point leaves: the events gait software names so.
+    Debounced as the gait numbers are (``gait.debounced_contact``): a foot up for less
+    than ``gait.MIN_SWING_S`` was never up, so a flickering contact gives one strike and
+    one off per step."""
     out = []
     for side, cols in (("Left", (0, 1)), ("Right", (2, 3))):
-        down = contacts[:, cols].any(axis=1)
+        down = debounced_contact(time, contacts[:, cols].any(axis=1))
         for k in np.flatnonzero(np.diff(down.astype(int)) != 0) + 1:
             out.append((float(time[k]), side, "Foot Strike" if down[k] else "Foot Off"))
     return sorted(out)

@@ -6,7 +6,8 @@ CameraRate NumFrames NumMarkers Units OrigDataRate OrigDataStartFrame OrigNumFra
 one of their values; ``Frame# Time`` and the marker names (each over three columns);
 ``X1 Y1 Z1 X2 ...``; an empty line; one row per frame. Millimetres, in OpenSim's ground
 (X forward, Y up, Z to the subject's right: ``app.export.opensim.M_OS``), time in seconds
-since the recording's first raw frame. Equally spaced frames as the C3D's.
+since the recording's first raw frame. Equally spaced frames as the C3D's; a frame the
+poser dropped is written with empty cells (TRC's missing marker), as the C3D marks it.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.export.c3d_file import regular_frames
+from app.export.c3d_file import filled, regular_frames
 from app.export.common import ExportMotion, atomic_target
 from app.export.markers import marker_names, marker_positions
 from app.export.opensim import M_OS
@@ -30,7 +31,8 @@ def trc_text(name: str, time: np.ndarray, names: list[str], pos_mm: np.ndarray, 
              "\t".join(["Frame#", "Time"] + [f"{n}\t\t" for n in names]).rstrip("\t"),
              "\t".join(["", ""] + [f"X{i}\tY{i}\tZ{i}" for i in range(1, N + 1)]), ""]
     for t in range(T):
-        lines.append("\t".join([str(t + 1), f"{time[t]:.6f}", *(f"{v:.4f}" for v in pos_mm[t].reshape(-1))]))
+        lines.append("\t".join([str(t + 1), f"{time[t]:.6f}",
+                                *("" if np.isnan(v) else f"{v:.4f}" for v in pos_mm[t].reshape(-1))]))
     return "\n".join(lines) + "\n"
 
 
@@ -38,6 +40,7 @@ def write_trc(path: str | os.PathLike, m: ExportMotion) -> Path:
     path = Path(path)
     k = regular_frames(m)
     pos = marker_positions(m.rot, m.joints, m.body)[k] @ M_OS.T * 1000.0
+    pos[filled(m, k)] = np.nan
     time = m.time[0] + np.arange(len(k)) / m.fps
     tmp = atomic_target(path)
     tmp.write_text(trc_text(path.name, time, marker_names(), pos, m.fps))

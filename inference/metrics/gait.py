@@ -44,20 +44,34 @@ def knee_flexion_deg(rot: np.ndarray) -> np.ndarray:
     return np.stack([joint_angles.knee_flexion_deg(rot, s) for s in joint_angles.SIDES], axis=-1)
 
 
+def debounced_contact(t: np.ndarray, down: np.ndarray, min_swing_s: float = MIN_SWING_S) -> np.ndarray:
+    """(T,) bool: a foot's contact with every time in the air shorter than ``min_swing_s``
+    filled in (a flicker off and on around heel strike or toe off is not a step); the time
+    before the first contact counts as in the air since the window began. A time in the air
+    still open at the window's end is kept."""
+    t = np.asarray(t, dtype=np.float64)
+    d = np.asarray(down, bool).copy()
+    if not d.any():
+        return d
+    edges = np.flatnonzero(np.diff(d.astype(np.int8)))  # last index before each change
+    starts = [0] + list(edges + 1)
+    for a, b in zip(starts, [*starts[1:], len(d)]):
+        if d[a] or b == len(d):  # a contact run, or the air run open at the end
+            continue
+        if t[b] - t[a] < min_swing_s:  # first frame up (or the window's start) to first frame down
+            d[a:b] = True
+    return d
+
+
 def foot_strikes(t: np.ndarray, contacts: np.ndarray) -> np.ndarray:
-    """Times at which either foot comes down (its heel or toe contact switching on), sorted."""
+    """Times at which either foot comes down (its heel or toe contact switching on after
+    ``MIN_SWING_S`` in the air: ``debounced_contact``), sorted."""
     c = np.asarray(contacts, bool)
     t = np.asarray(t, dtype=np.float64)
     times = []
     for heel, toe in FEET:
-        down = (c[:, heel] | c[:, toe]).astype(np.int8)
-        edges = np.diff(down)
-        ups, downs = t[1:][edges < 0], t[1:][edges > 0]
-        for ti in downs:
-            before = ups[ups < ti]
-            lifted = before[-1] if len(before) else t[0]  # in the air since the window began
-            if ti - lifted >= MIN_SWING_S:
-                times.append(ti)
+        down = debounced_contact(t, c[:, heel] | c[:, toe]).astype(np.int8)
+        times.extend(t[1:][np.diff(down) > 0])
     return np.sort(np.asarray(times, dtype=np.float64))
 
 
