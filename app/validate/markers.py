@@ -1,6 +1,6 @@
-"""Marker files as joint centres: C3D (read with ezc3d) and OpenSim's TRC (text).
+"""Marker files as joint centres and segment frames: C3D (read with the pure-Python
+``c3d`` package; ``read_c3d`` says why not ezc3d) and OpenSim's TRC (text).
 
-C3D is read with the pure-Python ``c3d`` package (``read_c3d`` says why not ezc3d).
 A lab's file names its points as its software does. We take a point as one of our joint
 centres (``kinematics.JOINT_NAMES``) when its label, lower-cased without a subject
 prefix (``Subject:``), is our name or one of the aliases below: the joint-centre names
@@ -11,6 +11,12 @@ only surface markers, the lateral markers at the joint (``LKNE``, ``LANK``, ``LS
 lines say. Units come from the file (C3D ``POINT:UNITS``, TRC ``Units``); the up axis
 is the one the legs hang along (hip above ankle), turned onto our Z (Y up is taken as
 OpenSim's ground, X forward; any other heading is found by the alignment).
+
+Surface markers beyond joint centres (``landmarks.py``): Plug-in Gait's segment axes,
+anatomical landmarks (ASIS/PSIS, epicondyles, malleoli, heel, toe) giving the hip, knee
+and ankle centres and the segment frames, and a static trial's landmarks carried into
+the walking trial by marker clusters. A joint centre the file names (``LKJC``, ours)
+wins over one computed from landmarks, which wins over a lateral marker standing in.
 """
 
 from __future__ import annotations
@@ -176,22 +182,44 @@ def read_trc(path: str | os.PathLike) -> Markers:
     return Markers(spath, a[:, 0], a[:, 1:].reshape(len(a), n_markers, 3) * UNITS[units], names, rate)
 
 
+LATERAL_ONLY = {"kne", "ank", "sho", "elb", "wra", "toe"}
+
+
 def marker_joints(m: Markers) -> tuple[np.ndarray, set[str], list[str]]:
     """(joints (T, 24, 3) in our Z-up world, NaN where unknown; the joints found; mapping
-    lines 'ours <- theirs') of a marker file. The up axis: along which the hips stand above
-    the ankles (or knees), on average."""
+    lines 'ours <- theirs') of a marker file (``marker_reference`` without the frames)."""
+    J, have, lines, _, _ = marker_reference(m)
+    return J, have, lines
+
+
+def marker_reference(m: Markers) -> tuple[np.ndarray, set[str], list[str], dict[str, np.ndarray], list[str]]:
+    """(joints (T, 24, 3) in our Z-up world, NaN where unknown; the joints found; mapping
+    lines 'ours <- theirs'; segment -> (T, 3, 3) frames from the markers; notes) of a marker
+    file. The up axis: along which the hips stand above the ankles (or knees), on average."""
+    from app.validate.landmarks import anatomy, frames_in_world, normalise, pig_frames
+
     found = map_joints(m.labels)
-    if not found:
-        raise MotionFormatError(m.path, f"none of its {len(m.labels)} points is a joint centre we know "
-                                        f"(e.g. l_knee, LKJC, LKNE); labels: {', '.join(m.labels[:12])}")
+    anat = anatomy(m.pos, m.labels, 1.0)
     T = m.pos.shape[0]
     J = np.full((T, len(JOINT_INDEX), 3), np.nan)
+    lines = []
     for joint, k in found.items():
         J[:, JOINT_INDEX[joint]] = m.pos[:, k]
+    for joint, c in anat.centres.items():
+        label = normalise(m.labels[found[joint]]) if joint in found else None
+        if label is None or label[1:] in LATERAL_ONLY or label[:-1] in LATERAL_ONLY:
+            J[:, JOINT_INDEX[joint]] = c
+            found.pop(joint, None)
+            lines.append(f"{joint} <- landmarks")
+    have = set(found) | {j for j in anat.centres if f"{j} <- landmarks" in lines}
+    if not have:
+        raise MotionFormatError(m.path, f"none of its {len(m.labels)} points is a joint centre we know "
+                                        f"(e.g. l_knee, LKJC, LKNE) or a landmark set that gives them (ASIS and "
+                                        f"PSIS, epicondyles, malleoli); labels: {', '.join(m.labels[:12])}")
     up = None
     for top, bottom in (("hip", "ankle"), ("hip", "knee"), ("shoulder", "elbow")):
         d = [J[:, JOINT_INDEX[f"{s}_{top}"]] - J[:, JOINT_INDEX[f"{s}_{bottom}"]] for s in "lr"
-             if f"{s}_{top}" in found and f"{s}_{bottom}" in found]
+             if f"{s}_{top}" in have and f"{s}_{bottom}" in have]
         d = np.concatenate(d) if d else np.zeros((0, 3))
         d = d[np.all(np.isfinite(d), axis=-1)]
         if len(d):
@@ -199,13 +227,19 @@ def marker_joints(m: Markers) -> tuple[np.ndarray, set[str], list[str]]:
             break
     if up is None or not np.all(np.isfinite(up)) or np.linalg.norm(up) < 1e-6:
         raise MotionFormatError(m.path, "cannot tell which way is up: it needs hip and knee or ankle centres "
-                                        f"(found {', '.join(sorted(found))})")
+                                        f"(found {', '.join(sorted(have))})")
     k = int(np.argmax(np.abs(up)))
     # Y up is OpenSim's ground (X forward, Z right): its own map keeps X forward; else any proper turn
     W = M_OS.T if (k == 1 and up[1] > 0) else world_map(up)
     J = J @ W.T
-    lines = [f"{j} <- {m.labels[k]}" for j, k in found.items()]
-    return J, set(found), lines
+    axes = {**anat.axes, **pig_frames(m.pos, m.labels)}  # a lab's own segment axes win
+    frames = frames_in_world(axes, W)
+    lines = [f"{j} <- {m.labels[k]}" for j, k in found.items()] + lines
+    if frames:
+        lines.append("segment frames <- " + ", ".join(
+            f"{s} ({'Plug-in Gait axes' if s in pig_frames(m.pos[:1], m.labels) else 'landmarks'})"
+            for s in sorted(frames)))
+    return J, have, lines, frames, anat.notes
 
 
-__all__ = ["Markers", "UNITS", "map_joints", "read_c3d", "read_trc", "marker_joints"]
+__all__ = ["Markers", "UNITS", "map_joints", "read_c3d", "read_trc", "marker_joints", "marker_reference"]

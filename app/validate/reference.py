@@ -70,16 +70,19 @@ def _kind(path: Path) -> str:
     raise MotionFormatError(str(path), f"not a reference file we read ({', '.join(REFERENCE_SUFFIXES)})")
 
 
-def read_reference(path: str | os.PathLike, body: Body | None = None) -> Reference:
+def read_reference(path: str | os.PathLike, body: Body | None = None,
+                   static: str | os.PathLike | None = None) -> Reference:
     """The reference in ``path`` (module docstring). ``body``: the subject's bones, for
-    a .mot (which has joint angles, not lengths); 1.75 m proportions without it."""
+    a .mot (which has joint angles, not lengths); 1.75 m proportions without it.
+    ``static``: a static trial of the same marker set (C3D or TRC) whose landmarks the
+    walking trial lacks (``landmarks.with_static``)."""
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"{p}: no such reference file")
     kind = _kind(p)
     try:
         if kind in ("c3d", "trc"):
-            return _from_markers(p, kind)
+            return _from_markers(p, kind, static)
         if kind in ("mot", "sto"):
             return read_mot_reference(p, body or Body.from_height(1.75))
         if kind == "npz" and _is_truth(p):
@@ -140,14 +143,28 @@ def _from_truth(p: Path) -> Reference:
     return _rotation_reference(p, "truth", t, tr.rot, tr.root, tr.offsets, set(SEGMENTS), [], [note])
 
 
-def _from_markers(p: Path, kind: str) -> Reference:
-    from app.validate.markers import marker_joints, read_c3d, read_trc
+def _from_markers(p: Path, kind: str, static: str | os.PathLike | None = None) -> Reference:
+    from app.validate.landmarks import with_static
+    from app.validate.markers import Markers, marker_reference, read_c3d, read_trc
 
-    m = read_c3d(p) if kind == "c3d" else read_trc(p)
+    def read(q: Path) -> Markers:
+        return read_c3d(q) if q.name.lower().endswith(".c3d") else read_trc(q)
+
+    m = read(p)
     if not np.all(np.isfinite(m.t)) or np.any(np.diff(m.t) <= 0):
         raise MotionFormatError(str(p), "frame times do not increase")
-    J, have, mapping = marker_joints(m)
-    return Reference(str(p), kind, m.t, J, have, None, set(), mapping)
+    extra: list[str] = []
+    if static is not None:
+        s = read(Path(static))
+        pos, labels, extra = with_static(m.pos, m.labels, s.pos, s.labels)
+        m = Markers(m.path, m.t, pos, labels, m.rate)
+    J, have, mapping, frames, notes = marker_reference(m)
+    R = None
+    if frames:
+        R = np.broadcast_to(np.eye(3), (len(m.t), len(SEGMENTS), 3, 3)).copy()
+        for seg, f in frames.items():
+            R[:, SEGMENT_INDEX[seg]] = f
+    return Reference(str(p), kind, m.t, J, have, None, set(), mapping + extra, notes, R, set(frames))
 
 
 # ---------------------------------------------------------------------------- OpenSim .mot/.sto

@@ -6,8 +6,9 @@ Why: a lab with MVN takes has, in one file, both the sensors a sparse setup woul
 answer. Read as motion, the take is truth for a re-run with a few of its sensors, and a
 clip for ``imucap evaluate``.
 
-The layout (MVNX version 4, as MVN's schema and a public MVN 2019 take have it): each
-``<segment label="...">`` lists its points in its own frame (``pos_b``, metres); a joint is
+The layout (MVNX version 4, as MVN's schema and a public MVN 2019 take have it; version 3,
+MVN Studio 4.x, names the points' positions ``pos_s`` instead of ``pos_b`` and is read the
+same way): each ``<segment label="...">`` lists its points in its own frame (metres); a joint is
 a point both segments name (``jRightHip`` on Pelvis and at the origin of RightUpperLeg), so
 the zero pose follows from the points alone. At zero rotation MVN's body stands in a
 T-pose, X forward, Y left, Z up (the file's ``identity`` frame), the world is Z up, and
@@ -96,7 +97,7 @@ def parse_mvnx(path: str | os.PathLike, max_frames: int | None = None) -> tuple[
                     point = elem.get("label", "")
                 continue
             open_elems.pop()
-            if tag == "pos_b" and segment is not None and point is not None:
+            if tag in ("pos_b", "pos_s") and segment is not None and point is not None:
                 v = _vec(elem, 3)
                 if v is not None:
                     points[segment][point] = v
