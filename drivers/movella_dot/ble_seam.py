@@ -111,7 +111,18 @@ class BleakLink:
 
 
 class BleakSeam:
-    """Bluetooth LE through bleak (BlueZ over D-Bus on Linux, CoreBluetooth, WinRT)."""
+    """Bluetooth LE through bleak (BlueZ over D-Bus on Linux, CoreBluetooth, WinRT).
+
+    ``client_backend`` and ``scanner_backend`` go to bleak's ``BleakClient`` and
+    ``BleakScanner`` as their ``backend=`` (subclasses of ``bleak.backends.client.BaseBleakClient``
+    and ``bleak.backends.scanner.BaseBleakScanner``); ``None``, the default, is the platform's own
+    stack. They exist so that this class, its loop thread and bleak above the backend can run
+    against a stand-in of the radio (``tests/drivers/dot_bleak_backend.py`` serves simulated DOTs).
+    """
+
+    def __init__(self, client_backend: type | None = None, scanner_backend: type | None = None) -> None:
+        self.client_backend = client_backend
+        self.scanner_backend = scanner_backend
 
     def scan(self, timeout: float) -> list[Advert]:
         """DOTs advertising in range, from their advertisements alone (no connection)."""
@@ -119,7 +130,8 @@ class BleakSeam:
         from bleak import BleakScanner
 
         async def go() -> list[Advert]:
-            found = await BleakScanner.discover(timeout=timeout, return_adv=True)
+            extra = {"backend": self.scanner_backend} if self.scanner_backend is not None else {}
+            found = await BleakScanner.discover(timeout=timeout, return_adv=True, **extra)
             out = []
             for dev, adv in found.values():
                 name = adv.local_name or dev.name or ""
@@ -133,7 +145,9 @@ class BleakSeam:
         need("bleak", "a Movella DOT over Bluetooth LE")
         from bleak import BleakClient
 
-        client = BleakClient(address, disconnected_callback=lambda _c: on_lost("BLE link lost"), timeout=timeout)
+        extra = {"backend": self.client_backend} if self.client_backend is not None else {}
+        client = BleakClient(address, disconnected_callback=lambda _c: on_lost("BLE link lost"), timeout=timeout,
+                             **extra)
         _Loop.run(client.connect(), timeout + 1.0)
         return BleakLink(client)
 

@@ -34,7 +34,9 @@ class MovellaDotDevice(Device):
     """``movella-dot://D4:22:CD:00:01:27`` (bleak; on macOS the CoreBluetooth UUID a scan lists,
     ``movella-dot://6E400001-B5A3-F393-E0A9-E50E24DCCA9E``), ``?ble=DIR`` for a simulated DOT whose
     socket is in DIR, ``?rate=60`` the output rate asked for (1-120 Hz, the DOT's list),
-    ``?mode=3`` the payload mode (2 or 3: both carry orientation and free acceleration)."""
+    ``?mode=3`` the payload mode (2 or 3: both carry orientation and free acceleration).
+    ``seam=`` (a keyword of ``drivers.make_device``/``open_device``, not of the URL) hands in the
+    seam to use instead, e.g. a ``BleakSeam`` over another bleak backend."""
 
     scheme = "movella-dot"
 
@@ -72,9 +74,11 @@ class MovellaDotDevice(Device):
             raise ValueError(f"movella-dot URL needs the sensor's Bluetooth address (AA:BB:CC:DD:EE:FF, or on macOS "
                              f"the CoreBluetooth UUID 8-4-4-4-12 hex digits that a scan lists), not {netloc!r}")
         folder = params.get("ble")
-        if not folder:
-            need("bleak", "a Movella DOT over Bluetooth LE (movella-dot://)")
-        seam: BleSeam = SocketSeam(folder) if folder else BleakSeam()
+        seam: BleSeam | None = kw.pop("seam", None)
+        if seam is None:
+            if not folder:
+                need("bleak", "a Movella DOT over Bluetooth LE (movella-dot://)")
+            seam = SocketSeam(folder) if folder else BleakSeam()
         try:
             rate, mode = int(params.get("rate", 60)), int(params.get("mode", dot.MODE_COMPLETE_QUATERNION))
         except ValueError as exc:
