@@ -1,6 +1,6 @@
 """`imucap validate`: a recording's reconstruction against a lab's reference system.
 
-    imucap validate REC.h5 --reference FILE [--sensors SET ...] [--json] [--report DIR]
+    imucap validate REC.h5 --reference FILE [--static FILE] [--sensors SET ...] [--json] [--report DIR]
                     [--model M] [--steps K] [--seed S] [--offset S] [--heading DEG]
                     [--height M] [--threads N]
 
@@ -30,6 +30,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("recording", metavar="REC.h5", help="a session recording")
     p.add_argument("--reference", required=True, metavar="FILE",
                    help="the other system's answer: .bvh, .mvnx, .c3d, .trc, .mot/.sto or a truth .npz")
+    p.add_argument("--static", default=None, metavar="FILE",
+                   help="a static trial (C3D/TRC) of the reference's marker set, for landmarks the trial lacks "
+                        "(e.g. medial knee and ankle markers removed after calibration)")
     p.add_argument("--sensors", action="append", default=[], metavar="SET",
                    help="comma separated recorded sites to re-run with (repeatable; default: all recorded)")
     p.add_argument("--model", default="diffusion", help="diffusion | regressor | floor | PATH.pt (default diffusion)")
@@ -58,7 +61,7 @@ def run_validate(args: argparse.Namespace) -> int:
 
     v = validate(args.recording, args.reference, args.sensors or [None], model=args.model, steps=args.steps,
                  seed=args.seed, time_offset=args.time_offset, heading_deg=args.heading, height=args.height,
-                 progress=progress)
+                 progress=progress, static=args.static)
     for line in v.reference.mapping:
         print(f"validate: mapping {line}", file=sys.stderr)
     for w in v.alignment.warnings:

@@ -156,8 +156,9 @@ def standing_track(t: np.ndarray, body: Body, yaw: float | np.ndarray) -> Track:
 def validate(rec_path: str | os.PathLike, reference: str | os.PathLike, subsets: Sequence[str | None] = (None,),
              model: str = "diffusion", steps: str | None = None, seed: int | None = None,
              time_offset: float | None = None, heading_deg: float | None = None, height: float | None = None,
-             progress: Callable[[str], None] | None = None) -> Validation:
-    """Score a recording's re-runs against a reference (module docstring)."""
+             progress: Callable[[str], None] | None = None, static: str | os.PathLike | None = None) -> Validation:
+    """Score a recording's re-runs against a reference (module docstring); ``static``: a
+    static trial of a marker reference (``reference.read_reference``)."""
     from app.export.formats import body_for_recording
     from app.recording import read_recording
 
@@ -165,7 +166,7 @@ def validate(rec_path: str | os.PathLike, reference: str | os.PathLike, subsets:
         raise FileNotFoundError(f"recording {rec_path} not found")
     rec = read_recording(rec_path)
     body, note = body_for_recording(rec.metadata, height)
-    ref = read_reference(reference, body)
+    ref = read_reference(reference, body, static)
     if note:
         ref.notes.append(note)
     runs = replay_subsets(rec, body, list(subsets), model, steps, seed, progress)
