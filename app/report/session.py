@@ -61,8 +61,11 @@ def _calibration(rec) -> tuple[list[dict[str, Any]], str, list[str]]:
     """Per-site rows of the last calibration that took effect, a one-line summary and its warnings."""
     warnings: list[str] = []
     meta_cal = rec.metadata.get("calibration")
-    if isinstance(meta_cal, dict):
-        warnings += [f"calibration: {w}" for w in meta_cal.get("warnings", []) if w]
+    found = rec.metadata.get("calibration_warnings") or (meta_cal.get("warnings") if isinstance(meta_cal, dict)
+                                                         else None)
+    if not found and rec.calibrations and isinstance(rec.calibrations[-1][1].meta, dict):
+        found = rec.calibrations[-1][1].meta.get("warnings")
+    warnings += [f"calibration: {w}" for w in (found or []) if w]
     if not rec.calibrations:
         return [], "no calibration in the recording", warnings + ["no calibration took effect"]
     t, cal = rec.calibrations[-1]
@@ -76,7 +79,7 @@ def _calibration(rec) -> tuple[list[dict[str, Any]], str, list[str]]:
         if not cal.valid[k]:
             warnings.append(f"{site}: not calibrated")
     protocol = cal.meta.get("protocol") if isinstance(cal.meta, dict) else None
-    method = meta_cal.get("method") if isinstance(meta_cal, dict) else None
+    method = meta_cal.get("method") if isinstance(meta_cal, dict) else meta_cal
     res = cal.residual_deg
     summary = ", ".join(x for x in (
         f"{len(rec.calibrations)} calibration(s), the last at {t - float(rec.raw['t'][0]):.1f} s"
