@@ -1,6 +1,6 @@
 """The perfect stand: what the poser makes of pelvis and both shanks upright and still.
 
-    .venv/bin/python benchmarks/perfect_stand.py [--model diffusion] [--model runs/x/model.pt] [--chains]
+    .venv/bin/python benchmarks/perfect_stand.py [--model diffusion] [--model runs/x/model.pt] [--chains | --no-chains]
 
 Prints each thigh's bend from vertical (deg), one-second means over 10 s. The measured
 segments say "standing straight"; what the thighs settle on is the model's estimate of a
@@ -40,7 +40,8 @@ def thigh_bend(rot: np.ndarray, side: str) -> np.ndarray:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--model", action="append", default=None)
-    ap.add_argument("--chains", action="store_true", help="whole-chain mirror averaging (Poser(mirror_chains=True))")
+    ap.add_argument("--chains", action=argparse.BooleanOptionalAction, default=None,
+                    help="whole-chain mirror averaging (Poser(mirror_chains=...); default: the model file's)")
     a = ap.parse_args(argv)
     F, M = perfect_stand()
     for spec in a.model or ["diffusion"]:

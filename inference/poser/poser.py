@@ -294,7 +294,8 @@ class Poser:
         # a model with a position input takes it as a keyword the traces do not carry: eager
         frozen = self._freeze and isinstance(self.model.model, Denoiser) and not self.takes_points
         nets = _model_nets(self.model)
-        onnx = frozen and windows == 1 and self.runtime == "onnx"
+        # one window (mirror-averaged inside the graph) or the two chains of whole-chain mirror averaging
+        onnx = frozen and (windows == 1 or (windows == 2 and not mirror)) and self.runtime == "onnx"
         key = (windows, mirror, frozen, self.window) + (("onnx",) if onnx else ())
         if key not in nets:
             model = self.model
