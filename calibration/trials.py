@@ -40,9 +40,9 @@ from inference.body.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX, parse_sites
 from .core import Calibration, CalibrationError, StillnessLimits, _free_acc_G, calibrate_tpose
 from .gait_heading import (
     MAX_BOUT_S,
-    UNSURE_DEG,
     MIN_WALK_M,
     MOVING_M_S,
+    UNSURE_DEG,
     _bouts,
     _not_turning,
     fill_gaps,

@@ -98,7 +98,6 @@ def test_a_recalibration_pauses_the_replay_where_it_paused_live(tmp_path):
     from calibration import Calibrator, synthesize_session
     from inference.signals.synthesis import NoiseModel
     from sim_devices.motions import generate
-
     from tests.app.conftest import REC_PROTO, REC_SITES
 
     act = generate("walk", seconds=2.0, seed=7)
@@ -149,7 +148,6 @@ def test_frames_live_had_no_time_for_are_left_out_again_so_the_replay_gives_back
     from calibration import Calibrator, synthesize_session
     from inference.signals.synthesis import NoiseModel
     from sim_devices.motions import generate
-
     from tests.app.conftest import REC_PROTO, REC_SITES
 
     act = generate("walk", seconds=3.0, seed=2)
