@@ -407,7 +407,8 @@ class Poser:
         out = inpaint(self.net_for(2, mirror=False), w2, m2, self._height.expand(2), self.steps, generator=self._gen,
                       schedule=self.schedule, mode=self.inpaint_mode, mask_input=self.model.config.mask_input,
                       start="mean")
-        return 0.5 * (out[:1] + P(out[1:]))
+        # the known entries as measured: the mirror image's round trip moves them by float rounding
+        return torch.where(mask, win, 0.5 * (out[:1] + P(out[1:])))
 
     def step(self, features: np.ndarray | Tensor, observed_mask: np.ndarray | Tensor,
              points: np.ndarray | Tensor | None = None) -> PoseFrame:

@@ -7,7 +7,10 @@ samples again."""
 
 from __future__ import annotations
 
+import shutil
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -42,7 +45,17 @@ def _as_played(sim, samples: list[drivers.Sample]) -> None:
         np.testing.assert_allclose(s.free_acc, truth["free_acc"], atol=2e-3)
 
 
-def test_dot_through_bleak_seam_scan_stream_drop_and_rejoin(tmp_path):
+@pytest.fixture
+def short_dir():
+    """A folder for the twin's socket: AF_UNIX paths are limited to ~107 bytes, which pytest's
+    per-worker tmp_path can pass once a UUID is in the socket's name."""
+    d = tempfile.mkdtemp(prefix="dot", dir="/tmp")
+    yield Path(d)
+    shutil.rmtree(d, ignore_errors=True)
+
+
+def test_dot_through_bleak_seam_scan_stream_drop_and_rejoin(short_dir):
+    tmp_path = short_dir
     drop_s = 1.0
     signals = spinning_signals(("pelvis",), seconds=10.0)
     sim = make_sim_device("movella-dot", signals, "pelvis", folder=str(tmp_path)).start()
@@ -86,9 +99,10 @@ def test_dot_through_bleak_seam_scan_stream_drop_and_rejoin(tmp_path):
     assert sum(s.device_time > t[k] for s in after) >= 30  # and it streams again after the rejoin
 
 
-def test_dot_by_corebluetooth_uuid_through_bleak_seam(tmp_path):
+def test_dot_by_corebluetooth_uuid_through_bleak_seam(short_dir):
     """On macOS bleak names a sensor by the UUID CoreBluetooth gives it: the same path takes it."""
     uuid = "6E400001-B5A3-F393-E0A9-E50E24DCCA9E"
+    tmp_path = short_dir
     sim = make_sim_device("movella-dot", spinning_signals(("pelvis",), seconds=10.0), "pelvis", folder=str(tmp_path),
                           address=uuid).start()
     client_backend, scanner_backend = dot_backends(tmp_path)
