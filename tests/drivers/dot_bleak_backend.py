@@ -42,7 +42,7 @@ from bleak.exc import BleakDeviceNotFoundError, BleakError
 
 from drivers.base import DeviceGone
 from drivers.movella_dot import protocol as dot
-from drivers.movella_dot.ble_seam import SocketLink, socket_name
+from drivers.movella_dot.ble_seam import SocketLink, SocketSeam, socket_name
 
 # the DOT's GATT table as the driver uses it: service -> [(characteristic, properties)]
 GATT: dict[str, list[tuple[str, list[str]]]] = {
@@ -212,22 +212,13 @@ class _SimDotScanner(BaseBleakScanner):
 
     def _advertisements(self) -> list[tuple[str, AdvertisementData]]:
         """One advertisement per twin in range (its socket answers the advertisement request)."""
+        # the socket seam's own scan walks the twins' sockets and asks each for its advertisement
         out = []
-        for p in sorted(self.folder.glob("*.sock")):
-            try:
-                link = SocketLink(str(p))
-            except DeviceGone:
-                continue  # a socket file left by a twin that is gone
-            try:
-                a = link.advertisement(1.0)
-            except (DeviceGone, ValueError):
-                continue
-            finally:
-                link.disconnect()
-            adv = AdvertisementData(local_name=a["name"], manufacturer_data={dot.XSENS_COMPANY_ID: b""},
-                                    service_data={}, service_uuids=[], tx_power=None, rssi=int(a["rssi"]),
+        for a in SocketSeam(self.folder).scan(1.0):
+            adv = AdvertisementData(local_name=a.name, manufacturer_data={dot.XSENS_COMPANY_ID: b""},
+                                    service_data={}, service_uuids=[], tx_power=None, rssi=int(a.rssi),
                                     platform_data=())
-            out.append((a["address"], adv))
+            out.append((a.address, adv))
         return out
 
     async def stop(self) -> None:
