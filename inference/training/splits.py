@@ -151,17 +151,22 @@ def is_variant(name: str | Path) -> bool:
     return "@hold" in str(name) or ("@x" in str(name) and is_walk(str(name).split("@")[0]))
 
 
+def _give_share(ds: FeatureDataset, part: np.ndarray, share: float) -> FeatureDataset:
+    """Rescale the sampling probabilities so the clips in ``part`` get ``share`` of the draws,
+    each side keeping its clips' proportions; nothing moves when one side is empty."""
+    if part.all() or not part.any():
+        return ds
+    w = ds.weights.astype(np.float64).copy()
+    w[part] *= share / w[part].sum()
+    w[~part] *= (1.0 - share) / w[~part].sum()
+    ds.weights = w / w.sum()
+    return ds
+
+
 def share_variants(ds: FeatureDataset, share: float) -> FeatureDataset:
     """Give the real-motion copies (``is_variant``) ``share`` of the draws, the rest keeping
     their proportions among themselves."""
-    extra = np.array([is_variant(n) for n in ds.names])
-    if not extra.any() or extra.all():
-        return ds
-    w = ds.weights.astype(np.float64).copy()
-    w[extra] *= share / w[extra].sum()
-    w[~extra] *= (1.0 - share) / w[~extra].sum()
-    ds.weights = w / w.sum()
-    return ds
+    return _give_share(ds, np.array([is_variant(n) for n in ds.names]), share)
 
 
 def _is_hdm05(name: str) -> bool:
@@ -198,14 +203,7 @@ def balance_shares(ds: FeatureDataset, shares: dict[str, float]) -> FeatureDatas
 
 def balance_sources(ds: FeatureDataset, hdm05_share: float = HDM05_SHARE) -> FeatureDataset:
     """Rescale the clip sampling probabilities so HDM05 clips get `hdm05_share` of the draws."""
-    is_hdm = np.array([_is_hdm05(str(n)) for n in ds.names])
-    if is_hdm.all() or not is_hdm.any():
-        return ds
-    w = ds.weights.astype(np.float64).copy()
-    w[is_hdm] *= hdm05_share / w[is_hdm].sum()
-    w[~is_hdm] *= (1.0 - hdm05_share) / w[~is_hdm].sum()
-    ds.weights = w / w.sum()
-    return ds
+    return _give_share(ds, np.array([_is_hdm05(str(n)) for n in ds.names]), hdm05_share)
 
 
 def drop_implausible_clips(ds: FeatureDataset) -> list[str]:
