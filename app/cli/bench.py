@@ -10,6 +10,10 @@ values) measured in the same run, so the two figures share the machine's load.
 
 ``onnx_p50_ms``/``onnx_p99_ms``: the same loop with the model call through ONNX Runtime
 (when installed; what live sessions then use), right after the torch figures.
+``reference``: the default step and the live settings it replaced (a 61-frame window, 3 steps
+1000 / 400 / 0, mirror averaging: 6 network passes a pose) stepped in turn on the same frames
+through the live runtime, with ``ratio_p50`` / ``ratio_p99`` (default over reference) and each
+side's ``passes_per_pose``, window, steps and runtime: a ratio from one run, comparable between machines.
 ``variants``: the model call on torch and ONNX Runtime, on 1 and 2 intra-op threads, and with
 the linear layers in int8 (ONNX Runtime's dynamic quantizer, torch's ``quantize_dynamic``),
 all stepped in turn on the same frames, each row's p50 / p99 as a ratio to plain torch and its
@@ -82,6 +86,7 @@ def bench_poser(model, steps=None, frames: int = 200, warmup: int = 10, label: s
         "cpu_p99_ms": round(float(np.percentile(cpu * 1e3, 99)), 3),
         "mean_ms": round(float(ms.mean()), 3), "max_ms": round(float(ms.max()), 3),
         "steps": len(poser.steps) if kind == "diffusion" else (1 if kind == "regressor" else 0),
+        "passes_per_pose": passes_per_pose(poser), "window": getattr(poser, "window", None),
         "model": label or kind, "frames": int(frames), "threads": torch.get_num_threads(),
         "mirror": poser.mirror, "runtime": poser.runtime,
         **({"draws": c.draws, "every": c.every, "pool": c.pool, "level": c.level}
@@ -128,6 +133,76 @@ def bench_runtimes(model, steps=None, frames: int = 200, warmup: int = 10, seed:
 
 
 VARIANTS = ("torch", "torch-2t", "onnx", "onnx-2t", "onnx-int8", "torch-int8")
+
+# The live settings the 1-step sampler replaced (docs/latency.md, "Fewer passes"): a 61-frame
+# window, the paper-like 3 levels 1000 / 400 / 0, whole-chain mirror averaging; 6 network
+# passes per pose. ``bench_reference`` times them beside the default in one run.
+REFERENCE_WINDOW = 61
+REFERENCE_STEPS = "10D:3"
+
+
+def passes_per_pose(poser) -> int:
+    """Windows the network evaluates per pose: one per step, two with mirror averaging
+    (the pair goes in one call of batch 2, but it is twice the arithmetic)."""
+    if poser.kind != "diffusion":
+        return 1 if poser.kind == "regressor" else 0
+    return len(poser.steps) * (2 if poser.mirror else 1)
+
+
+def reference_model(model, spec=None, window: int = REFERENCE_WINDOW):
+    """``model`` reading ``window`` frames: from its file again (``spec``) when it was trained
+    on that many, so the reference is exactly the model the settings describe; otherwise the
+    same weights with the missing frames' learned positions zero, whose answers differ but
+    whose arithmetic per call is the same, which is all a timing needs."""
+    from dataclasses import replace
+
+    import torch
+
+    from inference.model.files import LoadedModel, build_model
+    from inference.poser.models import resolve_model
+
+    trained = int((model.meta or {}).get("trained_window", model.config.window))
+    if spec is not None and not isinstance(spec, LoadedModel) and trained >= window:
+        return resolve_model(spec, window=window)
+    cfg = replace(model.config, window=window)
+    net = build_model(model.kind, cfg).eval()
+    sd = dict(model.model.state_dict())
+    pos = sd["pos"]
+    have = pos.shape[1] - 2
+    if have < window:
+        pad = torch.zeros(1, window - have, pos.shape[2], dtype=pos.dtype)
+        sd["pos"] = torch.cat([pos[:, :2], pad, pos[:, 2:]], dim=1)
+    else:
+        sd["pos"] = torch.cat([pos[:, :2], pos[:, pos.shape[1] - window:]], dim=1)
+    net.load_state_dict(sd)
+    return LoadedModel(model=net, kind=model.kind, config=cfg, norm_mean=model.norm_mean, norm_std=model.norm_std,
+                       step=model.step, meta=dict(model.meta or {}))
+
+
+def bench_reference(model, steps=None, frames: int = 200, warmup: int = 10, seed: int = 0,
+                    mirror: bool | None = None, spec=None) -> dict:
+    """The default live step against the settings it replaced (``REFERENCE_WINDOW``,
+    ``REFERENCE_STEPS``, the same mirror averaging), both on the live runtime, stepped in
+    turn on the same frames (``_interleaved``): the ratio holds on any machine, where the
+    milliseconds do not."""
+    from inference.model.diffusion import parse_steps
+    from inference.poser.poser import Poser
+
+    motion, inp = _walk(frames + warmup, seed)
+    ref = reference_model(model, spec)
+    posers = {"default": Poser(model, body=motion.body, steps=steps, seed=seed, mirror=mirror, runtime="auto"),
+              "reference": Poser(ref, body=motion.body, steps=parse_steps(REFERENCE_STEPS), seed=seed, mirror=mirror,
+                                 runtime="auto")}
+    ms = _interleaved(posers, inp, frames, warmup)
+    out: dict = {"frames": int(frames), "interleaved": True}
+    for name, poser in posers.items():
+        out[name] = {"p50_ms": round(float(np.percentile(ms[name], 50)), 3),
+                     "p99_ms": round(float(np.percentile(ms[name], 99)), 3),
+                     "window": poser.window, "steps": list(poser.steps), "passes_per_pose": passes_per_pose(poser),
+                     "mirror": poser.mirror, "runtime": poser.runtime}
+    out["ratio_p50"] = round(out["default"]["p50_ms"] / out["reference"]["p50_ms"], 3)
+    out["ratio_p99"] = round(out["default"]["p99_ms"] / out["reference"]["p99_ms"], 3)
+    return out
 """The rows of ``bench_variants``: the model call on torch or ONNX Runtime, on 1 intra-op
 thread or 2 (``-2t``), and with the linear layers' weights in int8 (``-int8``: ONNX
 Runtime's dynamic quantizer, or torch's ``quantize_dynamic``)."""
@@ -330,6 +405,10 @@ def run_bench(model_spec: str = "diffusion", steps=None, frames: int = 200, pape
         # against torch, frame for frame in turn, so a load change hits both alike
         o = bench_runtimes(model, st, frames, warmup, mirror=mirror)
         out.update(onnx_p50_ms=o["onnx_p50_ms"], onnx_p99_ms=o["onnx_p99_ms"], onnx=o)
+    if model is not None and model.kind == "diffusion":
+        # the default against the settings it replaced, in turn on the same frames
+        out["reference"] = bench_reference(model, st, frames, warmup, mirror=mirror,
+                                           spec=None if random_weights else model_spec)
     if variants and onnx and model is not None and model.kind == "diffusion" and onnxruntime_available():
         # threads 1 / 2 and int8 weights, each alone beside the plain call, with what each
         # changes in the poses
@@ -403,6 +482,13 @@ def run(args: argparse.Namespace) -> int:
                     f"{r['threads']} threads")
 
         print(line(res))
+        if "reference" in res:
+            r, d = res["reference"]["reference"], res["reference"]["default"]
+            print(f"against the settings it replaced ({r['window']}-frame window, {len(r['steps'])} steps, "
+                  f"{r['passes_per_pose']} passes; {r['runtime']}), in turn: "
+                  f"p50 {d['p50_ms']:.1f} vs {r['p50_ms']:.1f} ms "
+                  f"(x{res['reference']['ratio_p50']:.2f}), p99 {d['p99_ms']:.1f} vs {r['p99_ms']:.1f} ms "
+                  f"(x{res['reference']['ratio_p99']:.2f})")
         if "onnx" in res:
             o = res["onnx"]
             print(f"ONNX Runtime vs torch, frame for frame in turn: p50 {o['onnx_p50_ms']:.1f} vs "
@@ -448,5 +534,6 @@ def _run_sizes(args: argparse.Namespace) -> int:
     return 0
 
 
-__all__ = ["VARIANTS", "bench_poser", "bench_sizes", "bench_variants", "rotation_gap_deg", "parse_sizes",
+__all__ = ["VARIANTS", "REFERENCE_STEPS", "REFERENCE_WINDOW", "bench_poser", "bench_reference", "passes_per_pose",
+           "reference_model", "bench_sizes", "bench_variants", "rotation_gap_deg", "parse_sizes",
            "paper_model", "run_bench", "register", "run"]

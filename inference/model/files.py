@@ -182,9 +182,10 @@ def blend_models(path_a: str | os.PathLike, path_b: str | os.PathLike, weight: f
     atomic_torch_save(a, dest)
 
 
-def load_model(path: str | os.PathLike, use_ema: bool = True) -> LoadedModel:
+def load_model(path: str | os.PathLike, use_ema: bool = True, window: int | None = None) -> LoadedModel:
     """Load an inference model file or a training checkpoint (its EMA weights by default),
-    in eval mode, float32, on the CPU."""
+    in eval mode, float32, on the CPU; reading ``window`` frames (``with_window``), by default
+    those its file asks for (``meta["window"]``), else all it was trained on."""
     obj = _read_file(path)
     if not isinstance(obj, dict) or "model_config" not in obj:
         raise ModelFileError(path, f"not an imucap model file or training checkpoint (it holds {_what(obj)})")
@@ -210,7 +211,41 @@ def load_model(path: str | os.PathLike, use_ema: bool = True) -> LoadedModel:
     if not (np.all(np.isfinite(norm_mean)) and np.all(np.isfinite(norm_std))):
         raise ModelFileError(path, "damaged model file (non-finite feature normaliser)")
     model.eval()
-    return LoadedModel(model=model, kind=kind, config=cfg, norm_mean=norm_mean, norm_std=norm_std,
-                       step=int(obj.get("step", 0)), meta=obj.get("meta"))
+    loaded = LoadedModel(model=model, kind=kind, config=cfg, norm_mean=norm_mean, norm_std=norm_std,
+                         step=int(obj.get("step", 0)), meta=obj.get("meta"))
+    live = window if window is not None else (loaded.meta or {}).get("window")
+    if live is not None and int(live) != cfg.window:
+        try:
+            loaded = with_window(loaded, int(live))
+        except ValueError as exc:
+            raise ModelFileError(path, str(exc)) from None
+    return loaded
+
+
+def with_window(model: LoadedModel, window: int) -> LoadedModel:
+    """``model`` reading the last ``window`` frames of the history it was trained on: the
+    same weights, the learned positions of the frames it keeps (the newest frame keeps its
+    own position, the oldest ones are dropped).
+
+    Why a model file may ask for it (``meta["window"]``): with the one-step sampler the
+    denoiser trained on 61-frame windows scores better on the held-out people given only
+    the last second (docs/model.md, "How much history"), and every pass is then a third of
+    the arithmetic. Same window: the model itself."""
+    if window == model.config.window:
+        return model
+    if model.kind != "diffusion":
+        raise ValueError(f"a {model.kind} model reads its whole {model.config.window}-frame window")
+    if not 2 <= window <= model.config.window:
+        raise ValueError(f"live window {window}: the model was trained on {model.config.window} frames "
+                         "(a shorter window keeps the newest of them; 2 at least)")
+    cfg = replace(model.config, window=window)
+    net = build_model(model.kind, cfg)
+    sd = dict(model.model.state_dict())
+    pos = sd["pos"]
+    sd["pos"] = torch.cat([pos[:, :2], pos[:, pos.shape[1] - window:]], dim=1)
+    net.load_state_dict(sd)
+    net.eval()
+    meta = {**(model.meta or {}), "window": window, "trained_window": model.config.window}
+    return replace(model, model=net, config=cfg, meta=meta)
 
 

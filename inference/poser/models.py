@@ -109,19 +109,21 @@ def _shipped_stage(path: Path, mtime_ns: int, loader):
     return loader(path)
 
 
-def resolve_model(spec: str | os.PathLike | LoadedModel | None = "diffusion") -> LoadedModel | None:
+def resolve_model(spec: str | os.PathLike | LoadedModel | None = "diffusion",
+                  window: int | None = None) -> LoadedModel | None:
     """A model from a CLI-style spec: "diffusion"/"regressor" (shipped weights), "floor"
-    (no model: returns None), a path to a model file or checkpoint, or a LoadedModel."""
+    (no model: returns None), a path to a model file or checkpoint, or a LoadedModel;
+    ``window``: the frames it reads (``inference.model.files.with_window``; None: its file's)."""
     if spec is None or isinstance(spec, LoadedModel):
         return spec
     s = os.fspath(spec)
     if s == "floor":
         return None
     if s in DEFAULT_WEIGHTS:
-        return load_model(default_weights(s))
+        return load_model(default_weights(s), window=window)
     if not Path(s).exists():
         raise FileNotFoundError(f"model {s!r}: not a file, and not one of {', '.join(POSER_KINDS)}")
-    return load_model(s)
+    return load_model(s, window=window)
 
 
 def default_steps(model: LoadedModel | None) -> list[int]:

@@ -99,3 +99,37 @@ def test_rotation_gap_reads_small_angles():
     b = np.asarray(axis_angle_to_matrix(np.array([0.0, 0.0, np.radians(0.01)])))
     assert cli_bench.rotation_gap_deg(a, a) == 0.0
     assert abs(cli_bench.rotation_gap_deg(a, b) - 0.01) < 1e-6
+
+
+def test_bench_times_the_default_beside_the_settings_it_replaced(capsys):
+    code = main(["bench", "--json", "--random-weights", "--frames", "3", "--warmup", "1", "--threads", "1",
+                 "--steps", "1", "--mirror", "--no-paper", "--no-variants", "--no-confidence"])
+    res = json.loads(capsys.readouterr().out)
+    assert code == 0 and res["passes_per_pose"] == 2
+    ref = res["reference"]
+    assert ref["interleaved"] and ref["frames"] == 3
+    assert ref["default"]["passes_per_pose"] == 2 and ref["default"]["steps"] == [1000]
+    # the replaced settings: 61 frames, 1000 / 400 / 0, the same mirror averaging, the live runtime
+    assert ref["reference"]["window"] == cli_bench.REFERENCE_WINDOW == 61
+    assert ref["reference"]["steps"] == [1000, 400, 0] and ref["reference"]["passes_per_pose"] == 6
+    assert ref["reference"]["runtime"] == ref["default"]["runtime"]
+    for k in ("ratio_p50", "ratio_p99"):
+        assert ref[k] > 0
+
+
+def test_the_reference_of_a_short_window_file_is_its_whole_trained_window(tmp_path):
+    from inference.model.files import load_model, save_model
+
+    m = _tiny_paper()
+    path = tmp_path / "short.pt"
+    save_model(path, m.model, "diffusion", m.norm_mean, m.norm_std, meta={"window": 7})
+    short = load_model(path)
+    ref = cli_bench.reference_model(short, str(path), window=m.config.window)
+    assert torch.equal(ref.model.state_dict()["pos"], m.model.state_dict()["pos"])
+    # a file trained on fewer frames than asked: the same arithmetic, the missing positions zero
+    padded = cli_bench.reference_model(short, None, window=m.config.window + 4)
+    assert padded.config.window == m.config.window + 4
+    missing = m.config.window + 4 - 7
+    pos = padded.model.state_dict()["pos"]
+    assert torch.count_nonzero(pos[:, 2:2 + missing]) == 0
+    assert torch.equal(pos[:, 2 + missing:], short.model.state_dict()["pos"][:, 2:])
