@@ -18,6 +18,7 @@ from inference.poser.models import CONTACT_THRESHOLD
 
 from .angles import ANGLES, RANGE_ANGLES, angle_series, cycle_angle
 from .events import SIDES, FootEvents, contact_source, foot_events
+from .feet import foot_sensor_events
 from .strides import StrideSummary, cycle_curves, mean_sd, stride_ranges, strides_of, summarize, symmetry_index
 
 
@@ -46,13 +47,16 @@ class GaitAnalysis:
         return mean_sd(self.ranges[side][angle])
 
 
-def analyse(t: np.ndarray, R: np.ndarray, root: np.ndarray, contact_t: np.ndarray, contact_values: np.ndarray,
-            source: str, threshold: float = CONTACT_THRESHOLD) -> GaitAnalysis:
+def analyse(t: np.ndarray, R: np.ndarray, root: np.ndarray, contact_t: np.ndarray | None,
+            contact_values: np.ndarray | None, source: str, threshold: float = CONTACT_THRESHOLD,
+            events: dict[str, FootEvents] | None = None) -> GaitAnalysis:
     """t (T,), R (T, 24, 3, 3), root (T, 3): the reconstruction (or truth); contact_t / contact_values
-    (T', 4): the contact signal the events come from (``events.foot_events``) on its own clock."""
+    (T', 4): the contact signal the events come from (``events.foot_events``) on its own clock, or
+    ``events`` found already (the foot sensors', ``feet.sensor_events``)."""
     t = np.asarray(t, dtype=np.float64)
     R = np.asarray(R, dtype=np.float64)
-    events = foot_events(contact_t, contact_values, source, threshold=threshold)
+    if events is None:
+        events = foot_events(contact_t, contact_values, source, threshold=threshold)
     strides = strides_of(events, t, root, R[:, SEGMENT_INDEX["pelvis"]])
     summary = summarize(strides)
     angles = angle_series(R) if len(t) else {s: {a: np.zeros(0) for a in ANGLES} for s in SIDES}
@@ -64,14 +68,26 @@ def analyse(t: np.ndarray, R: np.ndarray, root: np.ndarray, contact_t: np.ndarra
     return an
 
 
-def analyse_recording(rec) -> GaitAnalysis:
+def analyse_recording(rec, source: str | None = None) -> GaitAnalysis:
     """A recording's (``app.recording.Recording``) reconstruction analysed, its events from the insoles
-    when they were worn, else from the poser's contacts."""
+    when they were worn, else from both foot sensors when they were worn (``feet.foot_sensor_events``),
+    else from the poser's contacts. ``source`` forces one of "insoles", "foot sensors", "model"
+    (ValueError when the recording does not have it)."""
     recon = rec.recon
     if "t" not in recon or len(recon["t"]) == 0:
         raise ValueError(f"{rec.path}: the recording holds no reconstruction (imucap replay writes one)")
-    ct, cv, source = contact_source(recon, rec.raw)
-    return analyse(recon["t"], recon["R"], recon["root"], ct, cv, source)
+    if source not in (None, "insoles", "foot sensors", "model"):
+        raise ValueError(f"unknown event source {source!r}")
+    ct, cv, found = contact_source(recon, rec.raw if source != "model" else None)  # the insoles' or the model's
+    if source == "insoles" and found != "insoles":
+        raise ValueError(f"{rec.path}: no insoles' contacts in the recording")
+    if source == "foot sensors" or (source is None and found != "insoles"):
+        feet = foot_sensor_events(rec)
+        if feet is not None:
+            return analyse(recon["t"], recon["R"], recon["root"], None, None, "foot sensors", events=feet)
+        if source == "foot sensors":
+            raise ValueError(f"{rec.path}: no calibrated gyro from both foot sensors")
+    return analyse(recon["t"], recon["R"], recon["root"], ct, cv, found)
 
 
 def _num(x: float | None, nd: int = 3) -> float | int | None:

@@ -25,7 +25,8 @@ SECTIONS = ("summary", "strides", "ranges", "cycles", "confidence", "compare", "
 PARAM_ROWS = (("time_s", "Stride time", "s", 3), ("stance_pct", "Stance", "% of stride", 1),
               ("swing_pct", "Swing", "% of stride", 1), ("double_support_pct", "Double support", "% of stride", 1),
               ("length_m", "Stride length", "m", 2), ("speed_mps", "Speed", "m/s", 2))
-SOURCES = {"model": "the model's foot contacts", "insoles": "the insoles' contacts", "truth": "the motion's truth"}
+SOURCES = {"model": "the model's foot contacts", "insoles": "the insoles' contacts", "truth": "the motion's truth",
+           "foot sensors": "the foot sensors' angular rate"}
 
 CSS = """
 body{font-family:'DejaVu Sans',Arial,sans-serif;font-size:10.5pt;color:#222;max-width:60em;margin:1.5em auto;
@@ -262,10 +263,18 @@ def compare_section(r: ReportInput) -> str:
 
 
 def methods_section(r: ReportInput) -> str:
+    src = r.figures["events_from"]
+    if src == "foot sensors":
+        how = (": each foot's angular rate about its medio-lateral axis peaks once per stride in mid-swing; the "
+               "peak of the roll over the toes before it is foot off, the first peak of the foot flattening after "
+               "it is foot strike (Rampp et al. 2014, IEEE TBME 62(4)); a step turning on the spot is told by the "
+               "foot's still periods")
+    else:
+        how = " (either heel or toe down is stance), the crossing interpolated between frames"
     return ('<section id="methods"><h2>How these figures were made</h2><ul>'
-            f"<li>Foot strike and foot off: from {e(SOURCES.get(r.figures['events_from'], r.figures['events_from']))}"
-            f" (either heel or toe down is stance), the crossing interpolated between frames, debounced: gaps under "
-            f"{MIN_SWING_S} s closed, contacts under {MIN_STANCE_S} s dropped.</li>"
+            f"<li>Foot strike and foot off: from {e(SOURCES.get(src, src))}{e(how)}, debounced: gaps under "
+            f"{MIN_SWING_S} s closed, contacts under {MIN_STANCE_S} s dropped. Insoles, when worn, come first, "
+            "then foot sensors, then the model's contacts.</li>"
             "<li>A stride runs from a foot strike to the next of the same foot. Stride length and speed come from "
             "the reconstructed pelvis path between the two strikes.</li>"
             "<li>Joint angles: <code>inference/metrics/joint_angles.py</code> (ISB / OpenSim Rajagopal), on the "
