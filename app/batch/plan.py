@@ -101,13 +101,17 @@ class Options:
     subsets: tuple[tuple[str, ...] | None, ...] = (None,)
     exports: tuple[str, ...] = ()
     held_out: bool = True
+    report: bool = False  # a gait report per recording (``app.report``), of the first subset's replay
 
     def fingerprint(self) -> str:
         """Changes whenever an option, imucap's version or the content of a model file the
-        options may load changes: outputs made otherwise are not up to date."""
+        options may load changes: outputs made otherwise are not up to date. (Without a report
+        the fingerprint is what it was before the option existed: earlier batches stay done.)"""
         import app
 
         d: dict[str, Any] = asdict(self)
+        if not self.report:
+            d.pop("report")
         d["imucap"] = app.APP_VERSION
         d["model_files"] = {str(p): file_digest(p) for p in model_files(self.settings.model)}
         return hashlib.sha256(json.dumps(d, sort_keys=True, default=str).encode()).hexdigest()[:16]

@@ -33,6 +33,7 @@ from app.batch.plan import Options, subset_label
 RESULT = "result.json"
 JOURNAL = ".journal.jsonl"
 RUNNING = ".running"
+REPORT = "report.html"  # with ``report.json``, its figures (``imucap report --json``)
 
 _MODELS: dict[str, Any] = {}  # per worker process: a model is loaded once, not per recording
 
@@ -233,6 +234,7 @@ def _run(task: Task) -> dict[str, Any]:
     truth = read_truth(task.truth) if task.truth else None
     warnings = list(rec.damage) + ([note] if note else [])
     full = None  # every recorded sensor's replay, once, for the held-out error of each subset
+    first = None  # the first subset's replay and its poser's label and steps, for the report
     rows, files = [], []
     for subset in opts.subsets:
         label = subset_label(subset)
@@ -244,6 +246,8 @@ def _run(task: Task) -> dict[str, Any]:
         res = replay_recording(rec, built.poser, sensors=subset, causal=built.causal)
         if subset is None:
             full = res
+        if subset == opts.subsets[0]:
+            first = (res, built.label, built.steps)
         n = len(res.poses)
         span = (res.poses[-1].t - res.poses[0].t + 0.05) if n else 0.0
         row: dict[str, Any] = {
@@ -278,5 +282,35 @@ def _run(task: Task) -> dict[str, Any]:
                          "files": made})
         rows.append(row)
         files += made
+    if opts.report:
+        if "report" in journal:
+            files += journal["report"]["files"]
+        else:
+            if first is None:  # the first subset came from the journal: its replay again
+                built = build_replay_poser(rec, opts.settings, body, model=model)
+                first = (replay_recording(rec, built.poser, sensors=opts.subsets[0], causal=built.causal),
+                         built.label, built.steps)
+            made = write_report(rec, folder, *first)
+            _append(folder, {"fingerprint": task.fingerprint, "stamp": stamp, "subset": "report", "row": None,
+                             "files": made})
+            files += made
     return {"recording": task.recording, "fingerprint": task.fingerprint, "stamp": stamp, "status": "done",
             "rows": rows, "files": files, "motion_s": max((r["duration_s"] for r in rows), default=0.0)}
+
+
+def write_report(rec, folder: Path, res, label: str, steps) -> list[str]:
+    """The gait report (``report.html``, self-contained) and its figures (``report.json``) of a replay
+    ``res`` of ``rec``; a replay without walking gives a report that says so, not a failure."""
+    from app.report.build import make_report, with_poses
+
+    replayed = with_poses(rec, res.poses, model=f"{label} (imucap batch)", steps=steps, sensors=list(res.sensors),
+                          insoles=bool(res.insoles))
+    summary: dict[str, Any] = {}
+
+    def html(tmp: Path) -> None:
+        summary.update(make_report(replayed, tmp).summary)
+
+    write_atomic(folder / REPORT, html)
+    summary["html"] = REPORT
+    _json_atomic(folder / "report.json", summary)
+    return [REPORT, "report.json"]

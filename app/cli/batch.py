@@ -1,13 +1,14 @@
 """`imucap batch`: re-process a whole study and get one table.
 
     imucap batch INPUTS... --out DIR [--sensors SET ...] [--model M] [--steps K] [--seed S]
-                 [--export EXT ...] [--workers N | --cluster tcp://HOST:PORT] [--json] [--no-progress]
+                 [--export EXT ...] [--report] [--workers N | --cluster tcp://HOST:PORT] [--json] [--no-progress]
 
 INPUTS: folders (every .h5 below), globs, recordings, or a manifest CSV with a
 ``recording`` column (and any others: subject, condition; ``truth`` scores against a
 simulator's truth file). Per recording: a replay with all its sensors and with each
-``--sensors`` subset, exports of each (``--export bvh csv``), and the table's rows; in
-``DIR/<recording>/`` and ``DIR/summary.csv`` (+ ``summary.parquet``).
+``--sensors`` subset, exports of each (``--export bvh csv``), with ``--report`` a gait report of the
+replay with all its sensors (``report.html`` and its figures in ``report.json``, as ``imucap report``),
+and the table's rows; in ``DIR/<recording>/`` and ``DIR/summary.csv`` (+ ``summary.parquet``).
 
 Running it again does only what is missing, failed or out of date (inputs, options,
 imucap's version or the model file changed); ``--force`` redoes every recording, or those
@@ -53,6 +54,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "(repeatable)")
     p.add_argument("--no-held-out", action="store_true",
                    help="skip the held-out error of subsets (saves one full replay per recording)")
+    p.add_argument("--report", action="store_true",
+                   help="also a gait report per recording (DIR/<recording>/report.html and report.json, as imucap "
+                        "report), of the replay with all the recorded sensors")
     p.add_argument("--workers", type=int, default=0, help="local worker processes (default: one per core)")
     p.add_argument("--cluster", default=None, metavar="tcp://HOST:PORT", help="a Dask distributed scheduler")
     p.add_argument("--force", nargs="?", const="*", default=None, metavar="GLOB",
@@ -86,7 +90,8 @@ def _options(args: argparse.Namespace):
         if sites not in subsets:
             subsets.append(sites)
     settings = ReplaySettings(model=args.model, steps=args.steps, seed=args.seed, latency=args.latency)
-    return Options(settings=settings, subsets=tuple(subsets), exports=tuple(exports), held_out=not args.no_held_out)
+    return Options(settings=settings, subsets=tuple(subsets), exports=tuple(exports), held_out=not args.no_held_out,
+                   report=args.report)
 
 
 class _Progress:

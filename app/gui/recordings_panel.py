@@ -1,5 +1,6 @@
 """Recordings: the sessions in the setup's recordings folder, newest first, with subject,
-date, length and sensors, to open in the replay.
+date, length and sensors, to open in the replay or to make a gait report of (``app.report``:
+``<recording>_report.html`` beside it, written on a thread; a link to it appears when done).
 
 Why read only attributes and two time stamps: a folder holds hundreds of sessions of
 minutes each; reading each one whole to list it would take the folder's size in I/O,
@@ -93,8 +94,21 @@ def fmt_length(seconds: float | None) -> str:
     return f"{m}:{s:02d}"
 
 
+def report_path(recording: Path) -> Path:
+    """Where the window writes a recording's gait report: beside it, ``<name>_report.html``."""
+    return Path(recording).with_name(Path(recording).stem + "_report.html")
+
+
+def write_report(recording: Path) -> dict:
+    """The gait report of ``recording`` (``imucap report REC --out <report_path>``); its figures."""
+    from app.report import make_report
+
+    return make_report(recording, report_path(recording)).summary
+
+
 class RecordingsPanel(QtWidgets.QWidget):
     openRequested = QtCore.Signal(str)
+    reportWritten = QtCore.Signal(str)  # the report's path, once written
 
     def __init__(self, jobs: Jobs, report: Callable[[str, str], None],
                  parent: QtWidgets.QWidget | None = None) -> None:
@@ -111,10 +125,18 @@ class RecordingsPanel(QtWidgets.QWidget):
         other.clicked.connect(self._open_other)
         self.open_button = QtWidgets.QPushButton("Open in replay")
         self.open_button.clicked.connect(self._open_selected)
+        self.report_button = QtWidgets.QPushButton("Gait report")
+        self.report_button.setToolTip("write a gait report of the selected recording beside it "
+                                      "(<name>_report.html: strides, joint angles over the gait cycle, how sure)")
+        self.report_button.clicked.connect(self.report_selected)
         row.addWidget(self.folder_label, 1)
-        for b in (refresh, other, self.open_button):
+        for b in (refresh, other, self.open_button, self.report_button):
             row.addWidget(b)
         lay.addLayout(row)
+        self.report_link = QtWidgets.QLabel("")
+        self.report_link.setOpenExternalLinks(True)
+        self.report_link.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextBrowserInteraction)
+        lay.addWidget(self.report_link)
         self.table = QtWidgets.QTableWidget(0, len(COLUMNS))
         self.table.setHorizontalHeaderLabels(COLUMNS)
         self.table.verticalHeader().setVisible(False)
@@ -161,6 +183,34 @@ class RecordingsPanel(QtWidgets.QWidget):
             self.report("select a recording first", "warning")
             return
         self.openRequested.emit(str(self.infos[rows[0].row()].path))
+
+    def report_selected(self) -> None:
+        """A gait report of the selected recording, made on a thread (reading and analysing a long
+        recording takes seconds); the button waits for it."""
+        rows = self.table.selectionModel().selectedRows()
+        if not rows:
+            self.report("select a recording first", "warning")
+            return
+        path = self.infos[rows[0].row()].path
+        self.report_button.setEnabled(False)
+        self.report_link.setText(f"writing the gait report of {path.name}…")
+
+        def done(summary: dict) -> None:
+            self.report_button.setEnabled(True)
+            out = Path(summary["html"])
+            n = summary["strides"]
+            what = (f"{n['l']} + {n['r']} walking strides, cadence {summary['cadence_spm']:.1f} steps/min"
+                    if summary["cadence_spm"] is not None else "no walking found")
+            self.report_link.setText(f'Gait report: <a href="{out.resolve().as_uri()}">{out.name}</a> ({what})')
+            self.report(f"gait report written: {out}", "ok")
+            self.reportWritten.emit(str(out))
+
+        def failed(exc: BaseException) -> None:
+            self.report_button.setEnabled(True)
+            self.report_link.setText("")
+            self.report(f"no gait report of {path.name}: {exc}", "error")
+
+        self.jobs.run("gait-report", write_report, path, on_done=done, on_error=failed)
 
     def _open_other(self) -> None:
         path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Open a recording", str(self.folder or ""),

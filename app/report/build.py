@@ -1,12 +1,18 @@
-"""A recording (and optionally an earlier one) -> the report's HTML (and PDF) and its figures as JSON."""
+"""A recording (and optionally an earlier one) -> the report's HTML (and PDF) and its figures as JSON.
+
+A recording is a path or a ``Recording`` in memory: ``with_poses`` puts a replay's poses in place of
+the recording's own reconstruction (``imucap batch --report`` reports on the batch's replay)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from app.recording import read_recording
+import numpy as np
+
+from app.recording import Recording, read_recording
 
 from .analysis import GaitAnalysis, analyse_recording, figures
 from .angles import ANGLES
@@ -26,9 +32,29 @@ class Report:
     summary: dict[str, Any]
 
 
-def report_input(path: str | Path) -> ReportInput:
+def with_poses(rec: Recording, poses: Sequence, **meta: Any) -> Recording:
+    """``rec`` with ``poses`` (``app.live.LivePose``, a replay's) as its reconstruction, laid out as the
+    recorder writes it; ``meta`` updates its metadata (the replay's model, steps, sensors)."""
+    n = len(poses)
+    nan24 = np.full(24, np.nan)
+    recon: dict[str, np.ndarray] = {
+        "t": np.array([p.t for p in poses], dtype=np.float64),
+        "index": np.array([p.index for p in poses], dtype=np.int64),
+        "R": np.stack([p.pose.rot for p in poses]) if n else np.zeros((0, 24, 3, 3)),
+        "root": np.stack([p.pose.root for p in poses]) if n else np.zeros((0, 3)),
+        "contacts": np.stack([p.pose.contacts for p in poses]) if n else np.zeros((0, 4), bool),
+        "contact_prob": np.stack([p.pose.contact_prob for p in poses]) if n else np.zeros((0, 4)),
+        "observed_sites": np.stack([p.observed_sites for p in poses]) if n else np.zeros((0, 13), bool),
+        "insoles": np.array([bool(p.insoles) for p in poses]),
+        "spread_deg": np.stack([nan24 if p.pose.spread_deg is None else p.pose.spread_deg for p in poses])
+        if n else np.zeros((0, 24)),
+    }
+    return replace(rec, recon=recon, metadata={**rec.metadata, **meta})
+
+
+def report_input(path: str | Path | Recording) -> ReportInput:
     """One recording read and analysed, its plots not yet drawn."""
-    rec = read_recording(path)
+    rec = path if isinstance(path, Recording) else read_recording(path)
     an: GaitAnalysis = analyse_recording(rec)
     info = session_info(rec)
     sites = worn_sites(rec.recon.get("observed_sites"), tuple(info.sensors))
@@ -45,7 +71,7 @@ def summary_json(r: ReportInput) -> dict[str, Any]:
                                                             "sources": r.band.sources}}
 
 
-def make_report(path: str | Path, out: str | Path, compare_with: str | Path | None = None,
+def make_report(path: str | Path | Recording, out: str | Path, compare_with: str | Path | Recording | None = None,
                 pdf: bool = False) -> Report:
     r = report_input(path)
     r.images["timeline"] = timeline_figure(r.analysis)

@@ -290,3 +290,59 @@ def test_the_live_view_colours_by_spread_when_the_pose_has_one(qtbot):
     assert np.allclose(colours[SEGMENT_INDEX["pelvis"]], MEASURED)
     assert np.allclose(colours[SEGMENT_INDEX["head"]], spread_colour(25.0))
     assert not panel.show_pose(pose(2, spread), body)  # the same frame is not drawn twice
+
+
+def test_a_gait_report_from_the_recordings_tab(window, qtbot, tmp_path, capsys):
+    """The Recordings tab's button writes the selected recording's gait report beside it and links it;
+    a recording with no reconstruction says why in the window."""
+    import json
+    import re
+
+    from app.gui.recordings_panel import report_path
+    from app.live import frames_from_signals
+    from app.recording import Recorder
+    from sim_devices.devices import spinning_signals
+    from tests.app.report.walks import walk_recording
+
+    folder = tmp_path / "recordings"
+    folder.mkdir()
+    walk = walk_recording(folder / "walk.h5", speed=1.3, seconds=10.0)
+    sig = spinning_signals(("pelvis", "head"), seconds=2.0)  # raw frames only: never reconstructed
+    rec = Recorder(folder / "raw_only.h5", ("pelvis", "head"), metadata={"sensors": ["pelvis", "head"]})
+    for f in frames_from_signals(sig, t0=100.0):
+        rec.on_frame(f)
+    rec.close()
+    panel = window.recordings_panel
+    window.tabs.setCurrentWidget(panel)
+    panel.set_folder(folder)
+    qtbot.waitUntil(lambda: panel.table.rowCount() == 2, timeout=30_000)
+
+    def pick(name: str) -> None:
+        row = [i.path.name for i in panel.infos].index(name)
+        panel.table.selectRow(row)
+
+    pick("walk.h5")
+    with qtbot.waitSignal(panel.reportWritten, timeout=120_000) as written:
+        qtbot.mouseClick(panel.report_button, QtCore.Qt.MouseButton.LeftButton)
+        assert not panel.report_button.isEnabled()  # one report at a time
+    out = report_path(walk)
+    assert written.args == [str(out)] and out.is_file() and panel.report_button.isEnabled()
+    html = out.read_text()
+    assert '<section id="strides">' in html and "data:image/png;base64," in html
+    # the link names the strides the report counted: the same as `imucap report --json` of that file
+    from app.cli.main import main
+
+    capsys.readouterr()
+    assert main(["report", str(walk), "--out", str(tmp_path / "cli.html"), "--json"]) == 0
+    cli = json.loads(capsys.readouterr().out)
+    text = panel.report_link.text()
+    m = re.search(r"(\d+) \+ (\d+) walking strides", text)
+    assert m and (int(m.group(1)), int(m.group(2))) == (cli["strides"]["l"], cli["strides"]["r"])
+    assert cli["strides"]["l"] >= 3 and out.resolve().as_uri() in text
+    assert window.messages.level == "ok"
+
+    pick("raw_only.h5")
+    qtbot.mouseClick(panel.report_button, QtCore.Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: window.messages.level == "error", timeout=60_000)
+    assert "no reconstruction" in window.messages.label.text()
+    assert not report_path(folder / "raw_only.h5").exists() and panel.report_button.isEnabled()
