@@ -194,6 +194,15 @@ class TrainConfig:
     causal: bool = False
     # the measured features as real sensors give them (``SensorEffects``; off by default)
     sensor_effects: SensorEffects = field(default_factory=SensorEffects)
+    # diffusion only: distillation. A model file whose live answer is the target instead of
+    # the truth: its own chain (``teacher_steps``, mean start, replacement of the known
+    # entries, one window, no mirror) on each training window of ``window`` frames; the
+    # student answers in one call at the top level from the newest ``model.window`` frames of
+    # it. One call trained on the truth learns the mean of what the sensors allow (a stand
+    # between standing and sitting comes out bent); trained on the chain's answer it learns
+    # the chain's choice (docs/model.md, "One step")
+    teacher: str | None = None
+    teacher_steps: str = "10D:3"
 
     def to_dict(self) -> dict:
         d = asdict(self)

@@ -125,6 +125,7 @@ class StepContext:
     mean: Tensor
     std: Tensor
     schedule: Schedule
+    teacher: nn.Module | None = None  # the distillation's teacher network (``TrainConfig.teacher``)
 
 
 def step_seeds(seed: int, rank: int, step: int) -> tuple[np.random.Generator, torch.Generator]:
@@ -238,7 +239,9 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
         told = (reading,)
     unmasked = (None, *told) if told else ()  # the mask argument a mask-blind model is given
     m = None  # known entries, where the model is told them
-    if cfg.kind == "diffusion":
+    if cfg.kind == "diffusion" and ctx.teacher is not None:
+        pred, xn, m = _distilled(model, ctx, x, xn, xm, height, rng, told)
+    elif cfg.kind == "diffusion":
         t = training_levels(cfg, B, gen, ctx.schedule.T)
         noise = torch.randn(xn.shape, generator=gen)
         if cfg.mean_start > 0:
@@ -273,6 +276,50 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
     return loss, {k: float(v.detach()) for k, v in terms.items()}
 
 
+def _distilled(model: nn.Module, ctx: StepContext, x: Tensor, xn: Tensor, xm: Tensor, height: Tensor,
+               rng: np.random.Generator, told: tuple) -> tuple[Tensor, Tensor, Tensor]:
+    """One distillation batch: (the student's answer, its target, the known entries), each
+    over the student's window (the newest ``cfg.model.window`` frames). The target is the
+    teacher's chain on the whole window where unknown and the truth where known, as the
+    student's answer is."""
+    cfg = ctx.cfg
+    if cfg.model.points or told:
+        raise ValueError("distillation is for models without a position input or reading tokens")
+    B, N = x.shape[:2]
+    m = torch.as_tensor(random_observation_mask(rng, B, N, cfg.mask))
+    start = torch.where(m, xm, torch.zeros(()))
+    with torch.no_grad():
+        answer = inpaint(ctx.teacher, start, m, height, parse_steps(cfg.teacher_steps), schedule=ctx.schedule,
+                         mode="replace-ddim", mask_input=True, start="mean")
+    target = torch.where(m, xn, answer)
+    keep = slice(N - cfg.model.window, N)
+    t = torch.full((B,), ctx.schedule.T, dtype=torch.long)
+    out = model(start[:, keep], t, height, m[:, keep])
+    return torch.where(m[:, keep], xn[:, keep], out), target[:, keep], m[:, keep]
+
+
+def load_teacher(cfg: TrainConfig, mean: np.ndarray, std: np.ndarray) -> nn.Module | None:
+    """The distillation's teacher network, checked to read the student's features."""
+    if cfg.teacher is None:
+        return None
+    from inference.model.files import load_model
+
+    if cfg.kind != "diffusion":
+        raise ValueError("a teacher distils a diffusion model's chain; this run trains a regressor")
+    teacher = load_model(cfg.teacher, window=None)
+    if teacher.kind != "diffusion" or not teacher.config.mask_input:
+        raise ValueError(f"teacher {cfg.teacher}: not a diffusion model that reads the mask")
+    if teacher.config.window != cfg.window or cfg.model.window > cfg.window:
+        raise ValueError(f"teacher {cfg.teacher} reads {teacher.config.window} frames: train on windows of that many "
+                         f"(window) with a student of at most as many (model.window {cfg.model.window})")
+    if not (np.allclose(teacher.norm_mean, mean) and np.allclose(teacher.norm_std, std)):
+        raise ValueError(f"teacher {cfg.teacher}: its feature normaliser is not the student's (start the student "
+                         "from the teacher's file with --init)")
+    for p in teacher.model.parameters():
+        p.requires_grad_(False)
+    return teacher.model.eval()
+
+
 @torch.no_grad()
 def validate(model: nn.Module, val_set: Dataset, ctx: StepContext) -> dict[str, float]:
     """Validation on fixed batches (same windows, noise levels and masks every time, so
@@ -293,7 +340,7 @@ def validate(model: nn.Module, val_set: Dataset, ctx: StepContext) -> dict[str, 
         for k, v in terms.items():
             sums[k] = sums.get(k, 0.0) + v
         sums["loss"] = sums.get("loss", 0.0) + sum(getattr(cfg.loss, k) * v for k, v in terms.items())
-        x = torch.as_tensor(batch["x"], dtype=torch.float32)
+        x = torch.as_tensor(batch["x"], dtype=torch.float32)[:, -cfg.model.window:]
         xn = (x - ctx.mean) / ctx.std
         h = torch.as_tensor(batch["height"], dtype=torch.float32)
         mask = torch.ones_like(xn, dtype=torch.bool)
@@ -301,7 +348,8 @@ def validate(model: nn.Module, val_set: Dataset, ctx: StepContext) -> dict[str, 
         x_in = xn.clone()
         x_in[:, -1] = torch.where(obs, xn[:, -1], xn[:, -2])
         if cfg.kind == "diffusion":
-            out = inpaint(model, x_in, mask, h, paper_steps(), generator=gen, schedule=ctx.schedule,
+            steps = parse_steps(cfg.infer_steps or "paper") if ctx.teacher is not None else paper_steps()
+            out = inpaint(model, x_in, mask, h, steps, generator=gen, schedule=ctx.schedule,
                           mode=inpaint_mode_for(cfg), start="mean" if cfg.mean_start > 0 else "sample")
         else:
             out = torch.where(mask, x_in, model(x_in, mask, h))
@@ -461,7 +509,8 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
         # augmentation, and they travel with every checkpoint and model file
         mean_np, std_np = window_stats(train_set, cfg.window, yaw_invariant=cfg.augment_yaw, seed=cfg.seed)
     ctx = StepContext(cfg, torch.as_tensor(mean_np, dtype=torch.float32),
-                      torch.as_tensor(std_np, dtype=torch.float32), Schedule.cosine(cfg.T))
+                      torch.as_tensor(std_np, dtype=torch.float32), Schedule.cosine(cfg.T),
+                      teacher=load_teacher(cfg, mean_np, std_np))
 
     torch.manual_seed(cfg.seed)  # identical initial weights on every rank
     model = build_model(cfg.kind, cfg.model).to(d.device)

@@ -17,7 +17,7 @@ from inference.body.rotations import matrix_to_rot6d, rot6d_to_matrix
 from inference.features.layout import SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT
 from inference.features.mirror import mirror_features, mirror_points
 from inference.model.config import ModelConfig
-from inference.model.files import build_model, load_model
+from inference.model.files import build_model, load_model, with_window
 from inference.training.augment import rotate_yaw, scale_features
 from inference.training.config import LossWeights, TrainConfig
 from inference.training.data import feature_stats, synthetic_dataset
@@ -652,3 +652,43 @@ def test_reading_tokens_train_on_each_windows_dataset_from_a_model_without_them(
         with_reading(ModelConfig.from_dict(TINY), "cmu")
     with pytest.raises(ValueError, match="unknown reading"):
         with_reading(cmu.config, "mocap")
+
+
+def test_distillation_targets_the_teachers_chain_over_the_students_window(tmp_path):
+    """A teacher distilled into itself at one step: its chain of one call at the top level is
+    the student's own answer, so the simple term is zero; with a 3-step chain it is not,
+    and a student of a shorter window is scored on the newest frames only."""
+    from inference.model.diffusion import Schedule
+    from inference.training.loop import load_teacher
+
+    masked = {**TINY, "mask_input": True, "dropout": 0.0}
+    base = train(_cfg(steps=2, cond_prob=1.0, model=masked), tmp_path / "base", progress=False)
+    assert base.step == 2
+    teacher_file = tmp_path / "base" / "model.pt"
+    teacher = load_model(teacher_file)
+    ds = synthetic_dataset(3, 70, seed=0)
+    batch = ds.sample(np.random.default_rng(0), 4, 61)
+    mean, std = torch.as_tensor(teacher.norm_mean), torch.as_tensor(teacher.norm_std)
+
+    def terms(steps: str, window: int):
+        cfg = _cfg(cond_prob=1.0, model={**masked, "window": window}, teacher=str(teacher_file), teacher_steps=steps,
+                   augment_yaw=False, augment_mirror=0.0)
+        ctx = StepContext(cfg=cfg, mean=mean, std=std, schedule=Schedule.cosine(),
+                          teacher=load_teacher(cfg, teacher.norm_mean, teacher.norm_std))
+        student = teacher.model if window == 61 else with_window(teacher, window).model
+        return batch_loss(student, batch, ctx, np.random.default_rng(1), torch.Generator().manual_seed(1))[1]
+
+    assert terms("1", 61)["simple"] < 1e-10
+    assert terms("10D:3", 61)["simple"] > 1e-6
+    assert terms("10D:3", 21)["simple"] > 1e-6
+    # a teacher of another reading of the features is refused, with what to do
+    cfg = _cfg(cond_prob=1.0, model=masked, teacher=str(teacher_file))
+    with pytest.raises(ValueError, match="--init"):
+        load_teacher(cfg, teacher.norm_mean + 1.0, teacher.norm_std)
+    with pytest.raises(ValueError, match="model.window"):
+        load_teacher(_cfg(cond_prob=1.0, model={**masked, "window": 70}, window=70, teacher=str(teacher_file)),
+                     teacher.norm_mean, teacher.norm_std)
+    # a whole run trains and writes its one-step student
+    res = train(_cfg(steps=2, cond_prob=1.0, model={**masked, "window": 21}, teacher=str(teacher_file),
+                     infer_steps="1"), tmp_path / "student", progress=False)
+    assert res.step == 2 and load_model(tmp_path / "student" / "model.pt").config.window == 21
