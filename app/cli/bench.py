@@ -21,6 +21,8 @@ poses' difference from torch's (``mean_deg``, ``max_deg``; ``--no-variants`` ski
 ``--sizes``: which larger denoiser would fit the live budget: the loop with the model's own
 settings (steps, mirror averaging, runtime) but random weights of each size, all stepped in
 turn with the model itself, each row's p50 also as a ratio to it.
+``stages``: the step split into the observation, the window's shift, the model call and the work after
+it, each frame's thread CPU time (p50 ms), with the sum outside the model call.
 ``--end-to-end``: sensor-to-pose latency of the whole live path in both latency modes in
 one run (``centred_p50_ms``, ``low_p50_ms``, ...; app/capture/end_to_end_bench.py, docs/latency.md).
 
@@ -92,6 +94,58 @@ def bench_poser(model, steps=None, frames: int = 200, warmup: int = 10, label: s
         **({"draws": c.draws, "every": c.every, "pool": c.pool, "level": c.level}
            if (c := poser.confidence) is not None else {}),
     }
+
+
+STAGES = ("observe", "enter", "model", "finish")
+"""``Poser.step``'s stages: the observation, the window's shift, the model call (``_predict``), and
+everything after it (cleaning, contacts, FK, root, filters, the PoseFrame)."""
+
+
+def stage_times(posers: dict, inp, frames: int, warmup: int = 10) -> dict[str, dict[str, np.ndarray]]:
+    """Each poser's thread CPU time (ms) of each of ``STAGES`` per frame (``<stage>_cpu``), and the
+    wall time (``<stage>_wall``), the posers stepped in turn as ``_interleaved`` does."""
+    import torch
+
+    names = list(posers)
+    n = inp.features.shape[0]
+    out = {name: {f"{s}_{k}": np.empty(frames) for s in STAGES for k in ("wall", "cpu")} for name in names}
+    for i in range(warmup + frames):
+        k = i % n
+        r = i % len(names)
+        for name in names[r:] + names[:r]:
+            p = posers[name]
+            with torch.inference_mode():
+                t = [(time.perf_counter(), time.thread_time())]
+                obs = p.observe(inp.features[k], inp.mask[k])
+                t.append((time.perf_counter(), time.thread_time()))
+                win, mask = p.enter(obs)
+                t.append((time.perf_counter(), time.thread_time()))
+                y = p._predict(win, mask)[0, -1]
+                t.append((time.perf_counter(), time.thread_time()))
+                p.finish(y, win, obs)
+                t.append((time.perf_counter(), time.thread_time()))
+            if i >= warmup:
+                for j, s in enumerate(STAGES):
+                    out[name][f"{s}_wall"][i - warmup] = (t[j + 1][0] - t[j][0]) * 1e3
+                    out[name][f"{s}_cpu"][i - warmup] = (t[j + 1][1] - t[j][1]) * 1e3
+    return out
+
+
+def bench_stages(model, steps=None, frames: int = 200, warmup: int = 10, seed: int = 0,
+                 mirror: bool | None = None) -> dict:
+    """The live step split into ``STAGES`` (``stage_times``, ONNX Runtime for the model call where
+    live sessions take it): each stage's p50 thread CPU time (``<stage>_p50_ms``), and the
+    p50 of the step's work outside the model call (``outside_model_p50_ms``)."""
+    from inference.poser.poser import Poser
+
+    motion, inp = _walk(frames + warmup, seed)
+    p = Poser(model, body=motion.body, steps=steps, seed=seed, mirror=mirror, runtime="auto")
+    t = stage_times({"live": p}, inp, frames, warmup)["live"]
+    out: dict = {f"{s}_p50_ms": round(float(np.median(t[f"{s}_cpu"])), 3) for s in STAGES}
+    rest = sum(t[f"{s}_cpu"] for s in STAGES if s != "model")
+    out.update(outside_model_p50_ms=round(float(np.median(rest)), 3), runtime=p.runtime, frames=int(frames),
+               clock="thread CPU")
+    return out
 
 
 def _interleaved(posers: dict, inp, frames: int, warmup: int) -> dict[str, np.ndarray]:
@@ -398,6 +452,8 @@ def run_bench(model_spec: str = "diffusion", steps=None, frames: int = 200, pape
     st = parse_steps(steps) if steps is not None else None
     out = bench_poser(model, st, frames, warmup, label=_config_label(model), mirror=mirror)
     out["weights"] = weights
+    # the step's stages: the model call and the work around it (docs/latency.md, "Around the model call")
+    out["stages"] = bench_stages(model, st, frames, warmup, mirror=mirror)
     from inference.model.onnx_runtime import onnxruntime_available
 
     if onnx and model is not None and model.kind == "diffusion" and onnxruntime_available():

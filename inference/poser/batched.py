@@ -147,9 +147,10 @@ def _windows(poser: Poser, part: list[Observation]) -> tuple[Tensor, Tensor]:
     rows, mrows = [hist[1:]], [hmask[1:]]
     prev = hist[-1]
     for o in part:
-        prev = torch.where(o.m, o.fn, prev)
+        m = torch.from_numpy(o.m)
+        prev = torch.where(m, torch.from_numpy(o.fn), prev)
         rows.append(prev[None])
-        mrows.append(o.m[None])
+        mrows.append(m[None])
     seq, mseq = torch.cat(rows), torch.cat(mrows)
     wins = seq.unfold(0, N, 1).permute(0, 2, 1)[:c]
     if poser.history_mode == "measured":

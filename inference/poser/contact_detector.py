@@ -28,10 +28,11 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from inference.body import frame_kernels
 from inference.body.rotations import matrix_about_axis, matrix_to_rot6d, rot6d_to_matrix
 from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX
 from inference.features.layout import SL_ACC, SL_CONTACT, SL_ROT
-from inference.poser.small_nets import FitConfig, clip_tensors, fit, load_net, save_net, stack_context
+from inference.poser.small_nets import FitConfig, NumpyMLP, clip_tensors, fit, load_net, save_net, stack_context
 
 DETECTOR_FORMAT = "imucap-contact-detector-v1"
 CONTEXT = 9  # frames at 20 Hz (0.45 s, this one and the 8 before)
@@ -61,6 +62,39 @@ def heading_frame_inputs(shank: Tensor) -> Tensor:
     rot = matrix_to_rot6d(Rz[..., None, :, :] @ R).reshape(*shank.shape[:-1], 12)
     acc = (Rz[..., None, :, :] @ shank[..., 12:].reshape(*shank.shape[:-1], 2, 3, 1)).reshape(*shank.shape[:-1], 6)
     return torch.cat([rot, acc], dim=-1)
+
+
+def heading_frame_inputs_np(shank: np.ndarray) -> np.ndarray:
+    """``heading_frame_inputs`` of (C, 18) float32 frames on numpy (the live poser's path).
+    Only the 6D of ``R_z(-yaw) @ R`` is needed, i.e. the turned first two columns of R:
+    the turn is applied to those and to the accelerations, written out about z."""
+    C = shank.shape[0]
+    R = frame_kernels.rot6d_to_matrix(shank[:, :12].reshape(C, 2, 6))  # (C, 2, 3, 3)
+    h = R[:, 0, :2, 0] + R[:, 1, :2, 0]
+    yaw = np.arctan2(h[:, 1], h[:, 0])[:, None, None]
+    c, s = np.cos(yaw), np.sin(yaw)
+    # (C, 2 shanks, 3 vectors: column 0, column 1, acceleration, xyz)
+    v = np.concatenate([np.swapaxes(R[..., :2], -1, -2), shank[:, 12:].reshape(C, 2, 1, 3)], axis=2)
+    x, y = v[..., 0], v[..., 1]
+    out = np.empty_like(v)
+    out[..., 0] = c * x + s * y  # R_z(-yaw) = [[c, s, 0], [-s, c, 0], [0, 0, 1]]
+    out[..., 1] = c * y - s * x
+    out[..., 2] = v[..., 2]
+    return np.concatenate([out[:, :, :2].reshape(C, 12), out[:, :, 2].reshape(C, 6)], axis=1)
+
+
+class DetectorKernel:
+    """A ContactDetector's ``probabilities`` on numpy (``small_nets.NumpyMLP``), for the live
+    poser's per-frame path; a copy of its weights at construction."""
+
+    def __init__(self, det: ContactDetector) -> None:
+        self.context = det.context
+        self.mlp = NumpyMLP(det)
+
+    def __call__(self, shank_frames: np.ndarray) -> np.ndarray:
+        """(context, 18) float32 raw shank features of the last frames (oldest first) -> (4,)."""
+        logits = self.mlp(heading_frame_inputs_np(shank_frames).reshape(1, -1))[0]
+        return np.float32(1.0) / (np.float32(1.0) + np.exp(-logits))
 
 
 def context_windows(x: np.ndarray | Tensor, context: int = CONTEXT) -> Tensor:

@@ -16,9 +16,11 @@ the forearm the elbow's hinge does not constrain. Both datasets' forearms carry 
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 from torch import Tensor
 
+from inference.body import frame_kernels
 from inference.body.rotations import matrix_about_axis
 from inference.body.skeleton import SEGMENT_INDEX
 
@@ -28,8 +30,14 @@ KNEES: tuple[tuple[int, int], ...] = tuple(
 )
 
 
-def hinge_angle(local: Tensor, axis: Tensor) -> Tensor:
-    """Angle of the rotation about ``axis`` closest (Frobenius) to ``local`` (..., 3, 3)."""
+def hinge_angle(local: Tensor | np.ndarray, axis: Tensor | np.ndarray) -> Tensor | np.ndarray:
+    """Angle of the rotation about ``axis`` closest (Frobenius) to ``local`` (..., 3, 3)
+    (torch tensors, or numpy arrays for the live poser's per-frame path)."""
+    if isinstance(local, np.ndarray):
+        flat = local.reshape(*local.shape[:-2], 9)
+        s = 0.5 * ((flat[..., _SKEW_PLUS] - flat[..., _SKEW_MINUS]) @ axis)
+        c = 0.5 * (flat[..., _DIAG].sum(-1) - (local @ axis) @ axis)
+        return np.arctan2(s, c)
     skew = 0.5 * torch.stack([local[..., 2, 1] - local[..., 1, 2], local[..., 0, 2] - local[..., 2, 0],
                               local[..., 1, 0] - local[..., 0, 1]], dim=-1)
     s = skew @ axis
@@ -38,11 +46,15 @@ def hinge_angle(local: Tensor, axis: Tensor) -> Tensor:
     return torch.atan2(s, c)
 
 
+# row-major entries of a 3x3 matrix: the skew part's (21 - 12, 02 - 20, 10 - 01) and the diagonal
+_SKEW_PLUS, _SKEW_MINUS, _DIAG = np.array([7, 2, 3]), np.array([5, 6, 1]), np.array([0, 4, 8])
+
+
 _THIGHS = [t for t, _ in KNEES]
 _SHANKS = [s for _, s in KNEES]
 
 
-def constrain_knees(R: Tensor, measured: Tensor) -> Tensor:
+def constrain_knees(R: Tensor | np.ndarray, measured: Tensor | np.ndarray) -> Tensor | np.ndarray:
     """Global orientations (..., 24, 3, 3) with each knee made a hinge about KNEE_AXIS.
 
     measured (..., 24) bool: segments whose orientation is a measurement, never changed.
@@ -50,7 +62,10 @@ def constrain_knees(R: Tensor, measured: Tensor) -> Tensor:
     flexion. Thigh measured, shank not, or neither: the shank is rebuilt from the thigh
     (with neither measured the model's thigh is kept; it carries the hip's three
     degrees of freedom, the shank only adds flexion). Both measured: unchanged.
+    Numpy arrays in (the live poser's per-frame path): numpy out, the same formulas.
     """
+    if isinstance(R, np.ndarray):
+        return _constrain_knees_np(R, measured)
     axis = torch.tensor(KNEE_AXIS, dtype=R.dtype)
     Rt, Rs = R[..., _THIGHS, :, :], R[..., _SHANKS, :, :]  # (..., 2, 3, 3), both knees at once
     theta = hinge_angle(Rt.transpose(-1, -2) @ Rs, axis)
@@ -59,4 +74,28 @@ def constrain_knees(R: Tensor, measured: Tensor) -> Tensor:
     out = R.clone()
     out[..., _THIGHS, :, :] = torch.where((ms & ~mt)[..., None, None], Rs @ hinge.transpose(-1, -2), Rt)
     out[..., _SHANKS, :, :] = torch.where((~ms)[..., None, None], Rt @ hinge, Rs)
+    return out
+
+
+_THIGH_IDX, _SHANK_IDX = np.array(_THIGHS), np.array(_SHANKS)
+
+
+def _constrain_knees_np(R: np.ndarray, measured: np.ndarray) -> np.ndarray:
+    mt, ms = measured.take(_THIGH_IDX, -1), measured.take(_SHANK_IDX, -1)
+    fix_thigh, fix_shank = ms & ~mt, ~ms  # exclusive: the thigh is rebuilt only from a measured shank
+    out = R.copy()
+    if not (fix_thigh.any() or fix_shank.any()):
+        return out
+    axis = np.asarray(KNEE_AXIS, dtype=R.dtype)
+    Rt, Rs = R.take(_THIGH_IDX, -3), R.take(_SHANK_IDX, -3)
+    hinge = frame_kernels.matrix_about_axis(axis, hinge_angle(np.swapaxes(Rt, -1, -2) @ Rs, axis))
+    if R.ndim == 3:  # one frame: each knee on its own
+        for k, (t, s) in enumerate(KNEES):
+            if fix_thigh[k]:
+                out[t] = Rs[k] @ hinge[k].T
+            elif fix_shank[k]:
+                out[s] = Rt[k] @ hinge[k]
+        return out
+    out[..., _THIGH_IDX, :, :] = np.where(fix_thigh[..., None, None], Rs @ np.swapaxes(hinge, -1, -2), Rt)
+    out[..., _SHANK_IDX, :, :] = np.where(fix_shank[..., None, None], Rt @ hinge, Rs)
     return out

@@ -185,6 +185,60 @@ class TwoWayOdometry(nn.Module):
 Odometry = PelvisOdometry | TwoWayOdometry
 
 
+def _heading_inputs_np(p: np.ndarray, windows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``heading_frame_windows`` of the windows ``windows`` (n, C) (frame indices into ``p``
+    (T, 9), float32) on numpy: (n, C * 9), and each window's cos, sin of its last frame's yaw.
+    The 6D of ``R_z(-yaw) @ R`` is the turned first two columns of R, so the turn (written
+    out about z) is applied to those and to the acceleration."""
+    d = p[:, :6].reshape(-1, 2, 3)
+    b1 = d[:, 0] / np.sqrt((d[:, 0] * d[:, 0]).sum(-1, keepdims=True))  # rotations.rot6d_to_matrix's columns
+    a2 = d[:, 1] - (b1 * d[:, 1]).sum(-1, keepdims=True) * b1
+    b2 = a2 / np.sqrt((a2 * a2).sum(-1, keepdims=True))
+    v = np.stack([b1, b2, p[:, 6:9]], axis=1)[windows]  # (n, C, 3 vectors, xyz)
+    yaw = np.arctan2(b1[windows[:, -1], 1], b1[windows[:, -1], 0])
+    c, s = np.cos(yaw), np.sin(yaw)
+    x, y = v[..., 0], v[..., 1]
+    out = np.empty_like(v)
+    out[..., 0] = c[:, None, None] * x + s[:, None, None] * y  # R_z(-yaw) = [[c, s, 0], [-s, c, 0], [0, 0, 1]]
+    out[..., 1] = c[:, None, None] * y - s[:, None, None] * x
+    out[..., 2] = v[..., 2]
+    return out.reshape(len(windows), -1), c, s
+
+
+class OdometryKernel:
+    """An odometry's ``displacement`` with the windows' inputs built on numpy (one frame's call
+    of the two-way pair was ~1.7 ms of tiny torch ops); the nets stay torch's (a batch of
+    windows through numpy would take OpenBLAS's threaded gemm, which spins on a busy machine:
+    ``small_nets.NumpyMLP``)."""
+
+    def __init__(self, odo: Odometry) -> None:
+        self.context = odo.context
+        two_way = isinstance(odo, TwoWayOdometry)
+        fwd = odo.forward_net if two_way else odo
+        self._forward = (fwd, np.arange(self.context - fwd.context, self.context)[None])
+        self._backward = None
+        if two_way:
+            b, g = odo.backward_net, odo.gate_frames
+            last = np.arange(self.context - g, self.context)  # the gate's frames, each a window's last
+            self._backward = (b, last[:, None] - np.arange(b.context - 1, -1, -1)[None])
+            self._gate = -odo.gate_m_s / FPS_MODEL  # a mean forward step below this walks backwards
+
+    @torch.no_grad()
+    def __call__(self, pelvis_frames: np.ndarray) -> np.ndarray:
+        """(context, 9) float32 raw pelvis features of the last frames (oldest first) -> (2,)
+        this frame's root displacement in the world (metres)."""
+        for net in (self._backward, self._forward):
+            if net is None:
+                continue
+            x, c, s = _heading_inputs_np(pelvis_frames, net[1])
+            d = (net[0](torch.from_numpy(x)) * net[0].out_std).numpy()
+            if net is self._backward and not d[:, 0].mean() < self._gate:
+                continue
+            d0, d1, c, s = d[-1, 0], d[-1, 1], c[-1], s[-1]
+            return np.array([c * d0 - s * d1, s * d0 + c * d1], dtype=np.float32)  # R_z(yaw) d
+        raise AssertionError("the forward net always answers")
+
+
 # --------------------------------------------------------------------------- training
 
 @dataclass

@@ -36,10 +36,12 @@ A sensor missing in some frames (packet loss, out of range, a NaN from the resam
 is simply unobserved in those frames: its features are inpainted like any other, the
 motion continues, and the measurements take over again when they return.
 
-Speed: everything per step stays in torch (float32) on preallocated buffers under
-``torch.inference_mode``; the window is a view into a double-length buffer so shifting
-it is free except for one copy every N frames. Outputs are numpy *views* of fresh
-tensors (zero-copy), so consumers get arrays without a conversion cost.
+Speed: the window is a float32 torch buffer (the model's input) that the step reads and
+writes through a numpy view of the same memory; it is a view into a double-length buffer,
+so shifting it is free except for one copy every N frames. Everything around the model
+call (observation, cleaning, contacts, FK, root, filters) is float32/float64 numpy on one
+frame's small arrays (``body.frame_kernels``, the helpers' ``NumpyMLP``): torch's per-op
+cost on tiny tensors was most of that time (docs/latency.md, "Around the model call").
 
 Default weights live in ``inference/weights/`` (``default_weights``); a missing file
 raises a FileNotFoundError that says how to train one.
@@ -57,8 +59,9 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from inference.body.body import Body, contact_points, forward_kinematics, npose_rotations, tpose
-from inference.body.rotations import matrix_to_rot6d, rot6d_to_matrix
+from inference.body import frame_kernels as fk
+from inference.body.body import CONTACT_SEGMENTS, Body, contact_points, forward_kinematics, npose_rotations, tpose
+from inference.body.rotations import matrix_to_rot6d
 from inference.body.skeleton import N_CONTACTS, N_SEGMENTS, SEGMENT_INDEX, SITE_INDEX
 from inference.body.tracked import POINT_FEATURES
 from inference.features.layout import N_FEATURES, SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
@@ -75,7 +78,7 @@ from inference.poser.confidence import (
     root_deviation_m,
     segment_deviation_deg,
 )
-from inference.poser.contact_detector import DETECTOR_THRESHOLD, SHANK_INDEX, ContactDetector
+from inference.poser.contact_detector import DETECTOR_THRESHOLD, SHANK_INDEX, ContactDetector, DetectorKernel
 from inference.poser.joint_constraints import constrain_knees
 from inference.poser.models import (
     CONTACT_THRESHOLD,
@@ -92,7 +95,7 @@ from inference.poser.models import (
     resolve_model,
     resolve_odometry,
 )
-from inference.poser.pelvis_odometry import PELVIS_INDEX, Odometry
+from inference.poser.pelvis_odometry import PELVIS_INDEX, Odometry, OdometryKernel
 from inference.poser.smoothing import ROOT_SMOOTHING, ROTATION_SMOOTHING, RotationOneEuro, VectorOneEuro
 from inference.poser.stride import FOOT_SEGMENTS, SHANK_SITES, StrideScale
 from inference.signals.resample import FPS_MODEL, acc_filter_of
@@ -151,14 +154,14 @@ def standing_features(body: Body, pose: str = "npose") -> np.ndarray:
 # --------------------------------------------------------------------------- the poser
 
 class Observation(NamedTuple):
-    """One frame's observation as the poser takes it: f_in the features as given, m the
-    mask used (given and finite), f32 float32 with the standing pose where unobserved, fn
-    the same normalised."""
+    """One frame's observation as the poser takes it (numpy): f_in the features as given,
+    m the mask used (given and finite), f32 float32 with the standing pose where
+    unobserved, fn the same normalised."""
 
-    f_in: Tensor
-    m: Tensor
-    f32: Tensor
-    fn: Tensor
+    f_in: np.ndarray
+    m: np.ndarray
+    f32: np.ndarray
+    fn: np.ndarray
 
 
 class Poser:
@@ -235,9 +238,11 @@ class Poser:
         # contacts from both shank sensors when they are measured (contact_detector.py):
         # far more often right than a reconstruction model's own contact features
         self.contact_detector = None if self.kind == "floor" else resolve_detector(contact_detector)
+        self._detector = DetectorKernel(self.contact_detector) if self.contact_detector is not None else None
         # without both shanks the root's walk from the pelvis sensor (pelvis_odometry.py):
         # the guessed legs cancel the walk there, insoles or not
         self.pelvis_odometry = None if self.kind == "floor" else resolve_odometry(pelvis_odometry)
+        self._odometry = OdometryKernel(self.pelvis_odometry) if self.pelvis_odometry is not None else None
         # the floor is by definition the standing pose wherever nothing is measured
         self.knee_hinge = knee_hinge and self.kind != "floor"
         # output only: the integrated root path (and so every later frame) is unfiltered
@@ -276,8 +281,10 @@ class Poser:
         self._offsets = torch.as_tensor(self.body.offsets, dtype=torch.float32)
         self._contact_offsets = torch.as_tensor(self.body.contact_offsets, dtype=torch.float32)
         self._stand = torch.as_tensor(standing_features(self.body, start_pose), dtype=torch.float32)
-        self._shank_idx = torch.as_tensor(SHANK_INDEX)
-        self._pelvis_idx = torch.as_tensor(PELVIS_INDEX)
+        # the per-frame path's numpy forms of the same (Poser.finish)
+        self._mean_np, self._std_np, self._stand_np = self._mean.numpy(), self._std.numpy(), self._stand.numpy()
+        self._kin = fk.Kinematics(self.body.offsets)
+        self._cp_local = np.asarray(self.body.contact_offsets, dtype=np.float32)[:, :, None]
         self.reset()
 
     @property
@@ -330,10 +337,13 @@ class Poser:
             self._stand_win = stand_n.expand(1, N, N_FEATURES)
             # tracked points' position input per frame, aligned with _buf (none at the start)
             self._pbuf = torch.zeros(1, 2 * N, POINT_FEATURES) if self.takes_points else None
-            R0 = rot6d_to_matrix(self._stand[SL_ROT].view(N_SEGMENTS, 6))
-            j0 = forward_kinematics(R0, torch.zeros(3), self._offsets)
-            self._prev_cps = contact_points(R0, j0, self._contact_offsets)
-            self._root_xy = torch.tensor(self.root_xy0, dtype=torch.float64)
+            # numpy views of the same memory, for the per-frame path
+            self._buf_np = self._buf.numpy()
+            self._mask_np = self._mask.numpy()
+            self._mbuf_np = self._mbuf.numpy() if self._mbuf is not None else None
+            R0 = fk.rot6d_to_matrix(self._stand_np[SL_ROT].reshape(N_SEGMENTS, 6))
+            self._prev_cps = self._contact_points(R0, self._kin.joints(R0))
+            self._root_xy = np.array(self.root_xy0, dtype=np.float64)
             self._root_raw = np.zeros(2)  # the root path without stride scaling
             self._gen = torch.Generator().manual_seed(self.seed)
             if self.confidence is not None:
@@ -353,9 +363,9 @@ class Poser:
         frame is free to fill."""
         N = self.window
         if self._pos + 1 >= 2 * N:
-            self._buf[:, : N - 1] = self._buf[:, N + 1:].clone()
-            if self._mbuf is not None:
-                self._mbuf[:, : N - 1] = self._mbuf[:, N + 1:].clone()
+            self._buf_np[:, : N - 1] = self._buf_np[:, N + 1:]
+            if self._mbuf_np is not None:
+                self._mbuf_np[:, : N - 1] = self._mbuf_np[:, N + 1:]
             if self._pbuf is not None:
                 self._pbuf[:, : N - 1] = self._pbuf[:, N + 1:].clone()
             self._pos = N - 2
@@ -435,22 +445,23 @@ class Poser:
     # (``batched.reconstruct_batched``) and still pass each frame through the same code.
     def observe(self, features: np.ndarray | Tensor, observed_mask: np.ndarray | Tensor) -> Observation:
         """This frame's observation, as the model and the history take it."""
-        f_in = torch.as_tensor(_writable(features))
-        m = torch.as_tensor(_writable(observed_mask)).to(torch.bool).reshape(N_FEATURES)
-        f32 = f_in.to(torch.float32).reshape(N_FEATURES)
-        m = m & torch.isfinite(f32)
-        f32 = torch.where(m, f32, self._stand)  # no NaN may reach any arithmetic
-        return Observation(f_in, m, f32, self._normalize(f32))
+        f_in = _numpy(features)
+        m = _numpy(observed_mask).astype(bool, copy=False).reshape(N_FEATURES)
+        f32 = f_in.astype(np.float32).reshape(N_FEATURES)
+        m = m & np.isfinite(f32)
+        f32 = np.where(m, f32, self._stand_np)  # no NaN may reach any arithmetic
+        return Observation(f_in, m, f32, (f32 - self._mean_np) / self._std_np)
 
     def enter(self, obs: Observation) -> tuple[Tensor, Tensor]:
         """Shift the window and put the observation into its last frame; returns the
         window view (1, N, F) and the mask the model is given."""
         win = self._advance()
-        win[0, -1] = torch.where(obs.m, obs.fn, win[0, -2])
+        pos = self._pos
+        np.copyto(self._buf_np[0, pos], np.where(obs.m, obs.fn, self._buf_np[0, pos - 1]))
         if self.history_mode == "measured":
-            self._mbuf[0, self._pos] = obs.m
-            return win, self._mbuf[:, self._pos - self.window + 1: self._pos + 1]
-        self._mask[0, -1] = obs.m
+            self._mbuf_np[0, pos] = obs.m
+            return win, self._mbuf[:, pos - self.window + 1: pos + 1]
+        self._mask_np[0, -1] = obs.m
         return win, self._mask
 
     def enter_points(self, points: np.ndarray | Tensor | None) -> None:
@@ -491,36 +502,45 @@ class Poser:
         return redraw(net or self._draw_net, rep(out), rep(win), rep(mask), h, self.confidence.level, noise,
                       self.schedule, mask_input=self.model.config.mask_input, points=pts)
 
-    def finish(self, y_n: Tensor, win: Tensor, obs: Observation, draws: Tensor | None = None) -> PoseFrame:
+    def finish(self, y_n: Tensor | np.ndarray, win: Tensor, obs: Observation,
+               draws: Tensor | None = None) -> PoseFrame:
         """Clean the model's answer ``y_n`` (F,) for the window's last frame (normalised),
         correct and integrate the root, write the frame into the history and return it;
         ``draws`` (k, F): other inpaintings of the frame for the spread, or None."""
+        # a degenerate answer (a zero 6D) gives NaN quietly, as torch did
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self._finish(y_n, win, obs, draws)
+
+    def _finish(self, y_n: Tensor | np.ndarray, win: Tensor, obs: Observation, draws: Tensor | None) -> PoseFrame:
         f_in, m, f32, fn = obs
-        y = y_n * self._std + self._mean  # physical units, fresh tensor
+        wn = win.numpy()[0]  # (N, F), the same memory
+        y = _numpy(y_n) * self._std_np + self._mean_np  # physical units, fresh array
 
         # clean the reconstruction: valid rotations, 0/1 contacts (what the data holds)
-        R = rot6d_to_matrix(y[SL_ROT].reshape(N_SEGMENTS, 6))
-        seg_measured = m[SL_ROT].view(N_SEGMENTS, 6).all(dim=-1)
+        R = fk.rot6d_to_matrix(y[SL_ROT].reshape(N_SEGMENTS, 6))
+        seg_measured = m[SL_ROT].reshape(N_SEGMENTS, 6).all(axis=-1)
         if self.knee_hinge:
             R = constrain_knees(R, seg_measured)
-        y[SL_ROT] = torch.where(m[SL_ROT], y[SL_ROT], matrix_to_rot6d(R).reshape(-1))
-        prob = y[SL_CONTACT].clamp(0.0, 1.0)
+        y[SL_ROT] = np.where(m[SL_ROT], y[SL_ROT], fk.matrix_to_rot6d(R).reshape(-1))
+        prob = np.clip(y[SL_CONTACT], 0.0, 1.0)
         threshold = self.contact_threshold
-        det = self.contact_detector
+        det = self._detector
         detected = False
-        if det is not None and not bool(m[SL_CONTACT].any()) and bool(m[self._shank_idx].all()):
-            prob, threshold = det.probabilities(self._recent(win, self._shank_idx, det.context)), DETECTOR_THRESHOLD
+        shanks = bool(m[SHANK_INDEX].all())
+        if det is not None and shanks and not m[SL_CONTACT].any():
+            prob, threshold = det(self._recent(wn, SHANK_INDEX, det.context)), DETECTOR_THRESHOLD
             detected = True
         contact = prob > threshold
-        y[SL_CONTACT] = torch.where(m[SL_CONTACT], y[SL_CONTACT], contact.to(y.dtype))
+        y[SL_CONTACT] = np.where(m[SL_CONTACT], y[SL_CONTACT], contact.astype(np.float32))
 
-        joints_rel = forward_kinematics(R, torch.zeros(3), self._offsets)
-        cps = contact_points(R, joints_rel, self._contact_offsets)
-        root_step = "measured" if bool(m[SL_DP].any()) else "model"
-        if self.root_correction and not bool(m[SL_DP].any()):
-            odo = self.pelvis_odometry
-            if odo is not None and not bool(m[self._shank_idx].all()) and bool(m[self._pelvis_idx].all()):
-                y[SL_DP] = odo.displacement(self._recent(win, self._pelvis_idx, odo.context))
+        joints_rel = self._kin.joints(R)
+        cps = self._contact_points(R, joints_rel)
+        dp_measured = bool(m[SL_DP].any())
+        root_step = "measured" if dp_measured else "model"
+        if self.root_correction and not dp_measured:
+            odo = self._odometry
+            if odo is not None and not shanks and bool(m[PELVIS_INDEX].all()):
+                y[SL_DP] = odo(self._recent(wn, PELVIS_INDEX, odo.context))
                 root_step = "odometry"
             else:
                 y[SL_DP] = correct_root_displacement(y[SL_DP], self._prev_cps, cps, contact)
@@ -532,45 +552,58 @@ class Poser:
         self._prev_cps = cps
 
         # history keeps the exact normalised measurement where observed
-        win[0, -1] = torch.where(m, fn, self._normalize(y))
+        wn[-1] = np.where(m, fn, (y - self._mean_np) / self._std_np)
 
         scale = 1.0
-        if self.stride is not None and not bool(m[SL_DP].any()):
+        if self.stride is not None and not dp_measured:
             scale = self._stride_scale(joints_rel, f32, m, contact, y[SL_DP])
             y[SL_DP] = y[SL_DP] * scale
         if apart is not None:
             seg_dev, pz_d, dp_d = apart
-            self._spread.add(seg_dev, root_deviation_m(pz_d, y[SL_PZ], dp_d * scale, y[SL_DP], FPS_MODEL))
-        self._root_xy += y[SL_DP].to(torch.float64)
-        root = torch.cat([self._root_xy.to(torch.float32), y[SL_PZ]])
+            yt = torch.from_numpy(y)
+            self._spread.add(seg_dev, root_deviation_m(pz_d, yt[SL_PZ], dp_d * scale, yt[SL_DP], FPS_MODEL))
+        self._root_xy += y[SL_DP]
+        root = np.concatenate([self._root_xy.astype(np.float32), y[SL_PZ]])
         if self._filters is not None:
             root_filter, rot_filter = self._filters
             root = root_filter(root)
             R = rot_filter(R, seg_measured)
-            joints_rel = forward_kinematics(R, torch.zeros(3), self._offsets)
+            if not seg_measured.all():  # else every segment passed through: the same joints
+                joints_rel = self._kin.joints(R)
         joints = joints_rel + root
-        feats = torch.where(m, f_in.to(torch.float64).reshape(N_FEATURES), y.to(torch.float64))
+        feats = np.where(m, f_in.reshape(N_FEATURES), y.astype(np.float64))
         pool = self._spread if self.confidence is not None else None
         frame = PoseFrame(
-            index=self.index, rot=R.numpy(), root=root.numpy(), joints=joints.numpy(),
-            contacts=contact.numpy(), contact_prob=prob.numpy(), features=feats.numpy(),
-            observed=m.numpy(),
+            index=self.index, rot=R, root=root, joints=joints,
+            contacts=contact, contact_prob=prob, features=feats,
+            observed=m,
             spread_deg=None if pool is None or pool.spread_deg is None else pool.spread_deg.copy(),
             root_spread_m=None if pool is None else pool.root_spread_m,
         )
         self.index += 1
         return frame
 
-    def _draws_apart(self, draws: Tensor, R: Tensor, y: Tensor, m: Tensor, seg_measured: Tensor,
-                     detected: Tensor | None, threshold: float, root_step: str) -> tuple[np.ndarray, Tensor, Tensor]:
+    def _contact_points(self, R: np.ndarray, joints_rel: np.ndarray) -> np.ndarray:
+        """(4, 3) heel/toe points relative to the root (``body.contact_points``)."""
+        return fk.points_on_segments(R, joints_rel, _CONTACT_SEGMENTS, self._cp_local)
+
+    def _draws_apart(self, draws: Tensor, R: np.ndarray, y: np.ndarray, m: np.ndarray, seg_measured: np.ndarray,
+                     detected: np.ndarray | None, threshold: float,
+                     root_step: str) -> tuple[np.ndarray, Tensor, Tensor]:
         """How far each draw (k, F) is from the cleaned answer: (k, 24) degrees, and the
         draws' root height (k,) and root step (k, 2) as the answer's root path would take
-        them (the same contact rule; the answer's own step where a sensor gives it)."""
+        them (the same contact rule; the answer's own step where a sensor gives it).
+        Torch, on the frame's numpy arrays (shared memory)."""
+        R, y, m, seg_measured = (torch.from_numpy(a) for a in (R, y, m, seg_measured))
+        detected = torch.from_numpy(detected) if detected is not None else None
+        prev_cps = torch.from_numpy(self._prev_cps)
         yd = draws * self._std + self._mean
         k = yd.shape[0]
-        Rd = rot6d_to_matrix(yd[:, SL_ROT].reshape(k, N_SEGMENTS, 6))
+        # the answer's own kernels: a measured segment's draw is then exactly the answer's
+        Rd = fk.rot6d_to_matrix(yd[:, SL_ROT].numpy().reshape(k, N_SEGMENTS, 6))
         if self.knee_hinge:
-            Rd = constrain_knees(Rd, seg_measured)
+            Rd = constrain_knees(Rd, seg_measured.numpy())
+        Rd = torch.from_numpy(Rd)
         seg_dev = segment_deviation_deg(Rd, R)
         pz_d = torch.where(m[SL_PZ], y[SL_PZ], yd[:, SL_PZ])
         if root_step in ("odometry", "measured"):
@@ -582,35 +615,36 @@ class Poser:
                 contact_d = yd[:, SL_CONTACT].clamp(0.0, 1.0) > threshold
                 contact_d = torch.where(m[SL_CONTACT], y[SL_CONTACT] > 0.5, contact_d)
             cps_d = contact_points(Rd, forward_kinematics(Rd, torch.zeros(3), self._offsets), self._contact_offsets)
-            dp_d = torch.stack([correct_root_displacement(yd[i, SL_DP], self._prev_cps, cps_d[i], contact_d[i])
+            dp_d = torch.stack([correct_root_displacement(yd[i, SL_DP], prev_cps, cps_d[i], contact_d[i])
                                 for i in range(k)])
         else:
             dp_d = yd[:, SL_DP]
         return seg_dev, pz_d, dp_d
 
-    def _recent(self, win: Tensor, idx: Tensor, n: int) -> Tensor:
-        """(n, len(idx)) the features ``idx`` of the window's last n frames in physical
-        units, oldest first: what a helper stage reads."""
-        return win[0, -n:, idx] * self._std[idx] + self._mean[idx]
+    def _recent(self, wn: np.ndarray, idx: np.ndarray, n: int) -> np.ndarray:
+        """(n, len(idx)) the features ``idx`` of the window's (N, F) last n frames in
+        physical units, oldest first: what a helper stage reads."""
+        return wn[-n:, idx] * self._std_np[idx] + self._mean_np[idx]
 
-    def _stride_scale(self, joints_rel: Tensor, f32: Tensor, m: Tensor, contact: Tensor,
-                      dp: Tensor) -> float:
+    def _stride_scale(self, joints_rel: np.ndarray, f32: np.ndarray, m: np.ndarray, contact: np.ndarray,
+                      dp: np.ndarray) -> float:
         """Feed this frame to the stride estimator; the factor for this frame's root step.
         Without both shanks the paper's root stands alone (the bias the scale undoes belongs
         to the sensor set it was measured with); the scale is kept for when they return."""
-        self._root_raw += dp.numpy().astype(np.float64)
+        self._root_raw += dp
         if not (bool(m[_SHANK_ROT].all()) and bool(m[_SHANK_ACC].all())):
             self.stride.drop()
             return 1.0
-        ankles = joints_rel.numpy()[list(_FOOT_JOINTS), :2].astype(np.float64) + self._root_raw
-        R = rot6d_to_matrix(f32[_SHANK_ROT].reshape(2, 6)).numpy()
-        return self.stride.update(R, f32[_SHANK_ACC].numpy().reshape(2, 3), contact.numpy(), ankles)
+        ankles = joints_rel[_FOOT_JOINTS, :2].astype(np.float64) + self._root_raw
+        R = fk.rot6d_to_matrix(f32[_SHANK_ROT].reshape(2, 6))
+        return self.stride.update(R, f32[_SHANK_ACC].reshape(2, 3), contact, ankles)
 
 
 _SHANK_SEGMENTS = tuple(SEGMENT_INDEX[s] for s in SHANK_SITES)
-_FOOT_JOINTS = tuple(SEGMENT_INDEX[s] for s in FOOT_SEGMENTS)
-_SHANK_ROT = torch.tensor([SL_ROT.start + 6 * k + i for k in _SHANK_SEGMENTS for i in range(6)])
-_SHANK_ACC = torch.tensor([SL_ACC.start + 3 * SITE_INDEX[s] + i for s in SHANK_SITES for i in range(3)])
+_FOOT_JOINTS = np.array([SEGMENT_INDEX[s] for s in FOOT_SEGMENTS])
+_SHANK_ROT = np.array([SL_ROT.start + 6 * k + i for k in _SHANK_SEGMENTS for i in range(6)])
+_SHANK_ACC = np.array([SL_ACC.start + 3 * SITE_INDEX[s] + i for s in SHANK_SITES for i in range(3)])
+_CONTACT_SEGMENTS = np.array(CONTACT_SEGMENTS)
 
 
 _NETS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -628,7 +662,13 @@ def _writable(a):
     return a
 
 
-def correct_root_displacement(dp: Tensor, prev_points: Tensor, points: Tensor, contact: Tensor) -> Tensor:
+def _numpy(a) -> np.ndarray:
+    """An array or CPU tensor as numpy, without a copy where none is needed."""
+    return a.numpy() if isinstance(a, Tensor) else np.asarray(a)
+
+
+def correct_root_displacement(dp: Tensor | np.ndarray, prev_points: Tensor | np.ndarray, points: Tensor | np.ndarray,
+                              contact: Tensor | np.ndarray) -> Tensor | np.ndarray:
     """The paper's root correction (sec. 3.4.2): subtract from the predicted ground-plane
     root displacement ``dp`` (2,) the mean horizontal *world* displacement, from the
     previous frame to this one, of the foot points predicted in contact.
@@ -636,12 +676,13 @@ def correct_root_displacement(dp: Tensor, prev_points: Tensor, points: Tensor, c
     prev_points/points: (4, 3) heel/toe points relative to the root at the previous and
     this frame; a point's world displacement is its relative displacement plus ``dp``,
     so a point in contact that moved with the body by ``d`` pulls dp to ``-d`` (the foot
-    stays planted, the pelvis moves). With no point in contact dp is unchanged.
+    stays planted, the pelvis moves). With no point in contact dp is unchanged. Torch
+    tensors or numpy arrays (all of one kind).
     """
     if not bool(contact.any()):
         return dp
     world = points[:, :2] - prev_points[:, :2] + dp
-    return dp - world[contact].mean(dim=0)
+    return dp - world[contact].mean(0)
 
 
 # --------------------------------------------------------------------------- offline

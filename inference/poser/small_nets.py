@@ -29,6 +29,40 @@ def stack_context(f: Tensor, context: int) -> Tensor:
     return pad[idx]
 
 
+class NumpyMLP:
+    """An eval-mode ``nn.Sequential`` of Linear and GELU layers as float32 numpy matmuls,
+    with the input normaliser ``(x - in_mean) / in_std`` of the helper nets: the live poser
+    calls a helper on one frame, where torch's per-call cost is most of the time. A copy
+    of the weights at construction. For one row at a time: a batch goes through OpenBLAS's
+    gemm, whose threads spin on a busy 2-core machine (a 20x256x256 call took 8 ms of CPU)."""
+
+    def __init__(self, net: nn.Module) -> None:
+        from scipy.special import erf
+
+        self._erf = erf
+        self.in_mean = net.in_mean.detach().numpy().astype(np.float32)
+        self.in_std = net.in_std.detach().numpy().astype(np.float32)
+        self.layers: list[tuple[np.ndarray, np.ndarray] | None] = []
+        for layer in net.net:
+            if isinstance(layer, nn.Linear):
+                self.layers.append((np.ascontiguousarray(layer.weight.detach().numpy().T, dtype=np.float32),
+                                    layer.bias.detach().numpy().astype(np.float32)))
+            elif isinstance(layer, nn.GELU) and layer.approximate == "none":
+                self.layers.append(None)
+            else:
+                raise TypeError(f"NumpyMLP takes Linear and exact GELU layers, not {layer}")
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        """(B, n) inputs -> (B, out) the net's outputs (before any sigmoid or output scale)."""
+        h = (x - self.in_mean) / self.in_std
+        for layer in self.layers:
+            if layer is None:
+                h = h * np.float32(0.5) * (np.float32(1.0) + self._erf(h * np.float32(0.7071067811865476)))
+            else:
+                h = h @ layer[0] + layer[1]
+        return h
+
+
 def clip_tensors(clips: Sequence[np.ndarray], mirror: bool = False) -> Iterator[Tensor]:
     """Each clip's (T, 190) features as float32 tensors, or their mirror images: what
     every helper's training windows are cut from."""

@@ -11,6 +11,9 @@ A fixed low-pass would trade the wobble for lag in fast motion; the 1-Euro filte
 raises it when fast, which is what a live viewer wants: a still body stays still and a
 jump is not delayed much. On rotations it moves along the geodesic; measured segments
 pass through untouched (their orientation is the measurement).
+
+The filters run on numpy (the live poser's per-frame path, ``body.frame_kernels``); a
+torch tensor in gives a tensor out, computed the same way.
 """
 
 from __future__ import annotations
@@ -18,10 +21,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 from torch import Tensor
 
-from inference.body.rotations import so3_exp, so3_log
+from inference.body.frame_kernels import so3_exp, so3_log
 
 
 @dataclass(frozen=True)
@@ -41,9 +45,9 @@ ROOT_SMOOTHING = OneEuroConfig(min_cutoff_hz=2.0, beta=0.5)
 ROTATION_SMOOTHING = OneEuroConfig(min_cutoff_hz=4.0, beta=0.3)
 
 
-def smoothing_gain(cutoff_hz: Tensor | float, dt: float) -> Tensor:
+def smoothing_gain(cutoff_hz: np.ndarray | float, dt: float) -> np.ndarray:
     """Gain of a first-order low-pass with this cutoff sampled every dt seconds."""
-    tau = 1.0 / (2.0 * math.pi * torch.as_tensor(cutoff_hz))
+    tau = 1.0 / (2.0 * math.pi * np.asarray(cutoff_hz))
     return 1.0 / (1.0 + tau / dt)
 
 
@@ -58,46 +62,55 @@ class _OneEuro:
 
     def reset(self) -> None:
         """Forget the past: the next sample passes through and starts the state."""
-        self._last: Tensor | None = None
-        self._rate: Tensor | None = None
+        self._last: np.ndarray | None = None
+        self._rate: np.ndarray | None = None
 
-    def _gain(self, speed: Tensor) -> Tensor:
+    def _gain(self, speed: np.ndarray) -> np.ndarray:
         """Update the filtered speed with this sample's and return the smoothing gain."""
         assert self._rate is not None
         self._rate = self._rate + self._rate_gain * (speed - self._rate)
         return smoothing_gain(self.config.min_cutoff_hz + self.config.beta * self._rate, self.dt)
 
-    def _start(self, x: Tensor, rows: tuple[int, ...]) -> Tensor:
-        self._last = x.clone()
-        self._rate = torch.zeros(rows, dtype=x.dtype)
-        return x.clone()
+    def _start(self, x: np.ndarray, rows: tuple[int, ...]) -> np.ndarray:
+        self._last = x.copy()
+        self._rate = np.zeros(rows, dtype=x.dtype)
+        return x.copy()
+
+
+def _speed(step: np.ndarray, dt: float) -> np.ndarray:
+    return np.sqrt(np.einsum("...i,...i->...", step, step)) / dt
 
 
 class VectorOneEuro(_OneEuro):
     """1-Euro filter of a vector signal (..., D): each row's cutoff follows its speed."""
 
-    def __call__(self, x: Tensor) -> Tensor:
+    def __call__(self, x: np.ndarray | Tensor) -> np.ndarray | Tensor:
+        if isinstance(x, Tensor):
+            return torch.from_numpy(self(x.numpy()))
         if self._last is None:
             return self._start(x, tuple(x.shape[:-1]))
         step = x - self._last
-        gain = self._gain(step.norm(dim=-1) / self.dt).to(x.dtype)
+        gain = self._gain(_speed(step, self.dt)).astype(x.dtype, copy=False)
         self._last = self._last + gain[..., None] * step
-        return self._last.clone()
+        return self._last.copy()
 
 
 class RotationOneEuro(_OneEuro):
     """1-Euro filter of rotations (S, 3, 3), one state per rotation; the speed that sets
     each cutoff is the filtered angular rate (rad/s)."""
 
-    def __call__(self, R: Tensor, passthrough: Tensor | None = None) -> Tensor:
+    def __call__(self, R: np.ndarray | Tensor, passthrough: np.ndarray | Tensor | None = None) -> np.ndarray | Tensor:
         """Filtered R (S, 3, 3); ``passthrough`` (S,) bool: returned as given (and kept
         as the state), for measured segments."""
+        if isinstance(R, Tensor):
+            keep = passthrough.numpy() if isinstance(passthrough, Tensor) else passthrough
+            return torch.from_numpy(self(R.numpy(), keep))
         if self._last is None:
             return self._start(R, (R.shape[0],))
-        step = so3_log(self._last.transpose(-1, -2) @ R)  # (S, 3) in each rotation's own frame
-        gain = self._gain(step.norm(dim=-1) / self.dt).to(R.dtype)
+        step = so3_log(np.swapaxes(self._last, -1, -2) @ R)  # (S, 3) in each rotation's own frame
+        gain = self._gain(_speed(step, self.dt)).astype(R.dtype, copy=False)
         out = self._last @ so3_exp(step * gain[:, None])
         if passthrough is not None:
-            out = torch.where(passthrough[:, None, None], R, out)
+            out = np.where(passthrough[:, None, None], R, out)
         self._last = out
-        return out.clone()
+        return out.copy()

@@ -34,6 +34,9 @@ def test_bench_json_contract(capsys, monkeypatch):
         assert 0 < r["p50_ms"] <= r["p99_ms"]
     assert res["steps"] == 2 and res["paper"]["steps"] == 30 and res["threads"] == 1
     assert "4/128/512" in res["model"] and "paper" in res["paper"]["model"]
+    # the step's stages, the work outside the model call summed
+    assert {f"{s}_p50_ms" for s in cli_bench.STAGES} <= set(res["stages"])
+    assert 0 < res["stages"]["outside_model_p50_ms"] < res["p99_ms"]
 
 
 def test_bench_times_the_loop_without_mirror_averaging_too_when_it_mirrors(capsys):
