@@ -5,7 +5,10 @@ same stages as written in torch (tests/inference/poser/reference_poser.py), the 
 posers stepped in turn on the same frames, the order turning each frame (the machine is
 shared: only ratios from one run compare). The model call is timed too, apart (``model``).
 
-    .venv/bin/python benchmarks/poser_stages.py [--frames 300] [--threads 1] [--json]
+    .venv/bin/python benchmarks/poser_stages.py [--frames 300] [--threads 1] [--sites SITE,...] [--json]
+
+The input is ``imucap bench``'s generated walk at the paper's 6 sites, or at ``--sites``
+(e.g. ``pelvis,l_wrist,r_wrist``: the pelvis odometry's root instead of the shanks' contacts).
 
 Prints per stage and poser the median wall and thread-CPU time (ms), their sum outside the
 model call, and the ratio of the torch sum to the numpy one (docs/latency.md, "Around the
@@ -31,6 +34,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--runtime", default="auto", help="the model call's runtime (untimed): auto, torch, onnx")
+    ap.add_argument("--sites", default="", help="comma-separated sensor sites (default: the paper's 6)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
 
@@ -44,10 +48,14 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(args.threads)
     model, label, _ = load_model("diffusion")
     motion, inp = _walk(args.frames + 10, 0)
+    if args.sites:
+        from inference.evaluation.runner import clip_input
+
+        inp = clip_input(motion, args.sites.split(","))
     posers = {"numpy": Poser(model, body=motion.body, runtime=args.runtime),
               "torch": ReferencePoser(model, body=motion.body, runtime=args.runtime)}
     times = stage_times(posers, inp, args.frames)
-    res: dict = {"model": label, "frames": args.frames, "threads": args.threads, "sites": "6 (paper)",
+    res: dict = {"model": label, "frames": args.frames, "threads": args.threads, "sites": args.sites or "6 (paper)",
                  "runtime": posers["numpy"].runtime}
     for name, t in times.items():
         res[name] = {k: round(float(np.median(v)), 4) for k, v in t.items()}

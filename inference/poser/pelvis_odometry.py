@@ -209,7 +209,10 @@ class OdometryKernel:
     """An odometry's ``displacement`` with the windows' inputs built on numpy (one frame's call
     of the two-way pair was ~1.7 ms of tiny torch ops); the nets stay torch's (a batch of
     windows through numpy would take OpenBLAS's threaded gemm, which spins on a busy machine:
-    ``small_nets.NumpyMLP``)."""
+    ``small_nets.NumpyMLP``). Called frame by frame with the frame's number, it keeps the
+    backward net's answer of each frame's window for the gate's later frames: a window holds
+    only frames already finished, so its answer does not change, and each frame then adds one
+    window instead of the gate's 20."""
 
     def __init__(self, odo: Odometry) -> None:
         self.context = odo.context
@@ -222,21 +225,47 @@ class OdometryKernel:
             last = np.arange(self.context - g, self.context)  # the gate's frames, each a window's last
             self._backward = (b, last[:, None] - np.arange(b.context - 1, -1, -1)[None])
             self._gate = -odo.gate_m_s / FPS_MODEL  # a mean forward step below this walks backwards
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the kept answers (the poser's history restarted)."""
+        g = 0 if self._backward is None else len(self._backward[1])
+        self._kept = np.full(g, -1)  # ring by frame number: which frame's answer each slot holds
+        self._d = np.zeros((g, 2), np.float32)
+        self._cs = np.zeros((g, 2), np.float32)
 
     @torch.no_grad()
-    def __call__(self, pelvis_frames: np.ndarray) -> np.ndarray:
+    def _answers(self, net: nn.Module, pelvis_frames: np.ndarray, windows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        x, c, s = _heading_inputs_np(pelvis_frames, windows)
+        return (net(torch.from_numpy(x)) * net.out_std).numpy(), np.stack([c, s], axis=-1)
+
+    def __call__(self, pelvis_frames: np.ndarray, frame: int | None = None) -> np.ndarray:
         """(context, 9) float32 raw pelvis features of the last frames (oldest first) -> (2,)
-        this frame's root displacement in the world (metres)."""
-        for net in (self._backward, self._forward):
-            if net is None:
-                continue
-            x, c, s = _heading_inputs_np(pelvis_frames, net[1])
-            d = (net[0](torch.from_numpy(x)) * net[0].out_std).numpy()
-            if net is self._backward and not d[:, 0].mean() < self._gate:
-                continue
-            d0, d1, c, s = d[-1, 0], d[-1, 1], c[-1], s[-1]
-            return np.array([c * d0 - s * d1, s * d0 + c * d1], dtype=np.float32)  # R_z(yaw) d
-        raise AssertionError("the forward net always answers")
+        this frame's root displacement in the world (metres). ``frame``: its number since
+        the history started (the kept answers are for it), None to keep nothing."""
+        if self._backward is not None:
+            net, windows = self._backward
+            g = len(windows)
+            if frame is None:
+                d, cs = self._answers(net, pelvis_frames, windows)
+            else:
+                frames = np.arange(frame - g + 1, frame + 1)
+                slots = frames % g
+                todo = np.flatnonzero(self._kept[slots] != frames)
+                if len(todo):
+                    self._d[slots[todo]], self._cs[slots[todo]] = self._answers(net, pelvis_frames, windows[todo])
+                    self._kept[slots[todo]] = frames[todo]
+                d, cs = self._d[slots], self._cs[slots]
+            if d[:, 0].mean() < self._gate:
+                return _turned_back(d[-1], cs[-1])
+        d, cs = self._answers(self._forward[0], pelvis_frames, self._forward[1])
+        return _turned_back(d[-1], cs[-1])
+
+
+def _turned_back(d: np.ndarray, cs: np.ndarray) -> np.ndarray:
+    """A heading-frame answer (2,) in the world: R_z(yaw) d, with cs = (cos, sin) of the yaw."""
+    c, s = cs
+    return np.array([c * d[0] - s * d[1], s * d[0] + c * d[1]], dtype=np.float32)
 
 
 # --------------------------------------------------------------------------- training

@@ -351,6 +351,8 @@ class Poser:
                 self._spread.reset()
         for f in self._filters or ():
             f.reset()
+        if self._odometry is not None:
+            self._odometry.reset()
         if self.stride is not None:
             self.stride.reset()
         self.index = 0
@@ -540,7 +542,7 @@ class Poser:
         if self.root_correction and not dp_measured:
             odo = self._odometry
             if odo is not None and not shanks and bool(m[PELVIS_INDEX].all()):
-                y[SL_DP] = odo(self._recent(wn, PELVIS_INDEX, odo.context))
+                y[SL_DP] = odo(self._recent(wn, PELVIS_INDEX, odo.context), self.index)
                 root_step = "odometry"
             else:
                 y[SL_DP] = correct_root_displacement(y[SL_DP], self._prev_cps, cps, contact)

@@ -23,6 +23,7 @@ CASES = {
     "six_insoles": dict(sites=SIX, insoles=True),
     "six_confidence": dict(sites=SIX, confidence=ConfidenceSettings(draws=2)),
     "pelvis_wrists": dict(sites=("pelvis", "l_wrist", "r_wrist")),  # the pelvis odometry's root
+    "pelvis_wrists_dropouts": dict(sites=("pelvis", "l_wrist", "r_wrist"), dropouts=True),  # its windows kept
     "thighs_dropouts": dict(sites=("pelvis", "l_thigh", "r_thigh", "l_shank", "r_shank"), dropouts=True),
 }
 
