@@ -16,6 +16,11 @@ if ! command -v xvfb-run >/dev/null || ! command -v strace >/dev/null || ! comma
     libxcb-shape0 libxcb-xkb1 libdbus-1-3 libfontconfig1 strace chromium >/dev/null
 fi
 .venv/bin/ruff check .
+# let Python keep compiled modules (in the __pycache__ folders git ignores): with
+# PYTHONDONTWRITEBYTECODE set, as some shells have it, each xdist worker rewrote the asserts of
+# every test module again (half of a collection's CPU) and each CLI subprocess compiled the
+# package anew
+unset PYTHONDONTWRITEBYTECODE
 XVFB=(xvfb-run -a -s "-screen 0 1280x1024x24")
 # two passes: everything else on both cores, then the real-time cross-process tests alone
 # (tests/conftest.py, SOLO_MODULES); pytest's 5 means "nothing collected" for a pass

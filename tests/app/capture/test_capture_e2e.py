@@ -17,7 +17,6 @@ import os
 import socket
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +27,7 @@ from app.recording import read_recording
 from inference.body.rotations import matrix_angle_between, quat_to_matrix
 from inference.body.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX
 from sim_devices.devices.can_loopback import loopback_channel
+from tests.app.capture.live_capture import cli, evaluated, finish, recorded, run_capture, session_end, start_evaluate
 
 pytestmark = pytest.mark.slow
 SITES = ("pelvis", "head", "l_wrist", "r_wrist", "l_shank", "r_shank")
@@ -67,33 +67,23 @@ protocol = "walk"
     return path
 
 
+# seconds of N-pose before the protocol: the capture, started first and waiting for the devices
+# (tests/app/capture/live_capture.py), has only its poser to build once they appear
+LEAD_IN = 6.0
+
+
 @pytest.fixture(scope="module")
-def captured(tmp_path_factory):
+def captured(tmp_path_factory, walk_20s):
     tmp = tmp_path_factory.mktemp("capture")
     setup = write_setup(tmp)
-    motion = tmp / "walk.npz"
-    subprocess.run([*CLI, "data", "generate", "walk", "--seconds", "20", "--seed", "3", "--out", str(motion)],
-                   check=True, capture_output=True, timeout=120)
+    motion = walk_20s
     truth = tmp / "truth.npz"
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    sim = subprocess.Popen([*CLI, "devices", "simulate", "--setup", str(setup), "--motion", str(motion),
-                            "--truth", str(truth), "--lead-in", "15", "--unplug", ":".join(map(str, UNPLUG)),
-                            "--seed", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    try:
-        lines = []
-        for line in sim.stdout:
-            lines.append(line)
-            if line.startswith("simulating"):
-                break
-        assert truth.exists(), "".join(lines) + sim.stderr.read()
-        duration = float(lines[-1].split()[1])
-        rec = tmp / "rec.h5"
-        cap = subprocess.run([*CLI, "capture", "--setup", str(setup), "--headless", "--record", str(rec),
-                              "--seconds", f"{duration - 4.0:.1f}", "--json", "--countdown", "1"],
-                             input="after the walk\n", capture_output=True, text=True, timeout=duration + 90, env=env)
-    finally:
-        sim.terminate()
-        sim.wait(10)
+    rec = tmp / "rec.h5"
+    cap, _ = run_capture(
+        ["--setup", str(setup), "--headless", "--record", str(rec), "--json", "--countdown", "1"],
+        ["--setup", str(setup), "--motion", str(motion), "--truth", str(truth), "--lead-in", str(LEAD_IN),
+         "--unplug", ":".join(map(str, UNPLUG)), "--seed", "1"],
+        done=lambda sim: session_end(truth, sim), stdin_text="after the walk\n")
     assert cap.returncode == 0, cap.stderr[-3000:]
     result = json.loads(cap.stdout.strip().splitlines()[-1])
     return tmp, setup, motion, truth, rec, result, cap.stderr
@@ -136,12 +126,12 @@ def test_calibration_puts_each_segment_within_3_deg(captured):
 
 def test_recording_scores_like_evaluate(captured):
     tmp, setup, motion, truth, rec, result, log = captured
-    rep = subprocess.run([*CLI, "replay", str(rec), "--truth", str(truth), "--json", "--no-progress"],
-                         capture_output=True, text=True, timeout=300)
+    evaluate_args = ["--data", str(motion), "--sensors", ",".join(SITES), "--insoles", "--json"]
+    start_evaluate(evaluate_args)  # beside the replay
+    rep = finish(cli(["replay", str(rec), "--truth", str(truth), "--json", "--no-progress"]))
+    ev = evaluated(evaluate_args)
     assert rep.returncode == 0, rep.stderr[-2000:]
     replay = json.loads(rep.stdout)
-    ev = subprocess.run([*CLI, "evaluate", "--data", str(motion), "--sensors", ",".join(SITES), "--insoles",
-                         "--json"], capture_output=True, text=True, timeout=300)
     assert ev.returncode == 0, ev.stderr[-2000:]
     evaluate = json.loads(ev.stdout)
     diag = {k: replay.get(k) for k in ("ga_deg", "truth_lag_s", "frames", "hub_frames", "frames_filled",
@@ -184,28 +174,12 @@ def test_an_unplugged_device_is_reported_and_rejoins(captured):
 def test_reused_calibration_and_ctrl_c(captured):
     """A second capture of the same suit reuses the first one's calibration (no protocol)
     and ends on Ctrl-C with the devices closed and the recording finalised."""
-    import signal
-
     tmp, setup, motion, truth, rec, result, log = captured
     rec2 = tmp / "again.h5"
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    sim = subprocess.Popen([*CLI, "devices", "simulate", "--setup", str(setup), "--motion", str(motion),
-                            "--seed", "1"], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env)
-    try:
-        for line in sim.stdout:
-            if line.startswith("simulating"):
-                break
-        cap = subprocess.Popen([*CLI, "capture", "--setup", str(setup), "--headless", "--record", str(rec2),
-                                "--calibration", str(rec), "--json"], stdin=subprocess.DEVNULL,
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and not (rec2.exists() and read_recording(rec2).recon["t"].size > 40):
-            time.sleep(0.5)
-        cap.send_signal(signal.SIGINT)
-        out, err = cap.communicate(timeout=30)
-    finally:
-        sim.terminate()
-        sim.wait(10)
+    cap, _ = run_capture(["--setup", str(setup), "--headless", "--record", str(rec2), "--calibration", str(rec),
+                          "--json"], ["--setup", str(setup), "--motion", str(motion), "--seed", "1"],
+                         done=lambda sim: recorded(rec2, 41, calibrated=False), ceiling=120)
+    out, err = cap.stdout, cap.stderr
     assert cap.returncode == 0, err[-2000:]
     res = json.loads(out.strip().splitlines()[-1])
     assert res["calibrated"] and res["frames"] > 40

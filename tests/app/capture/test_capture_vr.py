@@ -16,12 +16,8 @@ hands, and `imucap export` writes a BVH of it. The figures: docs/vr_input.md.
 from __future__ import annotations
 
 import json
-import os
-import queue
 import subprocess
 import sys
-import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +25,7 @@ import pytest
 
 from app.capture.twins import free_udp_port
 from app.recording import read_recording
+from tests.app.capture.live_capture import cli, finish, run_capture, session_end
 
 pytestmark = pytest.mark.slow
 IMU_SITES = ("l_shank", "r_shank")
@@ -76,48 +73,21 @@ def run(args: list[str], timeout: float) -> subprocess.CompletedProcess[str]:
     return subprocess.run([*CLI, *args], capture_output=True, text=True, timeout=timeout)
 
 
+LEAD_IN = 6.0  # s of N-pose before the protocol (test_capture_e2e.py says why this is enough)
+
+
 @pytest.fixture(scope="module")
-def captured(tmp_path_factory):
+def captured(tmp_path_factory, walk_20s):
     tmp = tmp_path_factory.mktemp("capture-vr")
     setup = write_setup(tmp)
-    motion = tmp / "walk.npz"
-    gen = run(["data", "generate", "walk", "--seconds", "20", "--seed", "3", "--out", str(motion)], 120)
-    assert gen.returncode == 0, gen.stderr[-2000:]
     truth = tmp / "truth.npz"
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    sim = subprocess.Popen([*CLI, "devices", "simulate", "--setup", str(setup), "--motion", str(motion),
-                            "--truth", str(truth), "--lead-in", "15", "--seed", "1"],
-                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    cap = None
-    lines: queue.Queue[str | None] = queue.Queue()
-
-    def read_stdout() -> None:
-        for line in sim.stdout:
-            lines.put(line)
-        lines.put(None)
-
-    threading.Thread(target=read_stdout, daemon=True).start()
-    try:
-        seen: list[str] = []
-        deadline = time.monotonic() + 180.0  # synthesis of the session on a busy machine
-        while not (seen and seen[-1].startswith("simulating")):
-            line = lines.get(timeout=max(0.1, deadline - time.monotonic()))  # queue.Empty past the deadline
-            assert line is not None, "".join(seen) + sim.stderr.read()[-2000:]
-            seen.append(line)
-        assert truth.exists(), "".join(seen)
-        duration = float(seen[-1].split()[1])
-        rec = tmp / "rec.h5"
-        cap = subprocess.run([*CLI, "capture", "--setup", str(setup), "--headless", "--record", str(rec),
-                              "--seconds", f"{duration - 4.0:.1f}", "--json", "--countdown", "1"],
-                             input="", capture_output=True, text=True, timeout=duration + 90, env=env)
-    finally:
-        sim.terminate()
-        try:
-            sim.wait(10)
-        except subprocess.TimeoutExpired:
-            sim.kill()
-            sim.wait(10)
-    assert cap is not None and cap.returncode == 0, (cap.stderr[-3000:] if cap else "")
+    rec = tmp / "rec.h5"
+    cap, _ = run_capture(
+        ["--setup", str(setup), "--headless", "--record", str(rec), "--json", "--countdown", "1"],
+        ["--setup", str(setup), "--motion", str(walk_20s), "--truth", str(truth), "--lead-in", str(LEAD_IN),
+         "--seed", "1"],
+        done=lambda sim: session_end(truth, sim))
+    assert cap.returncode == 0, cap.stderr[-3000:]
     result = json.loads(cap.stdout.strip().splitlines()[-1])
     return tmp, setup, truth, rec, result, cap.stderr
 
@@ -184,11 +154,12 @@ def test_observed_segments_at_the_truths_own_clock(captured):
 
 def test_replay_and_export(captured):
     tmp, setup, truth, rec, result, log = captured
-    rep = run(["replay", str(rec), "--json", "--no-progress"], 300)
+    bvh = tmp / "rec.bvh"
+    replaying, exporting = cli(["replay", str(rec), "--json", "--no-progress"]), cli(["export", str(rec), "--out",
+                                                                                       str(bvh)])
+    rep, ex = finish(replaying), finish(exporting)  # side by side, one core each
     assert rep.returncode == 0, rep.stderr[-2000:]
     assert json.loads(rep.stdout)["frames"] > 200
-    bvh = tmp / "rec.bvh"
-    ex = run(["export", str(rec), "--out", str(bvh)], 300)
     assert ex.returncode == 0, ex.stderr[-2000:]
     from inference.loaders import load_motion
 

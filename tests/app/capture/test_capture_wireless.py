@@ -12,9 +12,6 @@ same motion and sensors (the wired reference: perfect sensors, no transport).
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -25,11 +22,11 @@ from app.capture.twins import free_udp_port
 from app.recording import read_recording
 from sim_devices.devices.can_loopback import loopback_channel
 from sim_devices.devices.wireless_twins import dot_address
+from tests.app.capture.live_capture import cli, evaluated, finish, run_capture, session_end, start_evaluate
 
 pytestmark = pytest.mark.slow
 SITES = ("pelvis", "head", "l_wrist", "r_wrist", "l_shank", "r_shank")
 UNPLUG = ("l_shank", 6.0, 5.0)  # a DOT: s into the activity, for s
-CLI = [sys.executable, "-m", "app.cli.main"]
 
 
 def write_setup(tmp: Path) -> Path:
@@ -58,33 +55,21 @@ protocol = "walk"
     return path
 
 
+LEAD_IN = 6.0  # s of N-pose before the protocol (test_capture_e2e.py says why this is enough)
+
+
 @pytest.fixture(scope="module")
-def captured(tmp_path_factory):
+def captured(tmp_path_factory, walk_20s):
     tmp = tmp_path_factory.mktemp("capture-wireless")
     setup = write_setup(tmp)
-    motion = tmp / "walk.npz"
-    subprocess.run([*CLI, "data", "generate", "walk", "--seconds", "20", "--seed", "3", "--out", str(motion)],
-                   check=True, capture_output=True, timeout=120)
+    motion = walk_20s
     truth = tmp / "truth.npz"
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    sim = subprocess.Popen([*CLI, "devices", "simulate", "--setup", str(setup), "--motion", str(motion),
-                            "--truth", str(truth), "--lead-in", "15", "--unplug", ":".join(map(str, UNPLUG)),
-                            "--seed", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    try:
-        lines = []
-        for line in sim.stdout:
-            lines.append(line)
-            if line.startswith("simulating"):
-                break
-        assert truth.exists(), "".join(lines) + sim.stderr.read()
-        duration = float(lines[-1].split()[1])
-        rec = tmp / "rec.h5"
-        cap = subprocess.run([*CLI, "capture", "--setup", str(setup), "--headless", "--record", str(rec),
-                              "--seconds", f"{duration - 4.0:.1f}", "--json", "--countdown", "1"],
-                             input="", capture_output=True, text=True, timeout=duration + 90, env=env)
-    finally:
-        sim.terminate()
-        sim.wait(10)
+    rec = tmp / "rec.h5"
+    cap, _ = run_capture(
+        ["--setup", str(setup), "--headless", "--record", str(rec), "--json", "--countdown", "1"],
+        ["--setup", str(setup), "--motion", str(motion), "--truth", str(truth), "--lead-in", str(LEAD_IN),
+         "--unplug", ":".join(map(str, UNPLUG)), "--seed", "1"],
+        done=lambda sim: session_end(truth, sim))
     assert cap.returncode == 0, cap.stderr[-3000:]
     result = json.loads(cap.stdout.strip().splitlines()[-1])
     return tmp, setup, motion, truth, rec, result, cap.stderr
@@ -97,12 +82,12 @@ def test_wireless_capture_calibrates_and_scores_like_the_wired_reference(capture
     assert r.sites == SITES
     for s in SITES:
         assert r.raw[s]["present"].mean() > 0.7, (s, r.raw[s]["present"].mean())
-    rep = subprocess.run([*CLI, "replay", str(rec), "--truth", str(truth), "--json", "--no-progress"],
-                         capture_output=True, text=True, timeout=300)
+    evaluate_args = ["--data", str(motion), "--sensors", ",".join(SITES), "--insoles", "--json"]
+    start_evaluate(evaluate_args)  # beside the replay (or already done: test_capture_e2e.py's is the same)
+    rep = finish(cli(["replay", str(rec), "--truth", str(truth), "--json", "--no-progress"]))
+    ev = evaluated(evaluate_args)
     assert rep.returncode == 0, rep.stderr[-2000:]
     replay = json.loads(rep.stdout)
-    ev = subprocess.run([*CLI, "evaluate", "--data", str(motion), "--sensors", ",".join(SITES), "--insoles",
-                         "--json"], capture_output=True, text=True, timeout=300)
     assert ev.returncode == 0, ev.stderr[-2000:]
     evaluate = json.loads(ev.stdout)
     print("ga_deg replay", replay["ga_deg"], "evaluate", evaluate["ga_deg"])

@@ -1,0 +1,167 @@
+"""A simulated subject in one process and `imucap capture` in another, as the real-time
+capture tests run them (``SOLO_MODULES``, tests/conftest.py), each test's capture ended as
+soon as what it asserts on is there.
+
+The capture starts first, with ``--wait``: it imports what it needs while the simulator
+synthesizes its session, and opens the devices as soon as they appear. Its process imports
+torch before it waits (``CAPTURE``), so that what is left to do once the devices are there
+is building the poser: the simulated subject's lead-in (N-pose before the protocol) only has
+to cover that, not the capture's whole start. The capture then runs until ``done()`` says so
+(the session played out, enough poses recorded) and is ended with Ctrl-C, as a user ends it.
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+CLI = [sys.executable, "-m", "app.cli.main"]
+# `imucap capture` with torch imported before the command runs (the CLI imports it when the
+# capture builds its poser, after --wait): otherwise the same process and arguments
+CAPTURE = [sys.executable, "-c", "import sys, torch; from app.cli.main import main; sys.exit(main(sys.argv[1:]))"]
+SIM_READY_S = 180.0  # the simulator's synthesis of the session on a busy machine
+ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}
+
+
+@dataclass
+class Simulator:
+    proc: subprocess.Popen
+    lines: list[str]  # what it printed up to "simulating ..."
+
+    @property
+    def duration(self) -> float:
+        """The session's length (s): lead-in, calibration protocol, activity."""
+        return float(self.lines[-1].split()[1])
+
+    def stop(self) -> None:
+        if self.proc.stdin is not None:
+            self.proc.stdin.close()
+        self.proc.terminate()
+        try:
+            self.proc.wait(10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait(10)
+
+
+def start_simulator(args: list[str]) -> Simulator:
+    """`imucap devices simulate ARGS`, returned once its devices are up ("simulating ...")."""
+    proc = subprocess.Popen([*CLI, "devices", "simulate", *args], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=ENV)
+    lines: queue.Queue[str | None] = queue.Queue()
+
+    def read_stdout() -> None:
+        for line in proc.stdout:
+            lines.put(line)
+        lines.put(None)
+
+    threading.Thread(target=read_stdout, daemon=True).start()
+    seen: list[str] = []
+    deadline = time.monotonic() + SIM_READY_S
+    try:
+        while not (seen and seen[-1].startswith("simulating")):
+            line = lines.get(timeout=max(0.1, deadline - time.monotonic()))  # queue.Empty past the deadline
+            if line is None:
+                raise AssertionError("".join(seen) + proc.stderr.read()[-2000:])
+            seen.append(line)
+    except BaseException:
+        Simulator(proc, seen).stop()
+        raise
+    return Simulator(proc, seen)
+
+
+def session_end(truth: Path, sim: Simulator, margin: float = 0.5) -> Callable[[], bool]:
+    """done() once the simulated session has played out (but ``margin`` s, so the capture
+    ends while every device still streams), on the monotonic clock both processes share."""
+    from app.capture.simulate import read_truth
+
+    end = read_truth(truth).t0 + sim.duration - margin
+    return lambda: time.monotonic() >= end
+
+
+def recorded(rec: Path, poses: int, calibrated: bool = True) -> Callable[[], bool]:
+    """done() once the recording being written holds ``poses`` poses (and a calibration)."""
+    from app.recording import read_recording
+
+    def done() -> bool:
+        try:
+            r = read_recording(rec) if rec.exists() else None
+        except Exception:  # noqa: BLE001 - a file being written may not read yet; ask again
+            return False
+        return r is not None and (r.calibrations or not calibrated) and r.recon["t"].size >= poses
+
+    return done
+
+
+def run_capture(capture_args: list[str], sim_args: list[str], done: Callable[[Simulator], Callable[[], bool]] | None,
+                stdin_text: str = "", ceiling: float = 240.0, poll: float = 0.5,
+                window: bool = False) -> tuple[subprocess.CompletedProcess, Simulator]:
+    """`imucap capture --wait 120 CAPTURE_ARGS` started, then the simulator (``sim_args``);
+    once ``done(sim)()`` holds the capture gets Ctrl-C (with a window, ``done`` is None: it
+    quits by its own ``--quit-after``). ``ceiling`` bounds the whole run."""
+    with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
+        cmd = [*CAPTURE, "capture", "--wait", "120", *capture_args]
+        cap = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=out, stderr=err, text=True, env=ENV)
+        sim = None
+        try:
+            cap.stdin.write(stdin_text)  # each line a marker, as typed
+            cap.stdin.close()
+            sim = start_simulator(sim_args)
+            deadline = time.monotonic() + ceiling
+            if done is not None:
+                until = done(sim)
+                while cap.poll() is None and time.monotonic() < deadline and not until():
+                    time.sleep(poll)
+                if cap.poll() is None:
+                    cap.send_signal(signal.SIGINT)
+            cap.wait(max(60.0, deadline - time.monotonic()))
+        finally:
+            if cap.poll() is None:
+                cap.kill()
+                cap.wait(10)
+            if sim is not None:
+                sim.stop()
+        out.seek(0)
+        err.seek(0)
+        return subprocess.CompletedProcess(cmd, cap.returncode, out.read(), err.read()), sim
+
+
+def cli(args: list[str]) -> subprocess.Popen:
+    """`imucap ARGS` started, for ``finish``: once the real-time part of a test is over, its
+    replay and evaluate run side by side (each on one core)."""
+    return subprocess.Popen([*CLI, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def finish(proc: subprocess.Popen, timeout: float = 300) -> subprocess.CompletedProcess:
+    out, err = proc.communicate(timeout=timeout)
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+
+
+_EVALUATIONS: dict[tuple[str, ...], subprocess.Popen | subprocess.CompletedProcess] = {}
+
+
+def start_evaluate(args: list[str]) -> None:
+    """`imucap evaluate ARGS` started, once per test session for the same arguments (its answer
+    is a function of its files and arguments): the wired reference that the wireless and the
+    three-protocol captures are both held against, on the same motion file."""
+    key = tuple(args)
+    if key not in _EVALUATIONS:
+        _EVALUATIONS[key] = cli(["evaluate", *args])
+
+
+def evaluated(args: list[str]) -> subprocess.CompletedProcess:
+    """What ``start_evaluate(args)`` gave."""
+    start_evaluate(args)
+    done = _EVALUATIONS[tuple(args)]
+    if isinstance(done, subprocess.Popen):
+        done = _EVALUATIONS[tuple(args)] = finish(done)
+    return done
