@@ -28,7 +28,7 @@ CASES = {
 }
 
 
-def _clip(spec: dict, seconds: float = 4.5):
+def _clip(spec: dict, seconds: float = 3.5):
     m = synthetic_motion(seconds=seconds, seed=3, height=1.7)
     inp = clip_input(m, spec["sites"], insoles=spec.get("insoles", False))
     feats, mask = inp.features.copy(), inp.mask.copy()
@@ -70,7 +70,7 @@ def test_other_settings_pose_as_the_torch_step_did(kw):
     # the shipped model: a random one's poses are far from human, and a knee bent off its hinge
     # plane makes the hinge angle ill-conditioned (float32 rounding then moves it by ~1e-4)
     model = resolve_model("diffusion")
-    m, feats, mask = _clip(CASES["thighs_dropouts"], seconds=3.5)
+    m, feats, mask = _clip(CASES["thighs_dropouts"])
     got = [reconstruct_offline(cls(model, body=m.body, **kw), feats, mask) for cls in (Poser, ReferencePoser)]
     assert_same_poses(*got)
 
