@@ -25,7 +25,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from inference.body.frame_kernels import so3_exp, so3_log
+from inference.body.frame_kernels import matrix_to_quat, quat_to_matrix
 
 
 @dataclass(frozen=True)
@@ -107,9 +107,18 @@ class RotationOneEuro(_OneEuro):
             return torch.from_numpy(self(R.numpy(), keep))
         if self._last is None:
             return self._start(R, (R.shape[0],))
-        step = so3_log(np.swapaxes(self._last, -1, -2) @ R)  # (S, 3) in each rotation's own frame
-        gain = self._gain(_speed(step, self.dt)).astype(R.dtype, copy=False)
-        out = self._last @ so3_exp(step * gain[:, None])
+        # the step in each rotation's own frame, q = (cos h, sin h u) with w >= 0: its log is
+        # 2 h u (rad), and exp(gain * log) is (cos(gain h), sin(gain h) u): so3_log and so3_exp
+        # with the axis never formed
+        q = matrix_to_quat(np.swapaxes(self._last, -1, -2) @ R)
+        v = q[:, 1:]
+        n = np.sqrt((v * v).sum(-1))
+        half = np.arctan2(n, q[:, 0])
+        gain = self._gain(2.0 * half / self.dt).astype(R.dtype, copy=False)
+        turn = np.empty_like(q)
+        turn[:, 0] = np.cos(gain * half)
+        turn[:, 1:] = (np.sin(gain * half) / np.where(n > 0, n, 1.0))[:, None] * v  # 0 where no step
+        out = self._last @ quat_to_matrix(turn)
         if passthrough is not None:
             out = np.where(passthrough[:, None, None], R, out)
         self._last = out
