@@ -29,7 +29,7 @@ N = 5
 def study(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("faults")
     for k in range(N):
-        write_session(root / f"trial{k:02d}.h5", seconds=3.0 + 0.5 * k, seed=40 + k)
+        write_session(root / f"trial{k:02d}.h5", seconds=1.2 + 0.2 * k, seed=40 + k)
     return root
 
 
