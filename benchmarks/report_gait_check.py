@@ -38,11 +38,12 @@ import numpy as np
 
 from app.report.analysis import analyse
 from app.report.confidence import EXPECTED_FILE
-from app.report.events import truth_contact_values
+from app.report.events import MIN_SWING_S, foot_events, truth_contact_values
 from app.report.feet import sensor_events
 from app.report.normal import trial_curves
 from inference.evaluation.runner import SIX, evaluate_motions, face_forward, resolve_models
 from inference.loaders import find_motion_files, load_motion
+from inference.poser.models import CONTACT_THRESHOLD
 from inference.signals.resample import FPS_MODEL, STEP
 from inference.signals.synthesis import FPS_SIGNAL, NoiseModel, kinematics, synthesize
 from inference.training.data import data_root
@@ -154,8 +155,10 @@ def reconstructions(motions, model_spec: str, label: str, keep: Path | None) -> 
     return out
 
 
-def run(motions, sets: list[str], model_spec: str = "diffusion", done=None, keep: Path | None = None) -> dict:
-    """Every set over every motion; ``done(result so far)`` after each set."""
+def run(motions, sets: list[str], model_spec: str = "diffusion", done=None, keep: Path | None = None,
+        threshold: float = CONTACT_THRESHOLD, min_swing_s: float = MIN_SWING_S) -> dict:
+    """Every set over every motion; ``done(result so far)`` after each set. ``threshold`` / ``min_swing_s``:
+    the model contacts' event detection (``app.report.events.foot_events``), to try others."""
     truths = {m.name: truth_analysis(m) for m in motions}
     out = {}
     for label in sets:
@@ -163,7 +166,8 @@ def run(motions, sets: list[str], model_spec: str = "diffusion", done=None, keep
         if label == FEET:
             found = [(m.name, feet_analysis(m)) for m in motions]
         else:
-            found = [(name, analyse(d["t"], d["rot"], d["root"], d["t"], d["contact_prob"], "model"))
+            found = [(name, analyse(d["t"], d["rot"], d["root"], None, None, "model", events=foot_events(
+                d["t"], d["contact_prob"], "model", threshold=threshold, min_swing_s=min_swing_s)))
                      for name, d in reconstructions(motions, model_spec, label, keep)]
         for name, an in found:
             tr = truths[name]
@@ -204,6 +208,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--out", default=None, help="write the whole result (per clip) as JSON here")
     ap.add_argument("--write-expected", action="store_true")
+    ap.add_argument("--contact-threshold", type=float, default=CONTACT_THRESHOLD,
+                    help="the model contacts' threshold for the events (to try others)")
+    ap.add_argument("--min-swing", type=float, default=MIN_SWING_S,
+                    help="gaps in contact shorter than this are closed (s; to try others)")
     ap.add_argument("--keep", default=None, help="store / reuse the reconstructions here (module docstring)")
     args = ap.parse_args(argv)
     root = Path(args.data) if args.data else data_root()
@@ -213,7 +221,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.out:
             Path(args.out).write_text(json.dumps(res, indent=1))
 
-    res = run(motions, args.sets, args.model, done, None if args.keep is None else Path(args.keep))
+    res = run(motions, args.sets, args.model, done, None if args.keep is None else Path(args.keep),
+              args.contact_threshold, args.min_swing)
     if args.write_expected:
         write_expected(res, args.model, len(motions))
     if args.json:

@@ -166,15 +166,36 @@ def cycle_curves(strides: list[Stride], t: np.ndarray, series: np.ndarray, point
     return np.stack([np.interp(s.start + pct * s.time_s, t, y) for s in strides])
 
 
+def _vertex(y0: float, y1: float, y2: float) -> float:
+    """The extreme value of the parabola through three equally spaced samples whose middle one is the
+    extreme of the three (the middle value itself when they are collinear); it lies within
+    |y0 - y2| / 8 of the middle one."""
+    den = y0 - 2.0 * y1 + y2
+    return y1 if den == 0 else y1 - (y0 - y2) ** 2 / (8.0 * den)
+
+
 def stride_ranges(strides: list[Stride], t: np.ndarray, series: np.ndarray) -> np.ndarray:
-    """(N,) max - min of an angle over each stride (on the reconstruction's frames inside it and the
-    values at its two ends)."""
-    curves = cycle_curves(strides, t, series)
+    """(N,) max - min of an angle over each stride: on the reconstruction's frames inside it and the
+    values at its two ends, an extreme at a frame inside refined by the parabola through it and its two
+    neighbours (a peak falls between 20 Hz frames: sampled, a truth's knee range reads ~1 deg, at most
+    3 deg, short; docs/report.md)."""
+    t = np.asarray(t, dtype=np.float64)
+    y = np.asarray(series, dtype=np.float64)
+    curves = cycle_curves(strides, t, y)
     if len(curves) == 0:
         return np.zeros(0)
     out = []
     for s, c in zip(strides, curves):
-        inside = (t > s.start) & (t < s.end)
-        v = np.concatenate([c[[0, -1]], np.asarray(series, dtype=np.float64)[inside]])
-        out.append(float(v.max() - v.min()))
+        idx = np.flatnonzero((t > s.start) & (t < s.end))
+        lo, hi = float(min(c[0], c[-1])), float(max(c[0], c[-1]))
+        if len(idx):
+            v = y[idx]
+            for k, better in ((int(idx[np.argmax(v)]), max), (int(idx[np.argmin(v)]), min)):
+                peak = float(y[k])
+                if 0 < k < len(y) - 1 and np.all(np.isfinite(y[k - 1: k + 2])):
+                    y0, y2 = float(y[k - 1]), float(y[k + 1])
+                    if better(y0, peak, y2) == peak:  # a peak of the three (not a slope into the next stride)
+                        peak = better(peak, _vertex(y0, peak, y2))
+                hi, lo = (max(hi, peak), lo) if better is max else (hi, min(lo, peak))
+        out.append(hi - lo)
     return np.asarray(out)

@@ -119,3 +119,23 @@ def test_both_feet_down_throughout_gives_no_stride():
 def test_symmetry_index():
     assert symmetry_index(1.1, 1.0) == pytest.approx(100 * 0.1 / 1.05)
     assert symmetry_index(None, 1.0) is None
+
+
+def test_a_joint_range_between_frames_is_refined_by_a_parabola():
+    from app.report.strides import Stride, stride_ranges
+
+    t = np.arange(0, 3.0, 1 / FPS)
+    s = Stride("l", 0.31, 0.9, 1.44, 1.13, 60, 40, 10, 1.4, 1.25, 0)
+    fine = np.arange(s.start, s.end, 1e-4)
+    missed = []
+    for phase in np.linspace(0.0, 2 * np.pi, 9)[:-1]:  # peaks at different places between the 20 Hz frames
+        knee = 30 + 30 * np.sin(2 * np.pi * 1.4 * t + phase)
+        truth = np.ptp(30 * np.sin(2 * np.pi * 1.4 * fine + phase))
+        sampled = np.ptp(knee[(t > s.start) & (t < s.end)])
+        got = stride_ranges([s], t, knee)[0]
+        assert abs(got - truth) < 0.15 and abs(got - truth) <= abs(sampled - truth) + 1e-9
+        missed.append(truth - sampled)
+    assert max(missed) > 0.5  # the frames alone miss a peak by more than the refined range's error
+    # an angle still rising into the next stride: its largest frame is no peak and is not extrapolated
+    ramp = 10.0 * t
+    assert stride_ranges([s], t, ramp)[0] == pytest.approx(10.0 * (s.end - s.start), abs=1e-9)
