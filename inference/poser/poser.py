@@ -285,6 +285,9 @@ class Poser:
         self._mean_np, self._std_np, self._stand_np = self._mean.numpy(), self._std.numpy(), self._stand.numpy()
         self._kin = fk.Kinematics(self.body.offsets)
         self._cp_local = np.asarray(self.body.contact_offsets, dtype=np.float32)[:, :, None]
+        # frames the history keeps: the model's window, or more where a helper reads further
+        # back (the two-way odometry's gate reads 39; a short-window model keeps them anyway)
+        self._keep = max([self.window, *(h.context for h in (self._detector, self._odometry) if h is not None)])
         self.reset()
 
     @property
@@ -323,20 +326,20 @@ class Poser:
         """Back to a standing history (e.g. after recalibration or a long dropout)."""
         if root_xy0 is not None:
             self.root_xy0 = (float(root_xy0[0]), float(root_xy0[1]))
-        N = self.window
+        N, K = self.window, self._keep
         with torch.inference_mode():
             stand_n = self._normalize(self._stand)
-            # double-length buffer: the window is buf[:, pos-N+1 : pos+1]
-            self._buf = stand_n.repeat(1, 2 * N, 1).contiguous()
-            self._pos = N - 1
+            # double-length buffer of the K frames kept: the window is buf[:, pos-N+1 : pos+1]
+            self._buf = stand_n.repeat(1, 2 * K, 1).contiguous()
+            self._pos = K - 1
             self._mask = torch.ones(1, N, N_FEATURES, dtype=torch.bool)
             # per-frame masks aligned with _buf ("measured" history); the standing start
             # counts as known: it is the calibration pose the session began in
-            self._mbuf = (torch.ones(1, 2 * N, N_FEATURES, dtype=torch.bool)
+            self._mbuf = (torch.ones(1, 2 * K, N_FEATURES, dtype=torch.bool)
                           if self.history_mode == "measured" else None)
             self._stand_win = stand_n.expand(1, N, N_FEATURES)
             # tracked points' position input per frame, aligned with _buf (none at the start)
-            self._pbuf = torch.zeros(1, 2 * N, POINT_FEATURES) if self.takes_points else None
+            self._pbuf = torch.zeros(1, 2 * K, POINT_FEATURES) if self.takes_points else None
             # numpy views of the same memory, for the per-frame path
             self._buf_np = self._buf.numpy()
             self._mask_np = self._mask.numpy()
@@ -363,14 +366,14 @@ class Poser:
     def _advance(self) -> Tensor:
         """Shift the window by one frame; returns the window view (1, N, F) whose last
         frame is free to fill."""
-        N = self.window
-        if self._pos + 1 >= 2 * N:
-            self._buf_np[:, : N - 1] = self._buf_np[:, N + 1:]
+        N, K = self.window, self._keep
+        if self._pos + 1 >= 2 * K:
+            self._buf_np[:, : K - 1] = self._buf_np[:, K + 1:]
             if self._mbuf_np is not None:
-                self._mbuf_np[:, : N - 1] = self._mbuf_np[:, N + 1:]
+                self._mbuf_np[:, : K - 1] = self._mbuf_np[:, K + 1:]
             if self._pbuf is not None:
-                self._pbuf[:, : N - 1] = self._pbuf[:, N + 1:].clone()
-            self._pos = N - 2
+                self._pbuf[:, : K - 1] = self._pbuf[:, K + 1:].clone()
+            self._pos = K - 2
         self._pos += 1
         return self._buf[:, self._pos - N + 1: self._pos + 1]
 
@@ -624,9 +627,11 @@ class Poser:
         return seg_dev, pz_d, dp_d
 
     def _recent(self, wn: np.ndarray, idx: np.ndarray, n: int) -> np.ndarray:
-        """(n, len(idx)) the features ``idx`` of the window's (N, F) last n frames in
-        physical units, oldest first: what a helper stage reads."""
-        return wn[-n:, idx] * self._std_np[idx] + self._mean_np[idx]
+        """(n, len(idx)) the features ``idx`` of the history's last n frames (this one
+        included) in physical units, oldest first: what a helper stage reads. From the kept
+        history, not the window ``wn`` (N, F): a helper may read further back than the model."""
+        rows = self._buf_np[0, self._pos - n + 1: self._pos + 1] if n > len(wn) else wn[-n:]
+        return rows[:, idx] * self._std_np[idx] + self._mean_np[idx]
 
     def _stride_scale(self, joints_rel: np.ndarray, f32: np.ndarray, m: np.ndarray, contact: np.ndarray,
                       dp: np.ndarray) -> float:

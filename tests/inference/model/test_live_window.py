@@ -68,3 +68,23 @@ def test_a_window_the_model_cannot_read_is_a_one_line_error(tmp_path):
     with pytest.raises(ModelFileError) as err:
         load_model(path)
     assert "bad.pt" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_short_window_keeps_the_history_its_helpers_read():
+    """The pelvis odometry reads 39 frames of measured pelvis: with a 21-frame model the
+    poser keeps them all the same, so the root walked from the pelvis is the 61-frame
+    model's to the bit."""
+    from inference.evaluation.runner import clip_input, synthetic_motion
+    from inference.poser.models import resolve_model
+
+    model = resolve_model("diffusion", window=61)
+    short = with_window(model, 21)
+    motion = synthetic_motion(seconds=6.0, seed=1)
+    inp = clip_input(motion, ("pelvis", "l_wrist", "r_wrist"))
+    roots = []
+    for m in (model, short):
+        p = Poser(m, body=motion.body, steps=[1000], seed=0, smoothing=False)  # the filter mixes in the height
+        assert p._keep >= p._odometry.context > 21 or m is model
+        roots.append(np.stack([p.step(inp.features[t], inp.mask[t]).root[:2] for t in range(len(inp.features))]))
+    assert np.abs(roots[0][-1]).max() > 0.5  # it walked
+    np.testing.assert_array_equal(roots[0], roots[1])
