@@ -367,12 +367,19 @@ def validate(model: nn.Module, val_set: Dataset, ctx: StepContext) -> dict[str, 
 
 # --------------------------------------------------------------------------- the trainer
 
-def init_from_model_file(obj: dict) -> dict:
+def init_from_model_file(obj: dict, window: int | None = None) -> dict:
     """A model file (shipped weights: the EMA weights, fp16, and the normaliser) as the
     starting point of a fine-tune, in the shape ``--init`` takes from a checkpoint. The
-    optimiser starts afresh; the normaliser stays the model's, as its weights expect it."""
+    optimiser starts afresh; the normaliser stays the model's, as its weights expect it.
+    ``window``: a diffusion student of fewer frames starts with the newest frames' learned
+    positions (``files.with_window``)."""
     sd = {k: v.float() if v.is_floating_point() else v for k, v in obj["state_dict"].items()}
-    return {"format": CHECKPOINT_FORMAT, "kind": obj["kind"], "model_config": obj["model_config"], "ema": sd,
+    mc = dict(obj["model_config"])
+    if window is not None and obj["kind"] == "diffusion" and "pos" in sd and window < mc.get("window", window):
+        pos = sd["pos"]
+        sd["pos"] = torch.cat([pos[:, :2], pos[:, pos.shape[1] - window:]], dim=1)
+        mc["window"] = window
+    return {"format": CHECKPOINT_FORMAT, "kind": obj["kind"], "model_config": mc, "ema": sd,
             "model": sd, "norm_mean": obj["norm_mean"], "norm_std": obj["norm_std"], "step": obj.get("step", 0)}
 
 
@@ -469,7 +476,7 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
     if init_from is not None and ckpt is None:
         init = torch.load(init_from, map_location="cpu", weights_only=False)
         if isinstance(init, dict) and init.get("format") == MODEL_FORMAT:
-            init = init_from_model_file(init)
+            init = init_from_model_file(init, window=cfg.model.window if cfg.kind == "diffusion" else None)
         if not isinstance(init, dict) or init.get("format") != CHECKPOINT_FORMAT:
             raise ValueError(f"--init {init_from}: not an imucap training checkpoint (last.pt) or model file")
         # dropout is training behaviour, not architecture: a fine-tune may switch it

@@ -692,3 +692,8 @@ def test_distillation_targets_the_teachers_chain_over_the_students_window(tmp_pa
     res = train(_cfg(steps=2, cond_prob=1.0, model={**masked, "window": 21}, teacher=str(teacher_file),
                      infer_steps="1"), tmp_path / "student", progress=False)
     assert res.step == 2 and load_model(tmp_path / "student" / "model.pt").config.window == 21
+    # started from the teacher's file, the student is the teacher reading its newest 21 frames
+    train(_cfg(steps=1, lr=0.0, lr_min=0.0, cond_prob=1.0, model={**masked, "window": 21}, teacher=str(teacher_file),
+               infer_steps="1"), tmp_path / "init", progress=False, init_from=teacher_file)
+    started = torch.load(tmp_path / "init" / "last.pt", weights_only=False)["model"]
+    assert torch.equal(started["pos"], with_window(teacher, 21).model.state_dict()["pos"])
