@@ -1,12 +1,7 @@
 """CPU share of a 6-sensor capture with the outdoor view, at the default model setting and
-the model it replaced (the file shipped before the one-step student: a 61-frame window, 3
-steps), in one run.
+the lighter one (fewer diffusion steps, for a laptop on battery), in one run.
 
     xvfb-run -a .venv/bin/python benchmarks/outdoor_cpu.py [--seconds 40] [--repeat 2] [--json]
-        [--previous FILE]
-
-The previous file is read from git (``PREVIOUS``, the last commit that shipped it) unless
-``--previous`` names one.
 
 Each round starts the simulated suit in its own process (`imucap devices simulate
 --setup`), then `imucap capture --setup --view outdoor --record` with the window (under
@@ -38,7 +33,7 @@ from app.recording import read_recording
 from inference.signals.resample import FPS_MODEL
 
 SIX = ("pelvis", "head", "l_wrist", "r_wrist", "l_shank", "r_shank")
-PREVIOUS = "ecfd154:inference/weights/diffusionposer.pt"  # the 3-step file, before the one-step student
+SETTINGS = {"default": None, "light": "1"}  # the [model] steps of the setup file
 CLI = [sys.executable, "-m", "app.cli.main"]
 
 
@@ -47,19 +42,9 @@ def _children_cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def previous_file(path: str | None) -> Path:
-    """The file the default replaced: ``path``, or ``PREVIOUS`` taken out of git."""
-    if path is not None:
-        return Path(path)
-    out = Path(tempfile.mkdtemp(prefix="imucap-previous-")) / "diffusionposer_previous.pt"
-    root = Path(__file__).resolve().parents[1]
-    out.write_bytes(subprocess.run(["git", "show", PREVIOUS], cwd=root, check=True, capture_output=True).stdout)
-    return out
-
-
-def one_round(model: str, seconds: float) -> float | None:
+def one_round(steps: str | None, seconds: float) -> float | None:
     folder = Path(tempfile.mkdtemp(prefix="imucap-outdoor-"))
-    setup = simulated_setup(SIX, "xbus", folder=folder, model=model)
+    setup = simulated_setup(SIX, "xbus", folder=folder, steps=steps)
     path = folder / "setup.toml"
     save_setup(setup, path)
     rec = folder / "rec.h5"
@@ -79,20 +64,18 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=40.0)
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--json", action="store_true")
-    ap.add_argument("--previous", default=None, help="the replaced model file (default: from git, PREVIOUS)")
     args = ap.parse_args()
-    settings = {"default": "diffusion", "previous": str(previous_file(args.previous))}
-    shares: dict[str, list[float | None]] = {k: [] for k in settings}
+    shares: dict[str, list[float | None]] = {k: [] for k in SETTINGS}
     for _ in range(args.repeat):
-        for name, model in settings.items():
-            share = one_round(model, args.seconds)
+        for name, steps in SETTINGS.items():
+            share = one_round(steps, args.seconds)
             shares[name].append(None if share is None else round(share, 3))
     med = {k: float(np.median([x for x in v if x is not None])) if any(x is not None for x in v) else None
            for k, v in shares.items()}
-    ratio = round(med["default"] / med["previous"], 2) if med["default"] and med["previous"] else None
+    ratio = round(med["light"] / med["default"], 2) if med["light"] and med["default"] else None
     res = {"seconds": args.seconds, "runs": shares,
            **{f"{k}_share_of_one_core": None if v is None else round(v, 3) for k, v in med.items()},
-           "default_over_previous": ratio}
+           "light_over_default": ratio, "light_steps": SETTINGS["light"]}
     print(json.dumps(res) if args.json else "\n".join(f"{k}: {v}" for k, v in res.items()))
 
 
