@@ -1,6 +1,6 @@
 """Procedural human motions for tests, demos and smoke-training, with no data files.
 
-Kinds: walk, jog, squat, lunge, jump, arm_raises, stand, tpose, npose. Each is built on
+Kinds: walk, jog, squat, lunge, jump, arm_raises, stand, tpose, npose, walk_trial. Each is built on
 our body (``Body.from_height``) and written as an AMASS-format .npz
 (``write_amass_npz``), so the same AMASS loader that reads real data reads these.
 
@@ -18,6 +18,11 @@ How plausibility is obtained:
   flight follows a parabola with g = 9.81).
 - arm raises, standing: lower body still, upper body motion on top.
 - tpose/npose holds: exactly still (zero acceleration: the physics tests use them).
+- walk_trial: a lab's walking trial, which does not repeat itself: standing still, setting
+  off, walking with 180 deg turns (alternately left and right, shorter and slower steps
+  while turning) and a change to a brisker pace halfway through the walking
+  (``walk_trial_profile``). The walk's curves with the gait's excursions, cadence and
+  heading varied over time.
 
 ``speed`` is m/s for walk/jog (defaults 1.3 and 2.8) and a tempo factor (1 = normal) for
 the others. A seed varies amplitudes slightly (+-8%) and the start phase; the heading is
@@ -39,8 +44,9 @@ from inference.body.rotations import axis_angle_to_matrix
 from inference.body.skeleton import N_SEGMENTS, SEGMENT_INDEX
 from inference.loaders.amass_frames import global_to_amass_poses
 
-KINDS: tuple[str, ...] = ("walk", "jog", "squat", "lunge", "jump", "arm_raises", "stand", "tpose", "npose")
-DEFAULT_SPEED = {"walk": 1.3, "jog": 2.8}
+KINDS: tuple[str, ...] = ("walk", "jog", "squat", "lunge", "jump", "arm_raises", "stand", "tpose", "npose",
+                          "walk_trial")
+DEFAULT_SPEED = {"walk": 1.3, "jog": 2.8, "walk_trial": 1.3}
 G = 9.81
 I = SEGMENT_INDEX  # noqa: E741  (short alias keeps the pose tables readable)
 
@@ -168,7 +174,13 @@ def _ankle_for_heel_raise(toe_x: np.ndarray, pitch: np.ndarray, leg: _Leg) -> tu
 
 
 # --------------------------------------------------------------------------- kinds
-def _gait(T: int, fps: float, body: Body, speed: float, rng: np.random.Generator, run: bool) -> Motion:
+def _gait(T: int, fps: float, body: Body, speed: float, rng: np.random.Generator, run: bool,
+          amplitude: np.ndarray | None = None, pace: np.ndarray | None = None,
+          heading: np.ndarray | None = None) -> Motion:
+    """Walk or jog. Optional per-frame profiles (T,): ``amplitude`` scales every gait
+    excursion (0 = standing upright, 1 = the steady gait's), ``pace`` the cadence (1 = the
+    one that gives ``speed``), ``heading`` (rad) turns the walker about the vertical; the
+    root follows from the stance foot whatever they do."""
     t = np.arange(T) / fps
     v = 1.0 + rng.uniform(-0.08, 0.08, size=8)
     if run:
@@ -182,29 +194,29 @@ def _gait(T: int, fps: float, body: Body, speed: float, rng: np.random.Generator
         arm_amp, elbow0, lean = (0.15 + 0.12 * speed) * v[3], 0.3, 0.04
         yaw_amp, roll_amp = 0.07 * v[4], 0.05
 
-    def angles(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        hip = hip_off + hip_amp * np.cos(2 * np.pi * p)
-        knee = k_st * _bump(p, 0.17 if run else 0.14, 0.08) + k_sw * _bump(p, k_sw_c, 0.13)
-        ankle = (0.17 * _bump(p, 0.42, 0.12) - 0.35 * _bump(p, 0.62, 0.06) + 0.06 * _bump(p, 0.85, 0.1)
-                 - 0.08 * _bump(p, 0.05, 0.04))
+    def angles(p: np.ndarray, e) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        hip = e * (hip_off + hip_amp * np.cos(2 * np.pi * p))
+        knee = e * (k_st * _bump(p, 0.17 if run else 0.14, 0.08) + k_sw * _bump(p, k_sw_c, 0.13))
+        ankle = e * (0.17 * _bump(p, 0.42, 0.12) - 0.35 * _bump(p, 0.62, 0.06) + 0.06 * _bump(p, 0.85, 0.1)
+                     - 0.08 * _bump(p, 0.05, 0.04))
         return hip, knee, ankle
 
-    def build(phase: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def build(phase: np.ndarray, e=1.0) -> tuple[np.ndarray, np.ndarray]:
         pl = phase % 1.0
         pr = (phase + 0.5) % 1.0
         n = phase.shape[0]
         pose = _Pose.identity(n)
         c = np.cos(2 * np.pi * phase)
-        yaw = -yaw_amp * c
-        pose.set("pelvis", rz(yaw) @ ry(np.full(n, lean * 0.5)) @ rx(roll_amp * np.sin(4 * np.pi * phase)))
+        yaw = e * (-yaw_amp * c)
+        pose.set("pelvis", rz(yaw) @ ry(np.full(n, lean * 0.5)) @ rx(e * (roll_amp * np.sin(4 * np.pi * phase))))
         for s, p in (("l", pl), ("r", pr)):
-            hip, knee, ankle = angles(p)
+            hip, knee, ankle = angles(p, e)
             pose.set(f"{s}_thigh", ry(-hip))
             pose.set(f"{s}_shank", ry(knee))
             pose.set(f"{s}_foot", ry(-ankle))
-            pose.set(f"{s}_toes", ry(-0.4 * _bump(p, 0.6, 0.07)))
+            pose.set(f"{s}_toes", ry(e * (-0.4 * _bump(p, 0.6, 0.07))))
         _trunk(pose, np.full(n, lean * 0.5), yaw=-0.8 * yaw)
-        swing_l = -arm_amp * c
+        swing_l = e * (-arm_amp * c)
         elbow_extra = 0.25 if not run else 0.15
         _arms(pose, swing_l, -swing_l, elbow0 + elbow_extra * np.maximum(swing_l, 0),
               elbow0 + elbow_extra * np.maximum(-swing_l, 0))
@@ -238,8 +250,17 @@ def _gait(T: int, fps: float, body: Body, speed: float, rng: np.random.Generator
     _, cp = build(ph)
     stride = float(anchor_velocity(ph, cp, 1.0 / n_cyc)[:, 0].mean())
     cadence = speed / max(stride, 1e-3)
-    phase = rng.uniform() + cadence * t
-    R, cp = build(phase)
+    if pace is None:
+        phase = rng.uniform() + cadence * t
+    else:
+        phase = rng.uniform() + cadence * np.concatenate([[0.0], np.cumsum(pace[:-1])]) / fps
+    R, cp = build(phase, 1.0 if amplitude is None else amplitude)
+    if heading is not None:
+        # the body turns about the root (FK was from a root at the origin), so the contact
+        # points turn with it and the stance foot's anchoring holds in the world
+        Rh = rz(heading)
+        R = Rh[:, None] @ R
+        cp = np.einsum("tij,tkj->tki", Rh, cp)
     vel = anchor_velocity(phase, cp, 1.0 / fps)
     # the anchor (lowest point, stance foot) switches at heel-to-toe roll and at foot strike,
     # which puts kinks into the derived root path and spikes of tens of m/s^2 into the pelvis
@@ -269,6 +290,51 @@ def _stand_base(T: int, body: Body, pose: _Pose) -> tuple[np.ndarray, np.ndarray
     root = np.zeros((T, 3))
     root[:, 2] = -cp[..., 2].min(-1)
     return R, root
+
+
+def walk_trial_profile(t: np.ndarray) -> dict[str, np.ndarray]:
+    """The shape of a ``walk_trial`` over the times ``t`` (s, from 0): ``amplitude`` of the
+    gait's excursions (0 standing), ``pace`` (cadence factor), ``heading`` (rad) per frame,
+    and the trial's marks (s): ``stand_s`` (standing still until then), ``walk_s`` (steady
+    walking from then), ``brisk_s`` (the brisker pace reached from then), ``turns_s`` (each
+    turn's start; a turn takes ``TRIAL_TURN_S``). Durations shrink for short clips."""
+    t = np.asarray(t, dtype=np.float64)
+    dur = float(t[-1]) if t.size else 0.0
+    stand = min(TRIAL_STAND_S, 0.15 * dur)
+    ramp = min(1.0, 0.1 * dur)
+    walk0 = stand + ramp
+    amp = _smoothstep((t - stand) / max(ramp, 1e-9))
+    pace = np.ones_like(t)
+    heading = np.zeros_like(t)
+    brisk = walk0 + 0.5 * (dur - walk0)
+    up = _smoothstep((t - brisk) / 2.0)
+    amp = amp * (1.0 + 0.08 * up)
+    pace = pace * (1.0 + 0.2 * up)
+    turns = []
+    t_turn = walk0 + TRIAL_STRAIGHT_S
+    sign = 1.0
+    while t_turn + TRIAL_TURN_S < dur - 1.0:
+        turns.append(t_turn)
+        u = (t - t_turn) / TRIAL_TURN_S
+        heading = heading + sign * np.pi * _smoothstep(u)
+        dip = np.sin(np.pi * np.clip(u, 0.0, 1.0))  # shorter, slower steps while turning
+        amp = amp * (1.0 - 0.15 * dip)
+        pace = pace * (1.0 - 0.1 * dip)
+        sign = -sign
+        t_turn += TRIAL_TURN_S + TRIAL_STRAIGHT_S
+    return {"amplitude": amp, "pace": pace, "heading": heading, "stand_s": stand, "walk_s": walk0,
+            "brisk_s": brisk + 2.0, "turns_s": turns}
+
+
+TRIAL_STAND_S = 3.0  # standing still before setting off
+TRIAL_STRAIGHT_S = 8.0  # walking straight between turns (about 10 m, a lab's walkway)
+TRIAL_TURN_S = 2.0
+
+
+def _walk_trial(T: int, fps: float, body: Body, speed: float, rng: np.random.Generator) -> Motion:
+    p = walk_trial_profile(np.arange(T) / fps)
+    return _gait(T, fps, body, speed, rng, run=False, amplitude=p["amplitude"], pace=p["pace"],
+                 heading=p["heading"])
 
 
 def _squat(T: int, fps: float, body: Body, tempo: float, rng: np.random.Generator) -> Motion:
@@ -518,6 +584,8 @@ def generate(
         raise ValueError("speed must be positive")
     if kind in ("walk", "jog"):
         m = _gait(T, fps, body, sp, rng, run=(kind == "jog"))
+    elif kind == "walk_trial":
+        m = _walk_trial(T, fps, body, sp, rng)
     elif kind == "squat":
         m = _squat(T, fps, body, sp, rng)
     elif kind == "lunge":
@@ -562,4 +630,4 @@ def generate_file(path: str | Path, kind: str, **kw) -> Path:
     return write_amass_npz(generate(kind, **kw), path)
 
 
-__all__ = ["KINDS", "generate", "generate_file", "leg_cycle", "write_amass_npz"]
+__all__ = ["KINDS", "generate", "generate_file", "leg_cycle", "walk_trial_profile", "write_amass_npz"]

@@ -89,3 +89,41 @@ def test_holds_are_still(kind: str):
 def test_rejects_unknown_kind():
     with pytest.raises(ValueError, match="unknown motion kind"):
         generate("moonwalk")
+
+
+def test_a_walk_trial_stands_then_walks_turns_and_speeds_up():
+    """``walk_trial``: still for its first 3 s, then walking; each 180 deg turn turns the
+    pelvis round (read off the pelvis's forward axis, not the profile); the second half
+    is brisker (speed from the root path, cadence from the knee's spectrum)."""
+    from inference.metrics.joint_angles import knee_flexion_deg
+    from sim_devices.motions import walk_trial_profile
+
+    m = generate("walk_trial", seconds=40.0, seed=21)
+    prof = walk_trial_profile(np.arange(m.n_frames) / m.fps)
+    assert prof["stand_s"] == 3.0 and prof["turns_s"] == [12.0, 22.0, 32.0]
+    fps = m.fps
+    still = slice(0, int(2.9 * fps))
+    assert np.ptp(m.root[still], axis=0).max() < 2e-3
+    assert np.abs(m.rot[still] - m.rot[0]).max() < 1e-9
+    sig = synthesize(m)
+    assert np.abs(sig.free_acc[: int(2.5 * fps)]).max() < 0.05  # every site still, bar the smoothing's edge
+    assert np.ptp(knee_flexion_deg(m.rot[still], "l")) < 0.1
+    # walking: the knee flexes in swing
+    assert np.ptp(knee_flexion_deg(m.rot[int(5 * fps):int(11 * fps)], "l")) > 40.0
+    fwd = m.rot[:, 0, :2, 0]  # the pelvis's forward axis in the ground plane
+    yaw = np.unwrap(np.arctan2(fwd[:, 1], fwd[:, 0]))
+
+    def mean_yaw(a: float, b: float) -> float:  # over whole strides, so the pelvis's own swing averages out
+        return float(np.degrees(yaw[int(a * fps):int(b * fps)].mean()))
+    before, after1, after2 = mean_yaw(6.0, 11.0), mean_yaw(15.0, 21.0), mean_yaw(25.0, 31.0)
+    assert abs(before) < 3.0 and after1 == pytest.approx(180.0, abs=3.0) and abs(after2) < 3.0
+    speed = np.linalg.norm(np.diff(m.root[:, :2], axis=0), axis=-1) * fps
+
+    def cadence(a: float, b: float) -> float:
+        k = knee_flexion_deg(m.rot[int(a * fps):int(b * fps)], "l")
+        f = np.fft.rfftfreq(len(k) * 8, 1 / fps)
+        spec = np.abs(np.fft.rfft(k - k.mean(), len(k) * 8))
+        return float(f[np.argmax(spec)])
+    slow, brisk = speed[int(14 * fps):int(21 * fps)].mean(), speed[int(24 * fps):int(31 * fps)].mean()
+    assert slow == pytest.approx(1.3, rel=0.06) and brisk / slow == pytest.approx(1.3, abs=0.06)
+    assert cadence(24.0, 31.0) / cadence(14.0, 21.0) == pytest.approx(1.2, abs=0.05)

@@ -2,7 +2,9 @@
 
 Unit level, on angle curves made here: the FFT correlation over each lag's overlap is
 the direct one; a periodic curve shifted by one period has two candidates and a warning
-naming both; an unrelated reference gets a low-correlation warning. End to end: a steady
+naming both; an unrelated reference gets a low-correlation warning; a lab's trial (standing, then
+walking with turns and a change of pace: ``walk_trial``) has one clear offset where the
+steady walk has a rival every stride. End to end: a steady
 walk whose reference is shifted by one more stride (its period read off the knee angle's
 spectrum, not from the gait generator): validate warns, names both offsets, and
 ``--offset`` settles it."""
@@ -17,7 +19,8 @@ import pytest
 from app.capture.simulate import save_truth
 from app.cli.main import main
 from app.validate.align import correlation_at, correlation_curve, search_time_offset
-from inference.metrics.joint_angles import hip_angles_deg
+from inference.metrics.joint_angles import elbow_flexion_deg, hip_angles_deg, knee_flexion_deg
+from sim_devices.motions import generate
 from tests.app.validate.conftest import T0
 
 
@@ -60,6 +63,36 @@ def test_an_unrelated_reference_is_called_low():
     ref = {j: rng.normal(size=len(t)) for j in rec}
     *_, warns = search_time_offset(t, rec, t, ref)
     assert any("low correlation" in w for w in warns)
+
+
+def flexion(R: np.ndarray) -> dict[str, np.ndarray]:
+    out = {}
+    for s in "lr":
+        out[f"{s}_knee"], out[f"{s}_hip"] = knee_flexion_deg(R, s), hip_angles_deg(R, s)[0]
+        out[f"{s}_elbow"] = elbow_flexion_deg(R, s)
+    return out
+
+
+@pytest.mark.parametrize("kind", ["walk", "walk_trial"])
+def test_a_trial_that_stands_then_walks_with_turns_has_one_offset_a_steady_walk_has_many(kind):
+    """The motion as a reference (60 Hz, from its first frame) and as a recording (20 Hz,
+    2 deg of noise, starting 7 s earlier with the subject standing as at the clip's
+    start): a steady walk's offset has rivals a stride apart, the trial's is alone."""
+    m = generate(kind, seconds=30.0, seed=21)
+    t_ref, ref = np.arange(m.n_frames) / m.fps, flexion(m.rot)
+    lead = 140  # 7 s at 20 Hz
+    rng = np.random.default_rng(0)
+    rec = {j: np.concatenate([np.full(lead, v[0]), v]) for j, v in flexion(m.rot[::3]).items()}
+    rec = {j: v + rng.normal(0.0, 2.0, len(v)) for j, v in rec.items()}
+    t_rec = np.arange(len(rec["l_knee"])) / 20.0
+    lag, corr, _, cands, warns = search_time_offset(t_rec, rec, t_ref, ref)
+    assert corr > 0.8
+    if kind == "walk":  # the true offset is one of several that score alike
+        assert any(abs(o + 7.0) < 1 / 60 for o, _ in cands)
+        assert len(warns) == 1 and "rival" in warns[0]
+    else:
+        assert lag == pytest.approx(-7.0, abs=1 / 60)
+        assert warns == [] and all(c < corr - 0.15 for _, c in cands[1:])
 
 
 def test_a_steady_walk_shifted_by_one_stride_is_warned_and_settled_by_offset(walk, tmp_path, capsys):
