@@ -140,6 +140,11 @@ MVN = JointMap(
         "collar": "{Side}Shoulder", "upperarm": "{Side}UpperArm", "forearm": "{Side}ForeArm", "hand": "{Side}Hand",
         "thigh": "{Side}UpperLeg", "shank": "{Side}LowerLeg", "foot": "{Side}Foot", "toes": "{Side}Toe",
     }),
+    # MVN's segment frames are the world's in the calibration pose, the foot flat, and MVN
+    # counts its ankle angle from there; its ankle-to-ball-of-foot line slopes more than
+    # ours (30 deg on MVN Studio 4.2.4's take against our 17), and laying that line on ours
+    # tilted every foot 13 deg toes-down, a constant off MVN's own ankle angle
+    neutral_zero_pose=("l_foot", "r_foot"),
 )
 
 # Acclaim ASF (HDM05, CMU): bone names; each bone's rotation acts at its start joint.

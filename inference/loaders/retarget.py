@@ -107,6 +107,12 @@ class JointMap:
     # the reference's for the same posture (joint_maps.ICLONE_CC). Joint positions do not
     # move: the children's offsets turn back by as much (``retarget``).
     frame_turns: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    # segments whose source frame at zero rotation is the anatomical neutral the source's
+    # own joint angles count from (MVN's foot: flat in the calibration pose, whatever the
+    # slope of its ankle-to-ball-of-foot line): their T-pose rotation is their parent's,
+    # not the turn that lays that line on ours, so a zero pose keeps the joint at 0
+    # (joint_maps.MVN). Their bone keeps the source's slope.
+    neutral_zero_pose: tuple[str, ...] = ()
 
     def required(self) -> set[str]:
         return set(self.segments.values()) | set(self.orient.values()) | set(self.twist.values())
@@ -202,7 +208,7 @@ def tpose_rotations(
         Qp = Q[p] if p >= 0 else Q_root
         i = src_to_ours.get(j)
         d0 = _source_direction(src, j, src_child.get(j, [])) if i is not None else None
-        if i is None or d0 is None or i not in TPOSE_DIRECTIONS:
+        if i is None or d0 is None or i not in TPOSE_DIRECTIONS or SEGMENTS[i] in jmap.neutral_zero_pose:
             Q[j] = Qp
             continue
         target = Wt @ TPOSE_DIRECTIONS[i]

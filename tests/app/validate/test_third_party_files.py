@@ -6,7 +6,8 @@ Sources and licenses: ``tests/data/README.md``. What is checked:
 - Xsens MVN Studio 4.2.4 (MVNX v3, 240 Hz): the knee and hip flexion of our joint-angle
   module on the orientations our loader reads equal MVN's own ``jointAngle`` (the third,
   flexion, component), the elbow's its second (the long axis of MVN's arm segments is
-  their Y); the thigh's length is the file's own knee point.
+  their Y), the ankle's dorsiflexion its third (MVN counts it from its calibration pose, as
+  our loader now does: ``joint_maps.MVN``); the thigh's length is the file's own knee point.
 - Vicon Nexus 2.12 (pyCGM2's CGM2.1 model, 100 Hz, frames 153-373): knee, hip and ankle
   angles of our module on the segment axes Nexus wrote (``LFEO/LFEA/LFEL/LFEP``...) equal
   the angles Nexus computed (``LKneeAngles``...); the shank between the file's own knee
@@ -80,7 +81,10 @@ def test_mvn_studio_mvnx_joint_angles_are_mvns_own():
         knee = mvn[:, joints.index(f"j{side}Knee"), 2]
         hip = mvn[:, joints.index(f"j{side}Hip"), 2]
         elbow = mvn[:, joints.index(f"j{side}Elbow"), 1]
+        ankle = mvn[:, joints.index(f"j{side}Ankle"), 2]
         np.testing.assert_allclose(ja.knee_flexion_deg(m.rot, s), knee, atol=0.2)
+        # before, 13.2 deg below MVN's: its foot was laid on our ankle-to-toe line, not kept flat
+        np.testing.assert_allclose(ja.ankle_dorsiflexion_deg(m.rot, s), ankle, atol=0.2)
         np.testing.assert_allclose(ja.hip_angles_deg(m.rot, s)[0], hip, atol=0.2)
         np.testing.assert_allclose(ja.elbow_flexion_deg(m.rot, s), elbow, atol=0.2)
         assert elbow.min() > 100.0  # "Bowing arm": the elbows well bent, so the check has teeth
