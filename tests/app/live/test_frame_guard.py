@@ -1,4 +1,7 @@
-"""A recording written before the live frame became typed replays to the same poses (1e-6):
+"""A recording written before the live frame became typed replays to the same poses (1e-6 then;
+5e-5 since the step around the model call runs on numpy, whose float32 rounding moves this tiny
+model's orientations by up to 1.7e-5, where a field read from the wrong place moves them by
+orders of magnitude more):
 orientations, accelerations, which sites are observed, the insoles' contacts and a VR rig's
 tracked points all reach the answer of the guard's model, so a field read from the wrong
 place changes them (the fixture and how it was made: ``frame_fixture.py``)."""
@@ -28,4 +31,4 @@ def test_a_recording_from_before_the_typed_frame_replays_to_the_same_poses():
     for k in ("t", "observed", "insoles", "reached"):
         np.testing.assert_array_equal(got[k], want[k], err_msg=k)
     for k in ("rot", "root", "joints"):
-        np.testing.assert_allclose(got[k], want[k], rtol=0, atol=1e-6, err_msg=k)
+        np.testing.assert_allclose(got[k], want[k], rtol=0, atol=5e-5, err_msg=k)
