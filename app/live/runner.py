@@ -66,6 +66,11 @@ class LivePipeline:
         self._commands: deque[Callable[[Pipeline], Any]] = deque()
 
     def start(self) -> LivePipeline:
+        # the model's first call is slow (its runtime builds and sizes itself): here, not on
+        # the first pose after calibration
+        warm_up = getattr(self.pipeline.poser, "warm_up", None)
+        if warm_up is not None:
+            warm_up()
         if sys.getswitchinterval() < SWITCH_INTERVAL_S:
             sys.setswitchinterval(SWITCH_INTERVAL_S)
         self._stop.clear()

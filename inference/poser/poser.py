@@ -395,6 +395,18 @@ class Poser:
             w = self._buf[0, self._pos - N + 1: self._pos + 1] * self._std + self._mean
             return w.numpy().copy()
 
+    def warm_up(self) -> None:
+        """One model call of the live step on the current window, answer thrown away and
+        nothing the next step reads changed: the first call of a network builds its runtime's
+        graph or trace and sizes its buffers (~0.25 s), which in a live session fell on the
+        first pose after calibration and cost the four 20 Hz frames behind it."""
+        if self.kind != "diffusion":
+            return
+        state = self._gen.get_state()
+        with torch.inference_mode():
+            self._predict(self.history_rows()[None].clone(), self.history_mask_rows()[None].clone())
+        self._gen.set_state(state)
+
     # ------------------------------------------------------------------ one step
     def _predict(self, win: Tensor, mask: Tensor) -> Tensor:
         if self.chain_mirror:
