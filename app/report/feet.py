@@ -56,19 +56,29 @@ def still_periods(t: np.ndarray, gyro: np.ndarray, acc: np.ndarray, present: np.
     for k in range(2 * half + 1):
         win &= pad[k: k + len(ok)]
     out = []
-    i = 0
-    while i < len(win):
-        if not win[i]:
-            i += 1
-            continue
-        j = i
-        while j + 1 < len(win) and win[j + 1]:
-            j += 1
+    for i, j in true_runs(win):
         start, end = float(t[max(i - half, 0)]), float(t[min(j + half, len(t) - 1)])
         if end - start >= MIN_STILL_S:
             out.append((start, end))
-        i = j + 1
     return out
+
+
+def true_runs(mask: np.ndarray, starts: np.ndarray | None = None) -> list[tuple[int, int]]:
+    """The runs of True in ``mask`` as (first, last) sample indices; ``starts``: samples that
+    begin a new run even inside one (after a gap in time)."""
+    mask = np.asarray(mask, dtype=bool)
+    runs: list[tuple[int, int]] = []
+    i = 0
+    while i < len(mask):
+        if not mask[i]:
+            i += 1
+            continue
+        j = i
+        while j + 1 < len(mask) and mask[j + 1] and not (starts is not None and starts[j + 1]):
+            j += 1
+        runs.append((i, j))
+        i = j + 1
+    return runs
 
 
 def steps(periods: list[tuple[float, float]], t0: float, t1: float) -> list[tuple[float, float]]:
@@ -239,16 +249,8 @@ def sensor_events(t: np.ndarray, gyro: np.ndarray, R_SB: np.ndarray, present: np
     new_run = np.ones(len(t), dtype=bool)  # sample i starts a new stretch (after a gap in time)
     new_run[1:] = np.diff(t) > gap
     stances: list[Stance] = []
-    i = 0
-    while i < len(t):
-        if not ok[i]:
-            i += 1
-            continue
-        j = i
-        while j + 1 < len(t) and ok[j + 1] and not new_run[j + 1]:
-            j += 1
+    for i, j in true_runs(ok, new_run):
         stances += _run_stances(t[i: j + 1], w[i: j + 1], swing_rate)
-        i = j + 1
     if acc is not None:
         rate = np.linalg.norm(np.asarray(gyro, dtype=np.float64), axis=1)
         stances = split_pivots(stances, still_periods(t, gyro, acc, ok), t, rate, swing_rate)

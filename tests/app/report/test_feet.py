@@ -122,3 +122,14 @@ def test_foot_sensor_events_match_motion_capture_walks(shared_data):
     # roll over the toes within a few ms of the toe's lift (docs/report.md)
     assert abs(np.median(strike)) < 0.06 and abs(np.median(off)) < 0.06
     assert np.mean(np.abs(stride)) < 0.03
+
+
+def test_true_runs_split_at_gaps_in_time():
+    from app.report.feet import true_runs
+
+    mask = np.array([0, 1, 1, 1, 0, 1, 1, 0, 1], bool)
+    assert true_runs(mask) == [(1, 3), (5, 6), (8, 8)]
+    starts = np.zeros(len(mask), bool)
+    starts[2] = True  # a gap in time before sample 2
+    assert true_runs(mask, starts) == [(1, 1), (2, 3), (5, 6), (8, 8)]
+    assert true_runs(np.zeros(3, bool)) == []
