@@ -34,28 +34,10 @@ SITES = ("pelvis", "torso", "l_thigh", "r_thigh", "l_shank", "r_shank", "l_upper
 
 def record_walk(path: Path, seconds: float = 14.0, seed: int = 5) -> Path:
     """A walk recorded as ``imucap demo --record`` records (the floor poser: quick)."""
-    import itertools
-
-    from app.live import Pipeline, frames_from_signals
-    from app.recording import Recorder
-    from calibration import Calibrator, Protocol, synthesize_session
-    from inference.poser.poser import make_poser
-    from inference.signals.synthesis import NoiseModel
+    from app.capture.offline_session import record_motion
     from sim_devices.motions import generate
 
-    proto = Protocol(table=1.0, strap=0.5, tpose=1.0, blend=0.3, margin=0.15)
-    act = generate("walk", seconds=seconds, seed=seed)
-    sig, truth = synthesize_session(act, proto, noise=NoiseModel.typical(), rng=3, sites=SITES)
-    body = truth.body
-    ticks = itertools.count(0.0, 0.01)
-    meta = {"model": "floor", "steps": 0, "sensors": list(SITES), "insoles": False,
-            "body_height_m": float(body.height), "body_offsets": np.round(body.offsets, 6).tolist()}
-    rec = Recorder(path, SITES, metadata=meta, flush_interval=0.2, clock=lambda: next(ticks))
-    pipe = Pipeline(make_poser("floor", body=body), SITES, calibrator=Calibrator(SITES, schedule=proto.schedule()),
-                    sinks=[rec], insoles=False)
-    for f in frames_from_signals(sig, t0=500.0, insoles=False):
-        pipe.push(f)
-    pipe.close()
+    record_motion(path, generate("walk", seconds=seconds, seed=seed), SITES, rng=3, t0=500.0, flush_interval=0.2)
     return path
 
 

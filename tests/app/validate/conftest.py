@@ -8,25 +8,19 @@ from their sensors, the rest stand, which gives errors large and small to reprod
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from app.live import Pipeline, frames_from_signals
-from app.recording import Recorder
-from calibration import Calibrator, Protocol, synthesize_session
+from app.capture.offline_session import record_motion
 from inference.body.conventions import rot_z
 from inference.body.motion import Motion
-from inference.poser.poser import make_poser
-from inference.signals.synthesis import NoiseModel
 from sim_devices.motions import generate
 
 SITES = ("pelvis", "torso", "l_thigh", "r_thigh", "l_shank", "r_shank", "l_upperarm", "r_upperarm", "l_wrist",
          "r_wrist")
-PROTO = Protocol(table=1.0, strap=0.5, tpose=1.0, blend=0.3, margin=0.15)
 T0 = 500.0  # session time of the first hub frame
 SHIFT_FRAMES = 37  # the reference starts this many truth frames into the session
 HEADING_DEG = 63.0  # the reference's world is turned by this about the vertical
@@ -52,17 +46,6 @@ class Walk:
 
 @pytest.fixture(scope="session")
 def walk(tmp_path_factory) -> Walk:
-    act = generate("walk", seconds=14.0, seed=5)
-    sig, truth = synthesize_session(act, PROTO, noise=NoiseModel.typical(), rng=3, sites=SITES)
-    body = truth.body
     path = tmp_path_factory.mktemp("validate") / "walk.h5"
-    ticks = itertools.count(0.0, 0.01)
-    meta = {"model": "floor", "steps": 0, "sensors": list(SITES), "insoles": False,
-            "body_height_m": float(body.height), "body_offsets": np.round(body.offsets, 6).tolist()}
-    rec = Recorder(path, SITES, metadata=meta, flush_interval=0.2, clock=lambda: next(ticks))
-    pipe = Pipeline(make_poser("floor", body=body), SITES, calibrator=Calibrator(SITES, schedule=PROTO.schedule()),
-                    sinks=[rec], insoles=False)
-    for f in frames_from_signals(sig, t0=T0, insoles=False):
-        pipe.push(f)
-    pipe.close()
+    truth = record_motion(path, generate("walk", seconds=14.0, seed=5), SITES, rng=3, t0=T0, flush_interval=0.2)
     return Walk(path, truth)
