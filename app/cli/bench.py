@@ -212,22 +212,20 @@ def reference_model(model, spec=None, window: int = REFERENCE_WINDOW):
 
     import torch
 
-    from inference.model.files import LoadedModel, build_model
+    from inference.model.files import LoadedModel, build_model, with_window
     from inference.poser.models import resolve_model
 
     trained = int((model.meta or {}).get("trained_window", model.config.window))
     if spec is not None and not isinstance(spec, LoadedModel) and trained >= window:
         return resolve_model(spec, window=window)
+    if model.config.window >= window:
+        return with_window(model, window)
     cfg = replace(model.config, window=window)
     net = build_model(model.kind, cfg).eval()
     sd = dict(model.model.state_dict())
     pos = sd["pos"]
-    have = pos.shape[1] - 2
-    if have < window:
-        pad = torch.zeros(1, window - have, pos.shape[2], dtype=pos.dtype)
-        sd["pos"] = torch.cat([pos[:, :2], pad, pos[:, 2:]], dim=1)
-    else:
-        sd["pos"] = torch.cat([pos[:, :2], pos[:, pos.shape[1] - window:]], dim=1)
+    pad = torch.zeros(1, window - model.config.window, pos.shape[2], dtype=pos.dtype)
+    sd["pos"] = torch.cat([pos[:, :2], pad, pos[:, 2:]], dim=1)
     net.load_state_dict(sd)
     return LoadedModel(model=net, kind=model.kind, config=cfg, norm_mean=model.norm_mean, norm_std=model.norm_std,
                        step=model.step, meta=dict(model.meta or {}))

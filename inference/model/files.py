@@ -222,6 +222,12 @@ def load_model(path: str | os.PathLike, use_ema: bool = True, window: int | None
     return loaded
 
 
+def newest_positions(pos: Tensor, window: int) -> Tensor:
+    """A denoiser's learned positions (1, 2 + N, d) for the newest ``window`` of its N frames:
+    the step and height tokens' two, then the last ``window`` frames' (the newest keeps its own)."""
+    return torch.cat([pos[:, :2], pos[:, pos.shape[1] - window:]], dim=1)
+
+
 def with_window(model: LoadedModel, window: int) -> LoadedModel:
     """``model`` reading the last ``window`` frames of the history it was trained on: the
     same weights, the learned positions of the frames it keeps (the newest frame keeps its
@@ -241,8 +247,7 @@ def with_window(model: LoadedModel, window: int) -> LoadedModel:
     cfg = replace(model.config, window=window)
     net = build_model(model.kind, cfg)
     sd = dict(model.model.state_dict())
-    pos = sd["pos"]
-    sd["pos"] = torch.cat([pos[:, :2], pos[:, pos.shape[1] - window:]], dim=1)
+    sd["pos"] = newest_positions(sd["pos"], window)
     net.load_state_dict(sd)
     net.eval()
     meta = {**(model.meta or {}), "window": window, "trained_window": model.config.window}

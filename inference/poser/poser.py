@@ -545,7 +545,7 @@ class Poser:
         detected = False
         shanks = bool(m[SHANK_INDEX].all())
         if det is not None and shanks and not m[SL_CONTACT].any():
-            prob, threshold = det(self._recent(wn, SHANK_INDEX, det.context)), DETECTOR_THRESHOLD
+            prob, threshold = det(self._recent(SHANK_INDEX, det.context)), DETECTOR_THRESHOLD
             detected = True
         contact = prob > threshold
         y[SL_CONTACT] = np.where(m[SL_CONTACT], y[SL_CONTACT], contact.astype(np.float32))
@@ -557,7 +557,7 @@ class Poser:
         if self.root_correction and not dp_measured:
             odo = self._odometry
             if odo is not None and not shanks and bool(m[PELVIS_INDEX].all()):
-                y[SL_DP] = odo(self._recent(wn, PELVIS_INDEX, odo.context), self.index)
+                y[SL_DP] = odo(self._recent(PELVIS_INDEX, odo.context), self.index)
                 root_step = "odometry"
             else:
                 y[SL_DP] = correct_root_displacement(y[SL_DP], self._prev_cps, cps, contact)
@@ -638,11 +638,11 @@ class Poser:
             dp_d = yd[:, SL_DP]
         return seg_dev, pz_d, dp_d
 
-    def _recent(self, wn: np.ndarray, idx: np.ndarray, n: int) -> np.ndarray:
+    def _recent(self, idx: np.ndarray, n: int) -> np.ndarray:
         """(n, len(idx)) the features ``idx`` of the history's last n frames (this one
-        included) in physical units, oldest first: what a helper stage reads. From the kept
-        history, not the window ``wn`` (N, F): a helper may read further back than the model."""
-        rows = self._buf_np[0, self._pos - n + 1: self._pos + 1] if n > len(wn) else wn[-n:]
+        included) in physical units, oldest first: what a helper stage reads, from the kept
+        history (a helper may read further back than the model's window)."""
+        rows = self._buf_np[0, self._pos - n + 1: self._pos + 1]
         return rows[:, idx] * self._std_np[idx] + self._mean_np[idx]
 
     def _stride_scale(self, joints_rel: np.ndarray, f32: np.ndarray, m: np.ndarray, contact: np.ndarray,

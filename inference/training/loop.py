@@ -52,7 +52,7 @@ from inference.features.mirror import MirrorAveraged, mirror_features, mirror_po
 from inference.model.config import ModelConfig, atomic_torch_save
 from inference.model.denoiser import deepened_state_dict
 from inference.model.diffusion import Schedule, inpaint, paper_steps, parse_steps
-from inference.model.files import MODEL_FORMAT, build_model, save_model, with_reading
+from inference.model.files import MODEL_FORMAT, build_model, newest_positions, save_model, with_reading
 from inference.model.regressor import random_observation_mask
 from inference.training.augment import rotate_yaw, scale_features, sensor_effects
 from inference.training.config import CHECKPOINT_FORMAT, LAST, LOG_FILE, MODEL_FILE, VAL_SITES, TrainConfig
@@ -376,8 +376,7 @@ def init_from_model_file(obj: dict, window: int | None = None) -> dict:
     sd = {k: v.float() if v.is_floating_point() else v for k, v in obj["state_dict"].items()}
     mc = dict(obj["model_config"])
     if window is not None and obj["kind"] == "diffusion" and "pos" in sd and window < mc.get("window", window):
-        pos = sd["pos"]
-        sd["pos"] = torch.cat([pos[:, :2], pos[:, pos.shape[1] - window:]], dim=1)
+        sd["pos"] = newest_positions(sd["pos"], window)
         mc["window"] = window
     return {"format": CHECKPOINT_FORMAT, "kind": obj["kind"], "model_config": mc, "ema": sd,
             "model": sd, "norm_mean": obj["norm_mean"], "norm_std": obj["norm_std"], "step": obj.get("step", 0)}
