@@ -245,6 +245,9 @@ MVN_BVH = JointMap(
         "collar": "{Side}Collar", "upperarm": "{Side}Shoulder", "forearm": "{Side}Elbow", "hand": "{Side}Wrist",
         "thigh": "{Side}Hip", "shank": "{Side}Knee", "foot": "{Side}Ankle", "toes": "{Side}Toe",
     }),
+    # the foot keeps MVN's calibration-pose frame, as in MVN above: the export's zero pose
+    # has the foot flat with its ankle-to-toe line 33 deg down (ours 17)
+    neutral_zero_pose=("l_foot", "r_foot"),
 )
 
 BVH_MAPS = (BANDAI, CMU_CGSPEED, CMU_BVH, CMU_DAZ, ICLONE_CC, ACCLAIM_BVH, MIXAMO, MVN_BVH)

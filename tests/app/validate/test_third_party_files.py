@@ -21,7 +21,8 @@ Sources and licenses: ``tests/data/README.md``. What is checked:
   (Gait2392, knee flexion negative): our knee and hip flexion agree through the gait
   cycle; thigh and shank lengths against the height in OpenSim's scaling setup.
 - An MVN BVH export: none could be had with a license that allows keeping it here; the
-  test reads ``$IMUCAP_DATA/third_party/mvn_bvh/*.bvh`` (MVN's naming) when present.
+  test reads ``$IMUCAP_DATA/third_party/mvn_bvh/*.bvh`` (MVN's naming) when present and
+  checks the knee and ankle against the file's own Euler angles, computed by hand.
 """
 
 from __future__ import annotations
@@ -223,15 +224,66 @@ def _external(pattern: str) -> list[Path]:
     return files
 
 
+def _bvh_by_hand(path: Path) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """A BVH's own numbers, read without our loader: joint name -> (T, 3, 3) rotation of the
+    segment in its parent's frame (the channels' Euler angles, intrinsic, in the file's
+    order), and the root's Y position (cm)."""
+    from scipy.spatial.transform import Rotation
+
+    tok = path.read_text().split()
+    names, chans, i = [], [], 0
+    while tok[i] != "MOTION":
+        if tok[i] in ("ROOT", "JOINT"):
+            names.append(tok[i + 1])
+        elif tok[i] == "CHANNELS":
+            n = int(tok[i + 1])
+            chans.append((names[-1], tok[i + 2:i + 2 + n]))
+            i += 1 + n
+        i += 1
+    frames = int(tok[i + 2])
+    data = np.array(tok[i + 6:], float).reshape(frames, -1)
+    out, col, root_y = {}, 0, None
+    for name, ch in chans:
+        for k, c in enumerate(ch):
+            if c == "Yposition":
+                root_y = data[:, col + k]
+        rc = [k for k, c in enumerate(ch) if c.endswith("rotation")]
+        order = "".join(ch[k][0] for k in rc)
+        out[name] = Rotation.from_euler(order, data[:, [col + k for k in rc]], degrees=True).as_matrix()
+        col += len(ch)
+    return out, root_y
+
+
+def _flexion_by_hand(R: np.ndarray) -> np.ndarray:
+    """The first angle (deg) of the Z-X-Y decomposition in OpenSim's axes (X anterior, Y up,
+    Z right) of a relative rotation given in MVN BVH's axes (X left, Y up, Z forward)."""
+    from scipy.spatial.transform import Rotation
+
+    P = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
+    return Rotation.from_matrix(P @ R @ P.T).as_euler("ZXY", degrees=True)[:, 0]
+
+
 def test_mvn_bvh_exports_read_with_mvns_skeleton():
     """An MVN Analyze/Studio BVH (Hips, Chest..Chest4, RightCollar, RightHip/Knee/Ankle/Toe):
-    mapped as MVN, 23 segments' worth, a standing height."""
+    mapped as MVN; knee flexion and ankle dorsiflexion are the ones the file's own Euler
+    angles give by hand (MVN BVH's segment frames are the world's in its zero pose, so a
+    joint's channels are the distal segment in the proximal one; the ankle's is counted
+    from MVN's flat foot, ``joint_maps.MVN_BVH.neutral_zero_pose``: laying MVN's
+    ankle-to-toe line, 33 deg down, on ours, 17, had put every ankle 16 deg off); the root
+    height follows the file's Yposition in cm. Checked on AnyBody's AMMR Xsens examples
+    (``tests/data/README.md``): knee within 0.06 deg, ankle within 0.006 deg."""
     for path in _external("mvn_bvh/*.bvh"):
         ref = read_reference(path)
         assert "skeleton mvn-bvh" in ref.mapping, path
         assert {"l_thigh", "r_shank", "pelvis", "l_upperarm"} <= ref.have_rot
-        knee = joint_angles(ref)["l_knee"]
-        assert np.nanmax(knee) < 170.0 and np.nanmin(knee) > -20.0
+        m = load_motion(path)
+        local, root_y = _bvh_by_hand(path)
+        assert np.ptp(m.root[:, 2] - root_y / 100.0) < 1e-3, path  # cm, Y up (the floor may move)
+        for side, S in (("l", "Left"), ("r", "Right")):
+            knee = ja.knee_flexion_deg(m.rot, side)
+            ankle = ja.ankle_dorsiflexion_deg(m.rot, side)
+            assert np.max(np.abs(knee + _flexion_by_hand(local[S + "Knee"]))) < 0.2, (path, side)
+            assert np.max(np.abs(ankle - _flexion_by_hand(local[S + "Ankle"]))) < 0.05, (path, side)
 
 
 def test_plug_in_gait_c3d_files_agree_with_their_own_angles():
