@@ -29,7 +29,7 @@ from scipy.spatial.transform import Rotation
 __all__ = [
     "to_scipy", "from_scipy", "quat_to_matrix", "matrix_to_quat",
     "yaw_of", "quat_yaw", "rot_z", "quat_z", "heading_of", "heading_vector", "forward_xy",
-    "turn_xy", "wrap_angle", "mean_angle", "swing_twist_z", "without_yaw",
+    "turn_xy", "turn_cs", "wrap_angle", "mean_angle", "swing_twist_z", "without_yaw",
 ]
 
 _Z = np.array([0.0, 0.0, 1.0])
@@ -126,9 +126,20 @@ def forward_xy(R, axis: int = 0) -> np.ndarray:
 
 def turn_xy(v, angle) -> np.ndarray:
     """(..., 2) ground-plane vectors turned by ``angle`` (rad) about Z (negative: turned back)."""
-    v, a = _f64(v), _f64(angle)
-    c, s = np.cos(a), np.sin(a)
-    return np.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1]], axis=-1)
+    a = _f64(angle)
+    return turn_cs(_f64(v), np.cos(a), np.sin(a))
+
+
+def turn_cs(v: np.ndarray, c, s) -> np.ndarray:
+    """Vectors v (..., 2 or 3) turned about world Z by the angle whose cosine and sine are
+    ``c``, ``s`` (broadcast against ``v[..., 0]``), z kept, in the inputs' own dtype: for
+    per-frame code that holds the cosine and sine already (the live poser's heading frames,
+    float32) and would pay for a rotation object or a float64 round trip."""
+    x, y = v[..., 0], v[..., 1]
+    parts = [c * x - s * y, s * x + c * y]
+    if v.shape[-1] == 3:
+        parts.append(np.broadcast_to(v[..., 2], parts[0].shape))
+    return np.stack(parts, axis=-1)
 
 
 def wrap_angle(a) -> np.ndarray:

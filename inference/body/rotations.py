@@ -600,6 +600,153 @@ def triad(a_body: Array, b_body: Array, a_world: Array, b_world: Array) -> Array
     return frame(a_world, b_world) @ xp.mT(frame(a_body, b_body))
 
 
+# --------------------------------------------------------------------------- facing
+def facing_x(h: Array) -> Array:
+    """(..., 3, 3) R_z(-heading of h): the turn about world Z that makes ground-plane
+    directions h (..., 2) face +X. The heading frames of the learned helpers (contact
+    detector, pelvis odometry) are built with it, on tensors in training; numpy code without
+    a tensor in sight uses ``conventions`` (``rot_z``, ``turn_cs``)."""
+    xp, h = _ns(h)
+    yaw = xp.atan2(h[..., 1], h[..., 0])
+    up = xp.broadcast_to(xp.asarray([0.0, 0.0, 1.0]), (*yaw.shape, 3))
+    return matrix_about_axis(up, -yaw)
+
+
+# --------------------------------------------------------------------------- one frame on numpy
+# The live poser's per-frame path (``inference/poser``) turns one frame's 24 segments at a
+# time. Through the back-end shim above, each call's conversions and stacking cost more
+# than its arithmetic (a frame made ~170 tensor conversions before these kernels), so the
+# same operations are here once more, for numpy arrays only, keeping the input's float
+# dtype (float32 in, float32 out, as the model's side computes), with the index work done
+# at import. Same conventions, same guards; tests/inference/body/test_frame_kernels.py
+# holds each to its general counterpart above, tiny and near-pi angles included.
+
+_C1 = np.array([1, 2, 0])
+_C2 = np.array([2, 0, 1])
+
+
+def _cross_np(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b over the last axis, cheaper than ``np.cross`` on a few vectors."""
+    return a.take(_C1, -1) * b.take(_C2, -1) - a.take(_C2, -1) * b.take(_C1, -1)
+
+
+def _norm_np(v: np.ndarray) -> np.ndarray:
+    return np.sqrt((v * v).sum(-1, keepdims=True))
+
+
+def rot6d_to_matrix_np(d6: np.ndarray) -> np.ndarray:
+    """``rot6d_to_matrix`` of numpy (..., 6)."""
+    a1, a2 = d6[..., 0:3], d6[..., 3:6]
+    b1 = a1 / _norm_np(a1)
+    b2 = a2 - (b1 * a2).sum(-1, keepdims=True) * b1
+    b2 = b2 / _norm_np(b2)
+    out = np.empty((*d6.shape[:-1], 3, 3), dtype=b1.dtype)
+    out[..., 0] = b1
+    out[..., 1] = b2
+    out[..., 2] = _cross_np(b1, b2)
+    return out
+
+
+def matrix_to_rot6d_np(R: np.ndarray) -> np.ndarray:
+    """``matrix_to_rot6d`` of numpy (..., 3, 3)."""
+    return np.swapaxes(R[..., :, :2], -1, -2).reshape(*R.shape[:-2], 6)
+
+
+def _candidate_map() -> tuple[np.ndarray, np.ndarray]:
+    """``matrix_to_quat``'s four candidates (4 q_m q for m = w, x, y, z) as one linear map of
+    the nine matrix entries (row-major) plus a constant: ``cands = r9 @ W + B``, so a frame's
+    candidates are one matrix product instead of sixteen stacked sums."""
+    W, B = np.zeros((9, 4, 4)), np.zeros((4, 4))
+    terms = [  # (entry index, sign) per candidate m and component c, as in matrix_to_quat
+        [((0, 1), (4, 1), (8, 1)), ((7, 1), (5, -1)), ((2, 1), (6, -1)), ((3, 1), (1, -1))],
+        [((7, 1), (5, -1)), ((0, 1), (4, -1), (8, -1)), ((1, 1), (3, 1)), ((2, 1), (6, 1))],
+        [((2, 1), (6, -1)), ((1, 1), (3, 1)), ((0, -1), (4, 1), (8, -1)), ((5, 1), (7, 1))],
+        [((3, 1), (1, -1)), ((2, 1), (6, 1)), ((5, 1), (7, 1)), ((0, -1), (4, -1), (8, 1))],
+    ]
+    for m, row in enumerate(terms):
+        for c, entries in enumerate(row):
+            for i, sign in entries:
+                W[i, m, c] = sign
+        B[m, m] = 1.0
+    return W.reshape(9, 16), B.reshape(16)
+
+
+_QW, _QB = _candidate_map()
+_QW32, _QB32 = _QW.astype(np.float32), _QB.astype(np.float32)
+_DIAG = np.arange(4)
+
+
+def matrix_to_quat_np(R: np.ndarray) -> np.ndarray:
+    """``matrix_to_quat`` (largest divisor, w >= 0) of numpy (n, 3, 3)."""
+    n = R.shape[0]
+    W, B = (_QW32, _QB32) if R.dtype == np.float32 else (_QW, _QB)
+    cands = (R.reshape(n, 9) @ W + B).reshape(n, 4, 4)
+    best = cands[np.arange(n), np.argmax(cands[:, _DIAG, _DIAG], axis=-1)]
+    q = best / _norm_np(best)
+    return np.where(q[:, :1] < 0, -q, q)
+
+
+def quat_to_axis_angle_np(q: np.ndarray) -> np.ndarray:
+    """``quat_to_axis_angle`` (angle in [0, pi], the series near zero) of numpy (..., 4)."""
+    q = np.where(q[..., :1] < 0, -q, q)
+    w, v = q[..., 0], q[..., 1:]
+    n = _norm_np(v)[..., 0]
+    small = n < 1e-4 * w  # else n > 0: w >= 0, and q is not zero
+    w_safe = np.where(small, w, 1.0)
+    r2 = (n / w_safe) ** 2
+    scale = np.where(small, 2.0 / w_safe * (1.0 - r2 / 3.0), 2.0 * np.arctan2(n, w) / np.where(small, 1.0, n))
+    return scale[..., None] * v
+
+
+def so3_log_np(R: np.ndarray) -> np.ndarray:
+    """``so3_log`` of numpy (n, 3, 3)."""
+    return quat_to_axis_angle_np(matrix_to_quat_np(R))
+
+
+# the skew-symmetric [v]_x as a linear map of v: flat (9,) entries = v @ _SKEW
+_SKEW = np.zeros((3, 9))
+for _k, (_i, _j) in enumerate([(2, 1), (0, 2), (1, 0)]):
+    _SKEW[_k, 3 * _i + _j], _SKEW[_k, 3 * _j + _i] = 1.0, -1.0
+_SKEW32 = _SKEW.astype(np.float32)
+_EYE = np.eye(3)
+_EYE32 = _EYE.astype(np.float32)
+
+
+def quat_to_matrix_np(q: np.ndarray) -> np.ndarray:
+    """``quat_to_matrix`` of numpy (..., 4), non-unit q tolerated: with s = 2 / |q|^2,
+    R = s v v^T + (1 - s |v|^2) I + s w [v]_x (the same entries, ``1 - yy - zz`` =
+    ``1 - (xx + yy + zz) + xx``, summed in another order)."""
+    f32 = q.dtype == np.float32
+    w, v = q[..., :1], q[..., 1:]
+    s = 2.0 / (q * q).sum(-1, keepdims=True)
+    sv = s * v
+    out = sv[..., :, None] * v[..., None, :]  # s v v^T
+    out += (1.0 - (sv * v).sum(-1))[..., None, None] * (_EYE32 if f32 else _EYE)
+    out += ((sv * w) @ (_SKEW32 if f32 else _SKEW)).reshape(out.shape)
+    return out
+
+
+def quat_power_np(q: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """q^t of numpy unit quaternions (..., 4) with w >= 0: the same axis, ``t`` (...) times the
+    angle; ``exp(t log q)`` with the axis never formed (identity where q is)."""
+    v = q[..., 1:]
+    n = np.sqrt((v * v).sum(-1))
+    th = t * np.arctan2(n, q[..., 0])
+    out = np.empty_like(q)
+    out[..., 0] = np.cos(th)
+    out[..., 1:] = (np.sin(th) / np.where(n > 0, n, 1.0))[..., None] * v
+    return out
+
+
+def matrix_about_axis_np(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """``matrix_about_axis`` of numpy: (..., 3, 3) turns by ``angle`` (...) about one unit ``axis`` (3,)."""
+    half = 0.5 * angle
+    q = np.empty((*np.shape(angle), 4), dtype=np.result_type(angle, axis))
+    q[..., 0] = np.cos(half)
+    q[..., 1:] = np.sin(half)[..., None] * axis
+    return quat_to_matrix_np(q)
+
+
 # --------------------------------------------------------------------------- helpers for tests and synthesis
 def random_quat(shape: tuple[int, ...] | int = (), rng: np.random.Generator | None = None) -> np.ndarray:
     """Uniformly distributed unit quaternions (w >= 0), float64 numpy.
@@ -622,4 +769,6 @@ __all__ = [
     "quat_normalize", "quat_rotate", "quat_slerp", "quat_to_axis_angle", "quat_to_euler",
     "quat_to_matrix", "quat_to_rot6d", "random_quat", "rot6d_to_axis_angle", "rot6d_to_euler",
     "rot6d_to_matrix", "rot6d_to_quat", "skew", "so3_exp", "so3_log", "triad",
+    "facing_x", "matrix_about_axis_np", "matrix_to_quat_np", "matrix_to_rot6d_np", "quat_to_axis_angle_np",
+    "quat_power_np", "quat_to_matrix_np", "rot6d_to_matrix_np", "so3_log_np",
 ]

@@ -28,8 +28,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from inference.body import frame_kernels
-from inference.body.rotations import matrix_about_axis, matrix_to_rot6d, rot6d_to_matrix
+from inference.body.conventions import turn_cs
+from inference.body.rotations import facing_x, matrix_to_rot6d, rot6d_to_matrix, rot6d_to_matrix_np
 from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX
 from inference.features.layout import SL_ACC, SL_CONTACT, SL_ROT
 from inference.poser.small_nets import FitConfig, NumpyMLP, clip_tensors, fit, load_net, save_net, stack_context
@@ -49,7 +49,6 @@ def shank_feature_index() -> np.ndarray:
 
 
 SHANK_INDEX = shank_feature_index()
-_UP = torch.tensor([0.0, 0.0, 1.0])
 
 
 def heading_frame_inputs(shank: Tensor) -> Tensor:
@@ -57,8 +56,7 @@ def heading_frame_inputs(shank: Tensor) -> Tensor:
     the same turned about world z so the mean heading of the shanks' x axes is +X."""
     R = rot6d_to_matrix(shank[..., :12].reshape(*shank.shape[:-1], 2, 6))  # (..., 2, 3, 3)
     h = R[..., 0, :2, 0] + R[..., 1, :2, 0]
-    yaw = torch.atan2(h[..., 1], h[..., 0])
-    Rz = matrix_about_axis(_UP.to(shank.dtype).expand(*yaw.shape, 3), -yaw)  # R_z(-yaw)
+    Rz = facing_x(h)  # R_z(-yaw)
     rot = matrix_to_rot6d(Rz[..., None, :, :] @ R).reshape(*shank.shape[:-1], 12)
     acc = (Rz[..., None, :, :] @ shank[..., 12:].reshape(*shank.shape[:-1], 2, 3, 1)).reshape(*shank.shape[:-1], 6)
     return torch.cat([rot, acc], dim=-1)
@@ -69,17 +67,13 @@ def heading_frame_inputs_np(shank: np.ndarray) -> np.ndarray:
     Only the 6D of ``R_z(-yaw) @ R`` is needed, i.e. the turned first two columns of R:
     the turn is applied to those and to the accelerations, written out about z."""
     C = shank.shape[0]
-    R = frame_kernels.rot6d_to_matrix(shank[:, :12].reshape(C, 2, 6))  # (C, 2, 3, 3)
+    R = rot6d_to_matrix_np(shank[:, :12].reshape(C, 2, 6))  # (C, 2, 3, 3)
     h = R[:, 0, :2, 0] + R[:, 1, :2, 0]
     yaw = np.arctan2(h[:, 1], h[:, 0])[:, None, None]
     c, s = np.cos(yaw), np.sin(yaw)
     # (C, 2 shanks, 3 vectors: column 0, column 1, acceleration, xyz)
     v = np.concatenate([np.swapaxes(R[..., :2], -1, -2), shank[:, 12:].reshape(C, 2, 1, 3)], axis=2)
-    x, y = v[..., 0], v[..., 1]
-    out = np.empty_like(v)
-    out[..., 0] = c * x + s * y  # R_z(-yaw) = [[c, s, 0], [-s, c, 0], [0, 0, 1]]
-    out[..., 1] = c * y - s * x
-    out[..., 2] = v[..., 2]
+    out = turn_cs(v, c, -s)  # R_z(-yaw)
     return np.concatenate([out[:, :, :2].reshape(C, 12), out[:, :, 2].reshape(C, 6)], axis=1)
 
 

@@ -20,8 +20,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from inference.body import frame_kernels
-from inference.body.rotations import matrix_about_axis
+from inference.body.rotations import matrix_about_axis, matrix_about_axis_np
 from inference.body.skeleton import SEGMENT_INDEX
 
 KNEE_AXIS = (0.0, 1.0, 0.0)  # in the thigh's frame (our T-pose: lateral)
@@ -88,7 +87,7 @@ def _constrain_knees_np(R: np.ndarray, measured: np.ndarray) -> np.ndarray:
         return out
     axis = np.asarray(KNEE_AXIS, dtype=R.dtype)
     Rt, Rs = R.take(_THIGH_IDX, -3), R.take(_SHANK_IDX, -3)
-    hinge = frame_kernels.matrix_about_axis(axis, hinge_angle(np.swapaxes(Rt, -1, -2) @ Rs, axis))
+    hinge = matrix_about_axis_np(axis, hinge_angle(np.swapaxes(Rt, -1, -2) @ Rs, axis))
     if R.ndim == 3:  # one frame: each knee on its own
         for k, (t, s) in enumerate(KNEES):
             if fix_thigh[k]:

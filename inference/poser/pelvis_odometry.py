@@ -35,7 +35,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from inference.body.rotations import matrix_about_axis, matrix_to_rot6d, rot6d_to_matrix
+from inference.body.conventions import turn_cs
+from inference.body.rotations import facing_x, matrix_to_rot6d, rot6d_to_matrix, rot6d_to_matrix_np
 from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX
 from inference.features.layout import SL_ACC, SL_DP, SL_ROT
 from inference.features.time_reversal import is_forward_walk, reverse_features
@@ -74,15 +75,12 @@ def pelvis_feature_index() -> np.ndarray:
 
 
 PELVIS_INDEX = pelvis_feature_index()
-_UP = torch.tensor([0.0, 0.0, 1.0])
 
 
 def current_heading(pelvis: Tensor) -> Tensor:
     """(..., C, 9) pelvis frames -> (...,) R_z(-yaw) of the last frame's pelvis heading
     as (..., 3, 3): the turn that makes the subject face +X now."""
-    R = rot6d_to_matrix(pelvis[..., -1, :6])
-    yaw = torch.atan2(R[..., 1, 0], R[..., 0, 0])
-    return matrix_about_axis(_UP.to(pelvis.dtype).expand(*yaw.shape, 3), -yaw)
+    return facing_x(rot6d_to_matrix(pelvis[..., -1, :6])[..., :2, 0])
 
 
 def heading_frame_windows(pelvis: Tensor, Rz: Tensor | None = None) -> Tensor:
@@ -190,18 +188,12 @@ def _heading_inputs_np(p: np.ndarray, windows: np.ndarray) -> tuple[np.ndarray, 
     (T, 9), float32) on numpy: (n, C * 9), and each window's cos, sin of its last frame's yaw.
     The 6D of ``R_z(-yaw) @ R`` is the turned first two columns of R, so the turn (written
     out about z) is applied to those and to the acceleration."""
-    d = p[:, :6].reshape(-1, 2, 3)
-    b1 = d[:, 0] / np.sqrt((d[:, 0] * d[:, 0]).sum(-1, keepdims=True))  # rotations.rot6d_to_matrix's columns
-    a2 = d[:, 1] - (b1 * d[:, 1]).sum(-1, keepdims=True) * b1
-    b2 = a2 / np.sqrt((a2 * a2).sum(-1, keepdims=True))
-    v = np.stack([b1, b2, p[:, 6:9]], axis=1)[windows]  # (n, C, 3 vectors, xyz)
+    R = rot6d_to_matrix_np(p[:, :6])
+    b1 = R[..., 0]
+    v = np.stack([b1, R[..., 1], p[:, 6:9]], axis=1)[windows]  # (n, C, 3 vectors, xyz)
     yaw = np.arctan2(b1[windows[:, -1], 1], b1[windows[:, -1], 0])
     c, s = np.cos(yaw), np.sin(yaw)
-    x, y = v[..., 0], v[..., 1]
-    out = np.empty_like(v)
-    out[..., 0] = c[:, None, None] * x + s[:, None, None] * y  # R_z(-yaw) = [[c, s, 0], [-s, c, 0], [0, 0, 1]]
-    out[..., 1] = c[:, None, None] * y - s[:, None, None] * x
-    out[..., 2] = v[..., 2]
+    out = turn_cs(v, c[:, None, None], -s[:, None, None])  # R_z(-yaw)
     return out.reshape(len(windows), -1), c, s
 
 
@@ -264,8 +256,7 @@ class OdometryKernel:
 
 def _turned_back(d: np.ndarray, cs: np.ndarray) -> np.ndarray:
     """A heading-frame answer (2,) in the world: R_z(yaw) d, with cs = (cos, sin) of the yaw."""
-    c, s = cs
-    return np.array([c * d[0] - s * d[1], s * d[0] + c * d[1]], dtype=np.float32)
+    return turn_cs(d, cs[0], cs[1]).astype(np.float32, copy=False)
 
 
 # --------------------------------------------------------------------------- training

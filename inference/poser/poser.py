@@ -40,8 +40,9 @@ Speed: the window is a float32 torch buffer (the model's input) that the step re
 writes through a numpy view of the same memory; it is a view into a double-length buffer,
 so shifting it is free except for one copy every N frames. Everything around the model
 call (observation, cleaning, contacts, FK, root, filters) is float32/float64 numpy on one
-frame's small arrays (``body.frame_kernels``, the helpers' ``NumpyMLP``): torch's per-op
-cost on tiny tensors was most of that time (docs/latency.md, "Around the model call").
+frame's small arrays (``body.frame_kernels``, ``rotations``' ``*_np`` kernels, the helpers'
+``NumpyMLP``): torch's per-op cost on tiny tensors was most of that time (docs/latency.md,
+"Around the model call").
 
 Default weights live in ``inference/weights/`` (``default_weights``); a missing file
 raises a FileNotFoundError that says how to train one.
@@ -61,7 +62,7 @@ from torch import Tensor
 
 from inference.body import frame_kernels as fk
 from inference.body.body import CONTACT_SEGMENTS, Body, contact_points, forward_kinematics, npose_rotations, tpose
-from inference.body.rotations import matrix_to_rot6d
+from inference.body.rotations import matrix_to_rot6d, matrix_to_rot6d_np, rot6d_to_matrix_np
 from inference.body.skeleton import N_CONTACTS, N_SEGMENTS, SEGMENT_INDEX, SITE_INDEX
 from inference.body.tracked import POINT_FEATURES
 from inference.features.layout import N_FEATURES, SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT, WINDOW
@@ -344,7 +345,7 @@ class Poser:
             self._buf_np = self._buf.numpy()
             self._mask_np = self._mask.numpy()
             self._mbuf_np = self._mbuf.numpy() if self._mbuf is not None else None
-            R0 = fk.rot6d_to_matrix(self._stand_np[SL_ROT].reshape(N_SEGMENTS, 6))
+            R0 = rot6d_to_matrix_np(self._stand_np[SL_ROT].reshape(N_SEGMENTS, 6))
             self._prev_cps = self._contact_points(R0, self._kin.joints(R0))
             self._root_xy = np.array(self.root_xy0, dtype=np.float64)
             self._root_raw = np.zeros(2)  # the root path without stride scaling
@@ -534,11 +535,11 @@ class Poser:
         y = _numpy(y_n) * self._std_np + self._mean_np  # physical units, fresh array
 
         # clean the reconstruction: valid rotations, 0/1 contacts (what the data holds)
-        R = fk.rot6d_to_matrix(y[SL_ROT].reshape(N_SEGMENTS, 6))
+        R = rot6d_to_matrix_np(y[SL_ROT].reshape(N_SEGMENTS, 6))
         seg_measured = m[SL_ROT].reshape(N_SEGMENTS, 6).all(axis=-1)
         if self.knee_hinge:
             R = constrain_knees(R, seg_measured)
-        y[SL_ROT] = np.where(m[SL_ROT], y[SL_ROT], fk.matrix_to_rot6d(R).reshape(-1))
+        y[SL_ROT] = np.where(m[SL_ROT], y[SL_ROT], matrix_to_rot6d_np(R).reshape(-1))
         prob = np.clip(y[SL_CONTACT], 0.0, 1.0)
         threshold = self.contact_threshold
         det = self._detector
@@ -617,7 +618,7 @@ class Poser:
         yd = draws * self._std + self._mean
         k = yd.shape[0]
         # the answer's own kernels: a measured segment's draw is then exactly the answer's
-        Rd = fk.rot6d_to_matrix(yd[:, SL_ROT].numpy().reshape(k, N_SEGMENTS, 6))
+        Rd = rot6d_to_matrix_np(yd[:, SL_ROT].numpy().reshape(k, N_SEGMENTS, 6))
         if self.knee_hinge:
             Rd = constrain_knees(Rd, seg_measured.numpy())
         Rd = torch.from_numpy(Rd)
@@ -655,7 +656,7 @@ class Poser:
             self.stride.drop()
             return 1.0
         ankles = joints_rel[_FOOT_JOINTS, :2].astype(np.float64) + self._root_raw
-        R = fk.rot6d_to_matrix(f32[_SHANK_ROT].reshape(2, 6))
+        R = rot6d_to_matrix_np(f32[_SHANK_ROT].reshape(2, 6))
         return self.stride.update(R, f32[_SHANK_ACC].reshape(2, 3), contact, ankles)
 
 

@@ -12,7 +12,7 @@ raises it when fast, which is what a live viewer wants: a still body stays still
 jump is not delayed much. On rotations it moves along the geodesic; measured segments
 pass through untouched (their orientation is the measurement).
 
-The filters run on numpy (the live poser's per-frame path, ``body.frame_kernels``); a
+The filters run on numpy (the live poser's per-frame path, ``rotations``' ``*_np`` kernels); a
 torch tensor in gives a tensor out, computed the same way.
 """
 
@@ -25,7 +25,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from inference.body.frame_kernels import matrix_to_quat, quat_to_matrix
+from inference.body.rotations import matrix_to_quat_np, quat_power_np, quat_to_matrix_np
 
 
 @dataclass(frozen=True)
@@ -107,18 +107,12 @@ class RotationOneEuro(_OneEuro):
             return torch.from_numpy(self(R.numpy(), keep))
         if self._last is None:
             return self._start(R, (R.shape[0],))
-        # the step in each rotation's own frame, q = (cos h, sin h u) with w >= 0: its log is
-        # 2 h u (rad), and exp(gain * log) is (cos(gain h), sin(gain h) u): so3_log and so3_exp
-        # with the axis never formed
-        q = matrix_to_quat(np.swapaxes(self._last, -1, -2) @ R)
+        # the step in each rotation's own frame, q (w >= 0), taken ``gain`` of the way
+        q = matrix_to_quat_np(np.swapaxes(self._last, -1, -2) @ R)
         v = q[:, 1:]
-        n = np.sqrt((v * v).sum(-1))
-        half = np.arctan2(n, q[:, 0])
-        gain = self._gain(2.0 * half / self.dt).astype(R.dtype, copy=False)
-        turn = np.empty_like(q)
-        turn[:, 0] = np.cos(gain * half)
-        turn[:, 1:] = (np.sin(gain * half) / np.where(n > 0, n, 1.0))[:, None] * v  # 0 where no step
-        out = self._last @ quat_to_matrix(turn)
+        angle = 2.0 * np.arctan2(np.sqrt((v * v).sum(-1)), q[:, 0])
+        gain = self._gain(angle / self.dt).astype(R.dtype, copy=False)
+        out = self._last @ quat_to_matrix_np(quat_power_np(q, gain))
         if passthrough is not None:
             out = np.where(passthrough[:, None, None], R, out)
         self._last = out

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from inference.body.body import Body
-from inference.body.frame_kernels import so3_log
+from inference.body.rotations import so3_log_np
 from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX
 
 SHANK_SITES = ("l_shank", "r_shank")
@@ -220,7 +220,7 @@ def foot_flat(contacts: np.ndarray) -> np.ndarray:
 
 def _world_rate(R_before: np.ndarray, R_after: np.ndarray, dt: float) -> np.ndarray:
     """World-frame angular velocity from two orientations ``dt`` apart."""
-    return so3_log((R_after @ R_before.T)[None])[0] / dt
+    return so3_log_np((R_after @ R_before.T)[None])[0] / dt
 
 
 __all__ = ["StrideScale", "StrideScaleConfig", "SHANK_SITES", "foot_flat"]
