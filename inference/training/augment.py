@@ -8,6 +8,7 @@ import math
 import torch
 from torch import Tensor
 
+from inference.body.rotations import matrix_about_axis
 from inference.body.skeleton import N_SEGMENTS
 from inference.features.layout import (
     SL_ACC,
@@ -35,14 +36,10 @@ def rotate_yaw(x: Tensor, angle: Tensor) -> Tensor:
     Heading is arbitrary in the data (it depends on where each capture faced), so the
     model should not learn it; this also multiplies the effective data.
     """
-    c = torch.cos(angle).to(x.dtype)[:, None, None]
-    s = torch.sin(angle).to(x.dtype)[:, None, None]
+    Rz = matrix_about_axis(torch.tensor([0.0, 0.0, 1.0], dtype=x.dtype), angle.to(x.dtype))[:, None, None, :2, :2]
     idx = torch.tensor(horizontal_pairs())
-    xi, yi = idx[:, 0], idx[:, 1]
     out = x.clone()
-    vx, vy = x[..., xi], x[..., yi]
-    out[..., xi] = c * vx - s * vy
-    out[..., yi] = s * vx + c * vy
+    out[..., idx] = (Rz @ x[..., idx][..., None])[..., 0]  # each (x, y) pair of a window, (B, N, P, 2)
     return out
 
 
@@ -57,16 +54,6 @@ def scale_features(x: Tensor, scale: Tensor) -> Tensor:
     for sl in (SL_ACC, SL_DP, SL_PZ):
         out[..., sl] = x[..., sl] * s
     return out
-
-
-def _rotations(axis: Tensor, angle: Tensor) -> Tensor:
-    """Rotation matrices (..., 3, 3) about unit ``axis`` (..., 3) by ``angle`` (...) (Rodrigues)."""
-    x, y, z = axis.unbind(-1)
-    o = torch.zeros_like(x)
-    K = torch.stack([torch.stack([o, -z, y], -1), torch.stack([z, o, -x], -1), torch.stack([-y, x, o], -1)], -2)
-    s, c = torch.sin(angle)[..., None, None], torch.cos(angle)[..., None, None]
-    eye = torch.eye(3, dtype=axis.dtype).expand(K.shape)
-    return eye + s * K + (1 - c) * (K @ K)
 
 
 def _shift(v: Tensor, lag: Tensor) -> Tensor:
@@ -111,10 +98,10 @@ def sensor_effects(x: Tensor, fx, gen: torch.Generator) -> Tensor:
         axis = torch.randn(B, S, 3, generator=gen)
         axis = axis / axis.norm(dim=-1, keepdim=True)
         ang = torch.rand(B, S, generator=gen) * math.radians(fx.mount_deg) * on
-        R = R @ _rotations(axis, ang)[:, None]
+        R = R @ matrix_about_axis(axis, ang)[:, None]
     if fx.heading_deg > 0:
         ang = (2 * torch.rand(B, S, generator=gen) - 1) * math.radians(fx.heading_deg) * on
-        Rz = _rotations(torch.tensor([0.0, 0.0, 1.0]).expand(B, S, 3), ang)[:, None]  # (B, 1, S, 3, 3)
+        Rz = matrix_about_axis(torch.tensor([0.0, 0.0, 1.0]).expand(B, S, 3), ang)[:, None]  # (B, 1, S, 3, 3)
         R = Rz @ R
         a = (Rz @ a[..., None])[..., 0]
     if fx.acc_gain > 0:

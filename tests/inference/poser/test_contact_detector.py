@@ -4,12 +4,11 @@ and the insoles are not."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 import torch
 
+from inference.body.conventions import rot_z
 from inference.evaluation.runner import SIX, synthetic_motion
 from inference.features.codec import features_from_motion
 from inference.features.layout import SL_CONTACT, observation_mask
@@ -121,8 +120,7 @@ def test_heading_frame_keeps_the_shanks_relative_yaw():
     from inference.body.rotations import matrix_to_rot6d, rot6d_to_matrix
 
     Rl = rot6d_to_matrix(x[:, :6])
-    c, s = math.cos(0.5), math.sin(0.5)
-    Rz = torch.tensor([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    Rz = torch.as_tensor(rot_z(0.5), dtype=torch.float32)
     y = x.clone()
     y[:, :6] = matrix_to_rot6d(Rz @ Rl)
     assert not torch.allclose(heading_frame_inputs(y), a, atol=1e-3)

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import torch
 
+from inference.body.conventions import rot_z
 from inference.body.rotations import matrix_to_rot6d, rot6d_to_matrix
 from inference.features.layout import SL_ACC, SL_CONTACT, SL_DP, SL_PZ, SL_ROT
 from inference.features.mirror import mirror_features, mirror_points
@@ -110,7 +111,7 @@ def test_rotate_yaw_is_a_consistent_rigid_turn():
     x = torch.as_tensor(synthetic_dataset(1, 61, seed=2).clips[0])[None]
     a = 0.9
     y = rotate_yaw(x, torch.tensor([a]))
-    Rz = torch.tensor([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    Rz = torch.as_tensor(rot_z(a), dtype=torch.float32)
     R = rot6d_to_matrix(x[..., SL_ROT].reshape(1, 61, 24, 6))
     assert torch.allclose(y[..., SL_ROT], matrix_to_rot6d(Rz @ R).reshape(1, 61, -1), atol=1e-5)
     acc = x[..., SL_ACC].reshape(1, 61, 13, 3)
