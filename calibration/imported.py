@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from inference.body.conventions import turn_xy
 from inference.body.rotations import matrix_about_axis, matrix_to_quat, quat_multiply
 from inference.body.skeleton import parse_sites
 
@@ -102,8 +103,7 @@ def calibrate_log(sites: Sequence[str], quat: np.ndarray, rate: np.ndarray, pres
         off = float(signed_angle_deg(np.asarray(shared), f))  # this sensor's frame turned from the others'
         corrected = method == "walk"
         if corrected:  # its own forward, turned as the knees turned the shared one
-            c, sn = np.cos(base), np.sin(base)
-            own[k] = [c * f[0] - sn * f[1], sn * f[0] + c * f[1]]
+            own[k] = turn_xy(f[:2], base)
         headings[s] = {"offset_deg": round(off, 1), "source": gait.source[k], "corrected": corrected}
         if abs(off) > WARN_DEG:
             what = "corrected" if corrected else "not corrected (--calibration standing; walk corrects it)"

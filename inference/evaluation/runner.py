@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from inference.body.body import Body, global_from_local, npose_rotations
-from inference.body.conventions import heading_of, rot_z
+from inference.body.conventions import heading_of, heading_vector, rot_z
 from inference.body.motion import Motion
 from inference.body.reach import reach_hands
 from inference.body.rotations import matrix_about_axis, matrix_to_rot6d, quat_to_matrix
@@ -396,7 +396,7 @@ def synthetic_motion(seconds: float = 4.0, fps: float = 60.0, height: float = 1.
         elbow = 0.3 + 0.2 * np.clip(sign * s, 0, None)
         L[:, SEGMENT_INDEX[f"{side}_forearm"]] = matrix_about_axis(z_axis, sign * elbow)
     rot = global_from_local(L)
-    heading = np.stack([np.cos(yaw), np.sin(yaw)], -1)
+    heading = heading_vector(yaw)[:, :2]
     xy = np.cumsum(heading * speed / fps, axis=0) - heading[0] * speed / fps
     root = np.zeros((T, 3))
     root[:, :2] = xy

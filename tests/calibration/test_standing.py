@@ -9,6 +9,7 @@ import pytest
 
 from calibration import CalibrationError
 from calibration.standing import calibrate_standing, forward_from_knees, forward_from_shanks, still_stand
+from inference.body.conventions import rot_z
 from inference.body.motion import Motion
 from inference.body.rotations import matrix_angle_between
 from inference.body.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX
@@ -51,8 +52,7 @@ def test_forward_comes_from_the_knees_and_the_bones_come_out_right():
     assert cal.valid.all()
     R_WB, a_W = cal.apply(sig.quat, acc=sig.specific_force)
     # our world is the subject's: the truth turned by -70 deg about Z
-    c, s = np.cos(np.deg2rad(-70.0)), np.sin(np.deg2rad(-70.0))
-    Rz = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    Rz = rot_z(np.deg2rad(-70.0))
     seg = [SITE_SEGMENT_INDEX[SITE_INDEX[x]] for x in SITES]
     err = np.degrees(matrix_angle_between(R_WB, Rz @ motion.rot[:, seg]))
     assert np.median(err) < 4.0, np.median(err, axis=0)

@@ -11,7 +11,8 @@ from calibration.core import CalibrationError
 from calibration.guided import GuidedCalibration
 from calibration.protocol import Protocol, WalkProtocol, synthesize_session, synthesize_walk_session
 from calibration.walk import WalkWindows, calibrate_walk
-from inference.body.rotations import matrix_angle_between, quat_to_matrix
+from inference.body.conventions import quat_z
+from inference.body.rotations import matrix_angle_between, quat_multiply, quat_to_matrix
 from inference.body.skeleton import SITE_INDEX, SITE_SEGMENT_INDEX
 from inference.signals.synthesis import NoiseModel
 from sim_devices.motions import generate
@@ -92,11 +93,7 @@ def test_guided_step_says_who_never_held_still(session):
     k = SITES.index("l_wrist")
     # the left wrist turns slowly and steadily the whole time: 60 deg/s about z
     t = np.arange(len(q)) / sig.fps
-    half = np.deg2rad(60.0) * t / 2
-    spin = np.stack([np.cos(half), 0 * half, 0 * half, np.sin(half)], -1)
-    w1, x1, y1, z1 = spin.T
-    w2, x2, y2, z2 = q[:, k].T
-    q[:, k] = np.stack([w1 * w2 - z1 * z2, w1 * x2 - z1 * y2, w1 * y2 + z1 * x2, w1 * z2 + z1 * w2], -1)
+    q[:, k] = quat_multiply(quat_z(np.deg2rad(60.0) * t), q[:, k])
     g = GuidedCalibration(SITES, "walk", timeout=3.5)
     for i in range(len(q)):
         g.push(i / sig.fps, q[i], sig.free_acc[i])

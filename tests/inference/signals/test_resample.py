@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from inference.body.conventions import heading_of
 from inference.body.rotations import axis_angle_to_quat, quat_to_matrix
 from inference.signals.resample import STEP, StreamingResampler, downsample, moving_average, to_grid
 
@@ -72,7 +73,7 @@ def test_to_grid_interpolates_and_marks_gaps():
     np.testing.assert_allclose(ag[valid], np.stack([tg, 2 * tg, -tg], -1)[valid], atol=1e-12)
     # slerp of a constant-rate rotation is exact
     R = quat_to_matrix(qg[valid])
-    ang = np.arctan2(R[:, 1, 0], R[:, 0, 0])
+    ang = heading_of(R[:, :2, 0])
     np.testing.assert_allclose(np.unwrap(ang), omega * tg[valid], atol=1e-9)
 
 
