@@ -66,12 +66,12 @@ def test_rvc_packet_by_hand_is_yaw_then_pitch_then_roll():
     packet = b"\xaa\xaa" + payload + bytes((sum(payload) & 0xFF,))
     s = rvc_to_sample(rvc.decode(packet), "bno")
     y, p, r = np.deg2rad([yaw, pitch, roll])
-    Rz = np.array([[math.cos(y), -math.sin(y), 0.0], [math.sin(y), math.cos(y), 0.0], [0.0, 0.0, 1.0]])
     Ry = np.array([[math.cos(p), 0.0, math.sin(p)], [0.0, 1.0, 0.0], [-math.sin(p), 0.0, math.cos(p)]])
     Rx = np.array([[1.0, 0.0, 0.0], [0.0, math.cos(r), -math.sin(r)], [0.0, math.sin(r), math.cos(r)]])
-    np.testing.assert_allclose(_matrix(s.quat), Rz @ Ry @ Rx, atol=1e-12)
+    R = conventions.rot_z(y) @ Ry @ Rx
+    np.testing.assert_allclose(_matrix(s.quat), R, atol=1e-12)
     # free acceleration = R acc - g, in the world frame
-    np.testing.assert_allclose(s.free_acc, Rz @ Ry @ Rx @ s.acc - [0.0, 0.0, _math.G], atol=1e-9)
+    np.testing.assert_allclose(s.free_acc, R @ s.acc - [0.0, 0.0, _math.G], atol=1e-9)
     assert np.allclose(_math.euler_zyx_from_quat(s.quat), (y, p, r))
 
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import drivers
+from drivers._math import quat_from_euler_zyx
 from drivers.base import Sample
 from drivers.hub import ClockModel, Hub, Interpolation
 
@@ -15,7 +16,7 @@ def _dev(name="x"):
 
 
 def _sample(t, dev_t, counter, yaw=0.0, lost=0):
-    q = np.array([np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)])
+    q = quat_from_euler_zyx(yaw, 0.0, 0.0)
     s = Sample(t, dev_t, "x", counter, q, np.array([0.0, 0, 1.0]), np.array([0, 0, 9.81]), np.zeros(3))
     if lost:
         s.extra["lost_before"] = lost

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import drivers
+from drivers._math import quat_from_euler_zyx
 from drivers.base import Sample
 from drivers.hub import LATE_PERSIST_S, LATE_QUIET_S, Hub, Interpolation
 
@@ -19,7 +20,7 @@ resample = pytest.importorskip("inference.signals.resample")
 
 
 def _sample(t: float) -> Sample:
-    q = np.array([np.cos(t / 2), 0, 0, np.sin(t / 2)])
+    q = quat_from_euler_zyx(t, 0.0, 0.0)
     return Sample(t, None, "x", int(t * 100) & 0xFF, q, np.zeros(3), np.array([0, 0, 9.81]), np.zeros(3))
 
 

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import drivers
+from drivers._math import quat_from_euler_zyx
 from drivers.base import Sample
 from drivers.hub import Hub, Interpolation
 
@@ -27,7 +28,7 @@ def _stream(hub: Hub, lost: set[int], n: int = 300) -> None:
             run += 1
             continue
         t = 1.0 + k / 100
-        q = np.array([np.cos(t / 2), 0, 0, np.sin(t / 2)])
+        q = quat_from_euler_zyx(t, 0.0, 0.0)
         s = Sample(t, None, "x", k & 0xFF, q, np.array([t, 0.0, 0.0]), np.array([0, 0, 9.81]), np.zeros(3))
         if run:
             s.extra["lost_before"] = run
