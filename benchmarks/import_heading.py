@@ -26,6 +26,7 @@ if str(ROOT) not in sys.path:
 
 from app.cli.importing import import_paths  # noqa: E402
 from app.recording import read_recording  # noqa: E402
+from inference.body.conventions import yaw_of  # noqa: E402
 from inference.signals.synthesis import NoiseModel, synthesize  # noqa: E402
 from sim_devices.xsens_export import stand_walk_stand, write_mtmanager_exports  # noqa: E402
 
@@ -34,7 +35,7 @@ IDS = {s: f"00B4{0x21E6 + k:04X}" for k, s in enumerate(SITES)}
 
 
 def yaw_deg(R: np.ndarray) -> np.ndarray:
-    return np.degrees(np.arctan2(R[..., 1, 0] - R[..., 0, 1], R[..., 0, 0] + R[..., 1, 1]))
+    return np.degrees(yaw_of(R))
 
 
 def simulated_walk_exports(folder: Path, seed: int, heading_deg: float = 60.0, mounting_deg: float = 20.0,

@@ -3,7 +3,6 @@ recording and reconstructed (the ``imucap import`` the CLI's docstring describes
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -227,10 +226,9 @@ def write_mvn_truth(motion: Motion, res: Imported, dest: str | Path) -> Path:
     world into the recording's (X the subject's forward at the standing start), on the
     recording's clock, counted from the end of the standing start."""
     from app.capture.simulate import save_truth
-    from inference.body.rotations import matrix_about_axis
+    from inference.body.conventions import heading_of, rot_z
 
-    fx, fy = res.forward_G[0], res.forward_G[1]
-    R = matrix_about_axis(np.array([0.0, 0.0, 1.0]), -math.atan2(fy, fx))
+    R = rot_z(-heading_of(np.asarray(res.forward_G)[:2]))
     t0 = motion.meta["first_index"] / motion.fps - res.grid_t0
     out = save_truth(dest, R @ motion.rot, motion.root @ R.T, motion.fps, t0, res.still_s - t0, motion.body.height,
                      motion.body.offsets, res.sites, "standing start")

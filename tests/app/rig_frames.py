@@ -12,6 +12,7 @@ import numpy as np
 
 from calibration import Calibration
 from drivers.hub import HubFrame
+from inference.body.conventions import rot_z as rz
 from inference.body.motion import Motion
 from inference.body.rotations import matrix_to_quat
 from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX
@@ -28,10 +29,6 @@ T0 = 200.0
 # the segment each site's device turns with: a controller is held in the fist
 DEVICE_SEGMENT = {"pelvis": "pelvis", "head": "head", "l_wrist": "l_hand", "r_wrist": "r_hand"}
 POINT = {"head": 0, "l_wrist": 1, "r_wrist": 2}
-
-
-def rz(a: float) -> np.ndarray:
-    return np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
 
 
 @dataclass

@@ -14,6 +14,7 @@ import drivers
 from app.capture.identify import MotionWatcher, watch_devices
 from app.cli.main import main
 from drivers.base import Sample
+from inference.body.conventions import quat_z
 from sim_devices.devices import make_sim_device, spinning_signals
 
 
@@ -104,7 +105,7 @@ def test_a_silent_device_counts_as_still():
     yaw = np.radians(300.0)
     for k in range(30):
         t = k * 0.01
-        q = np.array([np.cos(yaw * t / 2), 0.0, 0.0, np.sin(yaw * t / 2)])
+        q = quat_z(yaw * t)
         watcher.push("a", Sample(t, t, "a", quat=q))
     assert watcher.moving() == "a"
     watcher.push("b", Sample(2.0, 2.0, "b", quat=np.array([1.0, 0, 0, 0])))  # time goes on; "a" said nothing

@@ -17,6 +17,7 @@ import pytest
 
 from app.cli.main import main
 from app.recording import read_recording
+from inference.body.conventions import yaw_of
 from inference.body.rotations import matrix_about_axis, matrix_to_quat, quat_multiply
 from inference.signals.synthesis import NoiseModel, synthesize
 from sim_devices.xsens_export import stand_walk_stand, write_mtmanager_exports
@@ -28,7 +29,7 @@ OFF_DEG = 45.0
 
 
 def _yaw_deg(R: np.ndarray) -> np.ndarray:
-    return np.degrees(np.arctan2(R[..., 1, 0] - R[..., 0, 1], R[..., 0, 0] + R[..., 1, 1]))
+    return np.degrees(yaw_of(R))
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from app.evaluation.phases import classify_phases, phase_seconds, world_rates
-from inference.body.conventions import rot_z
+from inference.body.conventions import heading_of, rot_z
 from inference.body.rotations import matrix_about_axis
 from inference.body.skeleton import SEGMENT_INDEX, SITE_SEGMENT
 from sim_devices.motions import generate
@@ -23,7 +23,7 @@ def _walk_turn_stand(walk_s=6.0, turn_s=3.0, stand_s=4.0):
     stand = generate("stand", seconds=stand_s, seed=3, fps=FPS).rot
     u = np.linspace(0.0, 1.0, len(turn))
     yaw = np.pi * (3 * u**2 - 2 * u**3)  # smooth start and stop, 180 deg
-    heading = np.arctan2(walk[-1, 0, 1, 0], walk[-1, 0, 0, 0])
+    heading = heading_of(walk[-1, 0, :2, 0])
     turn = rot_z(heading + yaw)[:, None] @ turn
     stand = rot_z(np.full(len(stand), heading + np.pi))[:, None] @ stand
     R = np.concatenate([walk, turn, stand])

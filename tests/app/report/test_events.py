@@ -7,6 +7,7 @@ import pytest
 
 from app.report.events import MIN_STANCE_S, MIN_SWING_S, Stance, debounce, foot_events
 from app.report.strides import strides_of, summarize, symmetry_index
+from inference.body.conventions import rot_z
 
 FPS = 20.0
 
@@ -94,7 +95,7 @@ def test_turns_and_standing_are_left_out_and_counted():
     c, _, _ = walk_contacts(t)
     root, R = straight(t)
     yaw = np.where(t > 5.0, np.minimum((t - 5.0) * np.deg2rad(60.0), np.pi), 0.0)  # a 180 deg turn from 5 s
-    R = np.stack([np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]]) for a in yaw])
+    R = rot_z(yaw)
     s = summarize(strides_of(foot_events(t, c, "model"), t, root, R))
     assert s.excluded["turning"] >= 2
     for st in s.strides:  # the turn lasts from 5 to 8 s: a stride inside it turns, one outside walks

@@ -8,6 +8,7 @@ import pytest
 
 from app.streams import make_stream_sinks
 from app.streams.vrchat import HEAD_OFFSET, VrchatSink
+from inference.body.conventions import rot_z
 from inference.body.skeleton import SEGMENT_INDEX
 
 from .conftest import Barrier, run_pipeline
@@ -24,8 +25,7 @@ def unity_euler_to_matrix(x_deg: float, y_deg: float, z_deg: float) -> np.ndarra
     x, y, z = np.radians([x_deg, y_deg, z_deg])
     Rx = np.array([[1, 0, 0], [0, np.cos(x), -np.sin(x)], [0, np.sin(x), np.cos(x)]])
     Ry = np.array([[np.cos(y), 0, np.sin(y)], [0, 1, 0], [-np.sin(y), 0, np.cos(y)]])
-    Rz = np.array([[np.cos(z), -np.sin(z), 0], [np.sin(z), np.cos(z), 0], [0, 0, 1]])
-    return Ry @ Rx @ Rz
+    return Ry @ Rx @ rot_z(z)
 
 
 def angle_deg(Ra: np.ndarray, Rb: np.ndarray) -> float:
