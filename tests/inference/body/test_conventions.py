@@ -90,3 +90,16 @@ def test_headings(rng):
     assert np.all(np.isnan(C.forward_xy(Rotation.from_rotvec([0, -np.pi / 2, 0]).as_matrix())))
     np.testing.assert_allclose(C.wrap_angle(a + 4 * np.pi), a, atol=1e-12)
     assert abs(C.wrap_angle(C.mean_angle([np.pi - 0.1, -np.pi + 0.1]) + np.pi)) < 1e-12
+
+
+def test_turns_of_vectors_match_scipy(rng):
+    a = rng.uniform(-np.pi, np.pi, 12)
+    v = rng.normal(size=(12, 3))
+    ref = Rotation.from_rotvec(a[:, None] * [0.0, 0.0, 1.0]).apply(v)
+    np.testing.assert_allclose(C.turn_cs(v, np.cos(a), np.sin(a)), ref, atol=1e-14)
+    np.testing.assert_allclose(C.turn_xy(v[:, :2], a), ref[:, :2], atol=1e-14)
+    h = rng.normal(size=(12, 2))  # facing_x turns each direction onto +X, numpy or torch alike
+    face = rot.facing_x(h)
+    np.testing.assert_allclose(face, Rotation.from_rotvec(-C.heading_of(h)[:, None] * [0.0, 0.0, 1.0]).as_matrix(),
+                               atol=1e-14)
+    np.testing.assert_allclose((face @ np.c_[h, np.zeros(12)][..., None])[:, 1:, 0], 0.0, atol=1e-14)
