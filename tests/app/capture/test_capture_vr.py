@@ -16,8 +16,6 @@ hands, and `imucap export` writes a BVH of it. The figures: docs/vr_input.md.
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +28,6 @@ from tests.app.capture.live_capture import cli, finish, run_capture, session_end
 pytestmark = pytest.mark.slow
 IMU_SITES = ("l_shank", "r_shank")
 TRACKED = ("head", "l_wrist", "r_wrist")
-CLI = [sys.executable, "-m", "app.cli.main"]
 # measured 7.9 deg GA over the walk (docs/vr_input.md, the command there); ~1.5x for a busy machine
 GA_BOUND_DEG = 12.0
 TRACKED_SEGMENT_BOUND_DEG = 3.5  # head and forearms at replay's lag: measured 0.4-1.2 deg, 2.04 beside other jobs
@@ -69,10 +66,6 @@ protocol = "walk"
     return path
 
 
-def run(args: list[str], timeout: float) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([*CLI, *args], capture_output=True, text=True, timeout=timeout)
-
-
 LEAD_IN = 6.0  # s of N-pose before the protocol (test_capture_e2e.py says why this is enough)
 
 
@@ -90,6 +83,22 @@ def captured(tmp_path_factory, walk_20s):
     assert cap.returncode == 0, cap.stderr[-3000:]
     result = json.loads(cap.stdout.strip().splitlines()[-1])
     return tmp, setup, truth, rec, result, cap.stderr
+
+
+@pytest.fixture(scope="module")
+def offline(captured):
+    """The recording's replay against the truth, its plain replay and its BVH export, started
+    together once the capture is over (three processes on the two cores, where they ran as a
+    replay, then a replay beside the export); each test finishes its own."""
+    tmp, setup, truth, rec, result, log = captured
+    procs = {"scored": cli(["replay", str(rec), "--truth", str(truth), "--json", "--no-progress"]),
+             "replay": cli(["replay", str(rec), "--json", "--no-progress"]),
+             "export": cli(["export", str(rec), "--out", str(tmp / "rec.bvh")])}
+    yield procs
+    for p in procs.values():
+        if p.poll() is None:
+            p.kill()
+            p.wait(10)
 
 
 def test_the_rig_and_shanks_calibrate_and_are_recorded(captured):
@@ -110,9 +119,8 @@ def test_the_rig_and_shanks_calibrate_and_are_recorded(captured):
         assert present.mean() > 0.9 and acc_ok.mean() > 0.85, (s, present.mean(), acc_ok.mean())
 
 
-def test_the_capture_scores_against_the_rigs_truth(captured):
-    tmp, setup, truth, rec, result, log = captured
-    rep = run(["replay", str(rec), "--truth", str(truth), "--json", "--no-progress"], 300)
+def test_the_capture_scores_against_the_rigs_truth(captured, offline):
+    rep = finish(offline["scored"])
     assert rep.returncode == 0, rep.stderr[-2000:]
     replay = json.loads(rep.stdout)
     seg = replay["ga_segment_deg"]
@@ -152,12 +160,10 @@ def test_observed_segments_at_the_truths_own_clock(captured):
     assert all(errs[s] < bound for s, bound in bounds.items()), errs
 
 
-def test_replay_and_export(captured):
+def test_replay_and_export(captured, offline):
     tmp, setup, truth, rec, result, log = captured
     bvh = tmp / "rec.bvh"
-    replaying, exporting = cli(["replay", str(rec), "--json", "--no-progress"]), cli(["export", str(rec), "--out",
-                                                                                       str(bvh)])
-    rep, ex = finish(replaying), finish(exporting)  # side by side, one core each
+    rep, ex = finish(offline["replay"]), finish(offline["export"])
     assert rep.returncode == 0, rep.stderr[-2000:]
     assert json.loads(rep.stdout)["frames"] > 200
     assert ex.returncode == 0, ex.stderr[-2000:]
