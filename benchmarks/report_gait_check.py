@@ -1,7 +1,8 @@
 """The gait report's figures on synthesized walks against the truth's: does the report measure a walk?
 
     .venv/bin/python benchmarks/report_gait_check.py [--data DIR] [--clips 20] [--seconds 8]
-        [--sets "6 sites" "pelvis+shanks" shanks "lower body"] [--json] [--write-expected] [--keep DIR]
+        [--sets "6 sites" "pelvis+shanks" shanks "lower body" "shank detector" "shank gyro" "foot sensors"]
+        [--json] [--write-expected] [--keep DIR]
 
 ``--sets "foot sensors"`` measures the foot sensors as the event source alone: the events from the
 synthesized foot sensors' gyro (``app.report.feet.sensor_events``, typical noise with mounting
@@ -12,18 +13,32 @@ truth, so only the events differ from the truth's analysis (joint ranges are 0 b
 DIR/<set>/<clip>.npz and, when they are there already, reads them instead of reconstructing again: a
 change to the event detection or the stride rules is measured in seconds on the same reconstructions.
 
-Clips: the walking trials the comparison band keeps (``app.report.normal.trial_curves``: enough straight
-walking strides at 0.8-1.8 m/s), half from CMU's takes (never seen by the shipped model), half from
-Bandai's "walk" clips of every style (its training data); HDM05 has no walk among its takes here. Each
-clip (its first ``--seconds``) is reconstructed from synthesized signals of each sensor set as
-``imucap evaluate`` does (the live poser frame by frame, the sensor noise model), then analysed by the
-report (``app.report.analysis.analyse``: events from the model's contacts at 20 Hz) and compared with
-the same analysis of the truth (events from the heel and toe points' speed at 60 Hz).
+``--sets "shank detector"`` measures the report's events with both shanks worn and no foot sensor or
+insole (every set above) alone: the shank contact detector on the shanks' synthesized features, exactly
+the contact values the poser gives after its first 0.45 s, with the body from the truth; it needs no
+reconstruction (seconds for the 20 clips). ``"shank gyro"``: the same with the events from the shanks'
+gyro instead (``shank_gyro_analysis``), the standard alternative, to compare with.
 
-Per clip and set: the absolute difference of the mean stride time (both feet), of the mean stance %,
-of the cadence (%), of the walking speed (%) and of the mean per-stride range of hip, knee and ankle
-flexion (both sides); and the event timing (each truth strike / off to the nearest one found, ms).
-The table is the mean over the clips. ``--write-expected`` stores the means per set under
+Clips: the walking trials the comparison band keeps (``app.report.normal.trial_curves``: enough straight
+walking strides at 0.8-1.8 m/s) whose skeleton bends its toes (``moves_toes``: the truth's foot off is its
+toe point leaving the ground, which on a rigid foot comes with the heel's rise; CMU's cgspeed conversion
+has no toe joint), half from CMU's takes (never seen by the shipped model: ASF/AMC and the iClone
+conversion), half from Bandai's "walk" clips of every style (its training data); HDM05 has no walk among
+its takes here. The same rule for every dataset. Each clip (its first ``--seconds``) is reconstructed from
+noise-free synthesized signals of each sensor set by the live poser frame by frame, then analysed by the
+report (``app.report.analysis.analyse``: events from the model's contacts at 20 Hz) and compared with the
+same analysis of the truth (events from the heel and toe points' speed at 60 Hz).
+
+Stride time and stance are compared stride by stride (``app.report.strides.match_strides``): a report's
+stride is the truth's when both its strikes lie within half a stride of the truth stride's; per clip, the
+mean |difference| over the strides both call walking. The shares of the truth's walking strides found and
+missed and of the report's walking strides with no truth stride there (extra) are over all the clips'
+strides. The take means (the report's mean stride time and stance against the truth's, each over its own
+strides) are kept beside them (``take_*``): with 2-4 strides a take, one stride more or less moves them.
+Per clip and set also: the absolute difference of the cadence (%), of the walking speed (%) and of the
+mean per-stride range of hip, knee and ankle flexion (both sides); and the event timing (each truth strike
+/ off to the nearest one found, ms). The table is the mean over the clips, then split by dataset with the
+median strike and foot-off differences. ``--write-expected`` stores the means per set under
 ``synthesized`` in app/report/expected_error.json, where the report reads its expected errors.
 """
 
@@ -40,7 +55,8 @@ from app.report.analysis import analyse
 from app.report.confidence import EXPECTED_FILE
 from app.report.events import MIN_SWING_S, foot_events, truth_contact_values
 from app.report.feet import sensor_events
-from app.report.normal import trial_curves
+from app.report.normal import dataset_of, trial_curves
+from app.report.strides import match_strides
 from inference.evaluation.runner import SIX, evaluate_motions, face_forward, resolve_models
 from inference.loaders import find_motion_files, load_motion
 from inference.poser.models import CONTACT_THRESHOLD
@@ -56,12 +72,32 @@ SETS = {
 }
 RANGES = ("hip_flexion", "knee_flexion", "ankle_dorsiflexion")
 FEET = "foot sensors"
+DETECTOR = "shank detector"
+SHANK_GYRO = "shank gyro"
 LIMITS = {"stride_time_s": 0.020, "stance_pct": 3.0, "cadence_pct": 2.0, "knee_flexion_range_deg": 5.0}
 
 
+TOE_MOVES_DEG = 5.0  # the toes' rotation on the foot over a clip: less is a rigid foot
+
+
+def moves_toes(motion) -> bool:
+    """Whether the skeleton bends its toes (range of the toes' rotation relative to the foot over the clip,
+    left foot, above ``TOE_MOVES_DEG``). The truth's foot off is its toe point leaving the ground: on a
+    rigid foot (the cgspeed conversion of CMU has no toe joint) that point lifts with the heel, so the
+    truth's stance ends 0.1-0.2 s early (docs/report.md)."""
+    from inference.body.skeleton import SEGMENT_INDEX
+
+    rel = np.swapaxes(motion.rot[:, SEGMENT_INDEX["l_foot"]], -1, -2) @ motion.rot[:, SEGMENT_INDEX["l_toes"]]
+    cos = np.clip((np.trace(rel, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
+    ang = np.degrees(np.arccos(cos))
+    return bool(ang.max() - ang.min() > TOE_MOVES_DEG)
+
+
 def pick_clips(root: Path, n: int, seconds: float) -> list:
-    """n walking clips (cut to ``seconds``), half CMU, half Bandai, in file order."""
-    cmu = find_motion_files([root / "cmu" / "asf_amc", root / "cmu" / "bvh_cgspeed"])
+    """n walking clips (cut to ``seconds``), half CMU, half Bandai, in file order, among the clips whose
+    skeleton bends its toes (``moves_toes``; the rule for every dataset) and that the comparison band would
+    keep as a walk (``trial_curves``)."""
+    cmu = find_motion_files([root / "cmu" / "asf_amc", root / "cmu" / "bvh_cgspeed", root / "cmu" / "bvh_iclone"])
     bandai = [p for p in find_motion_files([root / "bandai"]) if "_walk_" in p.name]
     out: dict[str, list] = {"cmu": [], "bandai": []}
     for key, paths, want in (("cmu", cmu, n // 2), ("bandai", bandai, n - n // 2)):
@@ -73,7 +109,7 @@ def pick_clips(root: Path, n: int, seconds: float) -> list:
             except (ValueError, OSError):
                 continue
             m = m.slice(0, min(m.n_frames, int(seconds * m.fps) + 1))
-            if trial_curves(m) is not None:
+            if moves_toes(m) and trial_curves(m) is not None:
                 out[key].append(m)
     return out["cmu"] + out["bandai"]
 
@@ -92,6 +128,26 @@ def clip_figures(an) -> dict[str, float | None]:
     return fig
 
 
+def stride_errors(truth_an, found_an) -> dict:
+    """The same strides compared (``match_strides``): over the truth's walking strides, how many the
+    report found as walking strides (``found``), missed (``missed``: none found there, or found but left
+    out as another kind); the report's walking strides with no truth stride there (``extra``); and over
+    the pairs both call walking, the mean |difference| of stride time (s) and stance (points), and the
+    signed strike and foot-off differences (found - truth, s)."""
+    tw = truth_an.summary.walking()
+    pairs = match_strides(truth_an.summary.strides, found_an.summary.strides)
+    both = [(a, b) for a, b in pairs if a.kind == "walking" and b.kind == "walking"]
+    matched_found = {id(b) for _, b in pairs}
+    fw = found_an.summary.walking()
+    out = {"truth_strides": len(tw), "found": len(both), "missed": len(tw) - len(both),
+           "extra": sum(1 for b in fw if id(b) not in matched_found), "report_strides": len(fw)}
+    out["stride_time_s"] = _mean([abs(b.time_s - a.time_s) for a, b in both])
+    out["stance_pct"] = _mean([abs(b.stance_pct - a.stance_pct) for a, b in both])
+    out["strike_s"] = [b.start - a.start for a, b in both]
+    out["off_s"] = [b.off - a.off for a, b in both]
+    return out
+
+
 def timing_ms(truth, found) -> float | None:
     """Mean |t_truth - nearest t_found| over the truth's events (ms)."""
     diffs = []
@@ -101,6 +157,21 @@ def timing_ms(truth, found) -> float | None:
             if len(a) and len(b):
                 diffs += [float(np.min(np.abs(b - x))) for x in a]
     return 1000.0 * float(np.mean(diffs)) if diffs else None
+
+
+def stride_shares(clips: list[dict]) -> dict:
+    """Over all the clips' strides: the share of the truth's walking strides found and missed, the share
+    of the report's walking strides that are extra (no truth stride there), and the median strike and
+    foot-off differences (found - truth, ms) over the matched strides."""
+    n_t = sum(c["strides"]["truth_strides"] for c in clips)
+    n_f = sum(c["strides"]["report_strides"] for c in clips)
+    strike = [x for c in clips for x in c["strides"]["strike_s"]]
+    off = [x for c in clips for x in c["strides"]["off_s"]]
+    return {"found_share": sum(c["strides"]["found"] for c in clips) / n_t if n_t else None,
+            "missed_share": sum(c["strides"]["missed"] for c in clips) / n_t if n_t else None,
+            "extra_share": sum(c["strides"]["extra"] for c in clips) / n_f if n_f else None,
+            "strike_median_ms": 1000.0 * float(np.median(strike)) if strike else None,
+            "off_median_ms": 1000.0 * float(np.median(off)) if off else None}
 
 
 def truth_analysis(motion):
@@ -135,23 +206,71 @@ def feet_analysis(motion, seed: int = 0):
     return analyse(t, kin.rot, kin.root, None, None, FEET, events=events)
 
 
+def shank_gyro_analysis(motion, seed: int = 0):
+    """The truth's body with events from the shanks' synthesized gyro by the foot sensors' method
+    (``app.report.feet.sensor_events`` on the shank's sagittal rate: mid-swing peak, foot off the rate's
+    maximum before it, strike the first maximum after it; the shank-gyro events of Aminian et al. 2002 /
+    Salarian et al. 2004), typical noise with mounting rotations undone as for the foot sensors: a
+    candidate event source, measured against the detector's."""
+    m = face_forward(motion)
+    kin = kinematics(m, FPS_SIGNAL)
+    t = np.arange(len(kin.rot)) / kin.fps
+    sig = synthesize(m, NoiseModel.typical(), rng=seed, sites=("l_shank", "r_shank"))
+    n = min(len(t), len(sig.t))
+    events = {side: sensor_events(sig.t[:n], sig.gyro[:n, k], sig.meta["R_SB"][k], side=side)
+              for k, side in enumerate(("l", "r"))}
+    return analyse(t, kin.rot, kin.root, None, None, SHANK_GYRO, events=events)
+
+
+def detector_analysis(motion, seed: int = 0):
+    """The truth's body with the events the report gets from the shank contact detector when both shanks
+    are worn: the detector (``inference.poser.contact_detector``, the shipped weights) run on the shanks'
+    synthesized 20 Hz features as ``imucap evaluate`` makes them (same noise model and per-clip seed), as the
+    live poser runs it on its kept history; the first ``CONTEXT - 1`` frames, where the poser's history
+    still holds its standing start, give no event. The poser's own contact values are these to 1e-6."""
+    from inference.evaluation.runner import clip_input, clip_seed
+    from inference.poser.contact_detector import DETECTOR_THRESHOLD, SHANK_INDEX, DetectorKernel
+    from inference.poser.models import resolve_detector
+
+    global _DETECTOR
+    if _DETECTOR is None:
+        _DETECTOR = DetectorKernel(resolve_detector("default"))
+    det = _DETECTOR
+    inp = clip_input(motion, SETS["shanks"], False, None, clip_seed(seed, motion.name))
+    f = inp.features[:, SHANK_INDEX].astype(np.float32)
+    prob = np.full((len(f), 4), np.nan)
+    for i in range(det.context - 1, len(f)):
+        prob[i] = det(f[i - det.context + 1: i + 1])
+    m = face_forward(motion)
+    kin = kinematics(m, FPS_SIGNAL)
+    t = np.arange(len(kin.rot)) / kin.fps
+    tc = np.arange(len(f)) * STEP / FPS_SIGNAL
+    return analyse(t, kin.rot, kin.root, tc, prob, DETECTOR, threshold=DETECTOR_THRESHOLD)
+
+
+_DETECTOR = None
+
+
 def reconstructions(motions, model_spec: str, label: str, keep: Path | None) -> list[tuple[str, dict]]:
-    """(clip name, {t, rot, root, contact_prob}) per motion for one set, from ``keep`` when stored there."""
+    """(clip name, {t, rot, root, contact_prob}) per motion for one set, from ``keep`` where stored there
+    (only the clips not stored are reconstructed)."""
     folder = None if keep is None else keep / label.replace(" ", "_")
-    if folder is not None and all((folder / f"{m.name}.npz").is_file() for m in motions):
-        return [(m.name, dict(np.load(folder / f"{m.name}.npz"))) for m in motions]
-    model = resolve_models([model_spec])[model_spec]
-    _, results = evaluate_motions(motions, model, SETS[label], keep=True, desc=label)
-    assert abs(1.0 / FPS_MODEL - STEP / FPS_SIGNAL) < 1e-9
-    out = []
-    for r in results:
-        rec = r.recon
-        d = {"t": np.arange(len(rec.rot)) * STEP / FPS_SIGNAL, "rot": rec.rot, "root": rec.root,
-             "contact_prob": rec.contact_prob}
-        if folder is not None:
-            folder.mkdir(parents=True, exist_ok=True)
-            np.savez_compressed(folder / f"{r.name}.npz", **d)
-        out.append((r.name, d))
+    stored = {} if folder is None else {m.name: dict(np.load(folder / f"{m.name}.npz")) for m in motions
+                                        if (folder / f"{m.name}.npz").is_file()}
+    todo = [m for m in motions if m.name not in stored]
+    if todo:
+        model = resolve_models([model_spec])[model_spec]
+        _, results = evaluate_motions(todo, model, SETS[label], keep=True, desc=label)
+        assert abs(1.0 / FPS_MODEL - STEP / FPS_SIGNAL) < 1e-9
+        for r in results:
+            rec = r.recon
+            d = {"t": np.arange(len(rec.rot)) * STEP / FPS_SIGNAL, "rot": rec.rot, "root": rec.root,
+                 "contact_prob": rec.contact_prob}
+            if folder is not None:
+                folder.mkdir(parents=True, exist_ok=True)
+                np.savez_compressed(folder / f"{r.name}.npz", **d)
+            stored[r.name] = d
+    out = [(m.name, stored[m.name]) for m in motions]
     return out
 
 
@@ -165,6 +284,10 @@ def run(motions, sets: list[str], model_spec: str = "diffusion", done=None, keep
         clips = []
         if label == FEET:
             found = [(m.name, feet_analysis(m)) for m in motions]
+        elif label == DETECTOR:
+            found = [(m.name, detector_analysis(m)) for m in motions]
+        elif label == SHANK_GYRO:
+            found = [(m.name, shank_gyro_analysis(m)) for m in motions]
         else:
             found = [(name, analyse(d["t"], d["rot"], d["root"], None, None, "model", events=foot_events(
                 d["t"], d["contact_prob"], "model", threshold=threshold, min_swing_s=min_swing_s)))
@@ -172,13 +295,20 @@ def run(motions, sets: list[str], model_spec: str = "diffusion", done=None, keep
         for name, an in found:
             tr = truths[name]
             ft, ff = clip_figures(tr), clip_figures(an)
-            clips.append({"clip": name, "truth": ft, "found": ff, "errors": errors(ft, ff),
+            err = errors(ft, ff)
+            matched = stride_errors(tr, an)
+            err = {"stride_time_s": matched["stride_time_s"], "stance_pct": matched["stance_pct"],
+                   **{k: v for k, v in err.items() if k not in ("stride_time_s", "stance_pct")},
+                   "take_stride_time_s": err["stride_time_s"], "take_stance_pct": err["stance_pct"]}
+            clips.append({"clip": name, "truth": ft, "found": ff, "errors": err, "strides": matched,
                           "timing_ms": timing_ms(tr.events, an.events)})
         keys = clips[0]["errors"].keys() if clips else []
         mean = {k: _mean([c["errors"][k] for c in clips]) for k in keys}
         mean["timing_ms"] = _mean([c["timing_ms"] for c in clips])
+        mean.update(stride_shares(clips))
         passed = {k: (mean[k] is not None and mean[k] <= lim) for k, lim in LIMITS.items()}
-        out[label] = {"sites": list(SETS.get(label, ("l_foot", "r_foot"))), "errors": mean, "passed": passed,
+        sites = SETS.get(label, ("l_foot", "r_foot") if label == FEET else ("l_shank", "r_shank"))
+        out[label] = {"sites": list(sites), "errors": mean, "passed": passed,
                       "clips": clips}
         if done is not None:
             done(out)
@@ -193,7 +323,7 @@ def write_expected(result: dict, model: str, n_clips: int, path: Path = EXPECTED
                   f"benchmarks/report_gait_check.py, model {model}. *_pct of cadence and speed are relative (%)."),
         "sets": {k: {"sites": v["sites"], "errors": {e: (None if x is None else round(x, 4))
                                                      for e, x in v["errors"].items()}} for k, v in result.items()
-                 if k != FEET}}
+                 if k not in (FEET, DETECTOR, SHANK_GYRO)}}
     path.write_text(json.dumps(d, indent=1) + "\n")
 
 
@@ -203,7 +333,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--clips", type=int, default=20)
     ap.add_argument("--seconds", type=float, default=8.0)
     ap.add_argument("--sets", nargs="+", default=["pelvis+shanks", "shanks", "6 sites", "lower body"],
-                    choices=[*SETS, FEET])
+                    choices=[*SETS, FEET, DETECTOR, SHANK_GYRO])
     ap.add_argument("--model", default="diffusion")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--out", default=None, help="write the whole result (per clip) as JSON here")
@@ -228,15 +358,32 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         print(json.dumps({k: {"errors": v["errors"], "passed": v["passed"]} for k, v in res.items()}))
     else:
+        g = lambda x, s=1.0, nd=1: "n/a" if x is None else f"{x * s:.{nd}f}"  # noqa: E731
         print("| set | stride time (ms) | stance (points) | cadence (%) | speed (%) | knee range (deg) | "
-              "hip range (deg) | ankle range (deg) | event timing (ms) |")
-        print("|---|---|---|---|---|---|---|---|---|")
+              "hip range (deg) | ankle range (deg) | strides found / missed / extra (%) | "
+              "take means: stride time (ms), stance (points) |")
+        print("|---|---|---|---|---|---|---|---|---|---|")
         for k, v in res.items():
             e = v["errors"]
-            g = lambda x, s=1.0, nd=1: "n/a" if x is None else f"{x * s:.{nd}f}"  # noqa: E731
             print(f"| {k} | {g(e['stride_time_s'], 1000)} | {g(e['stance_pct'])} | {g(e['cadence_pct'], nd=2)} | "
                   f"{g(e['speed_pct'])} | {g(e['knee_flexion_range_deg'])} | {g(e['hip_flexion_range_deg'])} | "
-                  f"{g(e['ankle_dorsiflexion_range_deg'])} | {g(e['timing_ms'])} |")
+                  f"{g(e['ankle_dorsiflexion_range_deg'])} | {g(e['found_share'], 100, 0)} / "
+                  f"{g(e['missed_share'], 100, 0)} / {g(e['extra_share'], 100, 0)} | "
+                  f"{g(e['take_stride_time_s'], 1000)}, {g(e['take_stance_pct'])} |")
+        print("\n| set | clips | stride time (ms) | stance (points) | cadence (%) | strides found / missed / extra (%) "
+              "| strike, foot off: found - truth (median ms) |")
+        print("|---|---|---|---|---|---|---|")
+        for k, v in res.items():
+            for src in ("bandai", "cmu", "hdm05"):
+                cs = [c for c in v["clips"] if dataset_of(c["clip"]) == src]
+                if not cs:
+                    continue
+                e = {x: _mean([c["errors"][x] for c in cs]) for x in ("stride_time_s", "stance_pct", "cadence_pct")}
+                e.update(stride_shares(cs))
+                print(f"| {k} | {src} ({len(cs)}) | {g(e['stride_time_s'], 1000)} | {g(e['stance_pct'])} | "
+                      f"{g(e['cadence_pct'], nd=2)} | {g(e['found_share'], 100, 0)} / {g(e['missed_share'], 100, 0)}"
+                      f" / {g(e['extra_share'], 100, 0)} | {g(e['strike_median_ms'], nd=0)}, "
+                      f"{g(e['off_median_ms'], nd=0)} |")
     return 0
 
 

@@ -110,6 +110,30 @@ def strides_of(events: dict[str, FootEvents], t: np.ndarray, root: np.ndarray, p
     return out
 
 
+def match_strides(reference: list[Stride], found: list[Stride]) -> list[tuple[Stride, Stride]]:
+    """The same strides in two analyses of one walk (a truth's and a report's, or two event sources):
+    one-to-one (reference, found) pairs of the same foot whose strikes, at the start and at the end, each
+    lie within half the reference stride's time of the reference's; the closest pairs (summed strike
+    differences) first. Strides of every kind: the caller picks which count."""
+    cands = []
+    for i, a in enumerate(reference):
+        for j, b in enumerate(found):
+            if a.side != b.side:
+                continue
+            d0, d1 = abs(b.start - a.start), abs(b.end - a.end)
+            if d0 < 0.5 * a.time_s and d1 < 0.5 * a.time_s:
+                cands.append((d0 + d1, i, j))
+    used_r: set[int] = set()
+    used_f: set[int] = set()
+    pairs = []
+    for _, i, j in sorted(cands):
+        if i not in used_r and j not in used_f:
+            used_r.add(i)
+            used_f.add(j)
+            pairs.append((reference[i], found[j]))
+    return pairs
+
+
 def mean_sd(values) -> dict[str, float | None]:
     v = np.asarray([x for x in values if x is not None and np.isfinite(x)], dtype=np.float64)
     if len(v) == 0:
