@@ -136,10 +136,13 @@ def turn_cs(v: np.ndarray, c, s) -> np.ndarray:
     per-frame code that holds the cosine and sine already (the live poser's heading frames,
     float32) and would pay for a rotation object or a float64 round trip."""
     x, y = v[..., 0], v[..., 1]
-    parts = [c * x - s * y, s * x + c * y]
+    tx = c * x - s * y
+    out = np.empty((*tx.shape, v.shape[-1]), dtype=tx.dtype)
+    out[..., 0] = tx
+    out[..., 1] = s * x + c * y
     if v.shape[-1] == 3:
-        parts.append(np.broadcast_to(v[..., 2], parts[0].shape))
-    return np.stack(parts, axis=-1)
+        out[..., 2] = v[..., 2]
+    return out
 
 
 def wrap_angle(a) -> np.ndarray:

@@ -634,12 +634,18 @@ def _norm_np(v: np.ndarray) -> np.ndarray:
     return np.sqrt((v * v).sum(-1, keepdims=True))
 
 
-def rot6d_to_matrix_np(d6: np.ndarray) -> np.ndarray:
-    """``rot6d_to_matrix`` of numpy (..., 6)."""
+def rot6d_columns_np(d6: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The first two columns of ``rot6d_to_matrix_np``, for callers that need no more (the
+    6D of a turned rotation is its turned columns)."""
     a1, a2 = d6[..., 0:3], d6[..., 3:6]
     b1 = a1 / _norm_np(a1)
     b2 = a2 - (b1 * a2).sum(-1, keepdims=True) * b1
-    b2 = b2 / _norm_np(b2)
+    return b1, b2 / _norm_np(b2)
+
+
+def rot6d_to_matrix_np(d6: np.ndarray) -> np.ndarray:
+    """``rot6d_to_matrix`` of numpy (..., 6)."""
+    b1, b2 = rot6d_columns_np(d6)
     out = np.empty((*d6.shape[:-1], 3, 3), dtype=b1.dtype)
     out[..., 0] = b1
     out[..., 1] = b2
@@ -770,5 +776,5 @@ __all__ = [
     "quat_to_matrix", "quat_to_rot6d", "random_quat", "rot6d_to_axis_angle", "rot6d_to_euler",
     "rot6d_to_matrix", "rot6d_to_quat", "skew", "so3_exp", "so3_log", "triad",
     "facing_x", "matrix_about_axis_np", "matrix_to_quat_np", "matrix_to_rot6d_np", "quat_to_axis_angle_np",
-    "quat_power_np", "quat_to_matrix_np", "rot6d_to_matrix_np", "so3_log_np",
+    "quat_power_np", "quat_to_matrix_np", "rot6d_columns_np", "rot6d_to_matrix_np", "so3_log_np",
 ]

@@ -36,7 +36,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from inference.body.conventions import turn_cs
-from inference.body.rotations import facing_x, matrix_to_rot6d, rot6d_to_matrix, rot6d_to_matrix_np
+from inference.body.rotations import facing_x, matrix_to_rot6d, rot6d_columns_np, rot6d_to_matrix
 from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX
 from inference.features.layout import SL_ACC, SL_DP, SL_ROT
 from inference.features.time_reversal import is_forward_walk, reverse_features
@@ -188,9 +188,8 @@ def _heading_inputs_np(p: np.ndarray, windows: np.ndarray) -> tuple[np.ndarray, 
     (T, 9), float32) on numpy: (n, C * 9), and each window's cos, sin of its last frame's yaw.
     The 6D of ``R_z(-yaw) @ R`` is the turned first two columns of R, so the turn (written
     out about z) is applied to those and to the acceleration."""
-    R = rot6d_to_matrix_np(p[:, :6])
-    b1 = R[..., 0]
-    v = np.stack([b1, R[..., 1], p[:, 6:9]], axis=1)[windows]  # (n, C, 3 vectors, xyz)
+    b1, b2 = rot6d_columns_np(p[:, :6])
+    v = np.stack([b1, b2, p[:, 6:9]], axis=1)[windows]  # (n, C, 3 vectors, xyz)
     yaw = np.arctan2(b1[windows[:, -1], 1], b1[windows[:, -1], 0])
     c, s = np.cos(yaw), np.sin(yaw)
     out = turn_cs(v, c[:, None, None], -s[:, None, None])  # R_z(-yaw)
