@@ -22,6 +22,8 @@ a body-to-world quaternion chains as ``q_WS = q_WB * q_BS``.
 Numpy-only code (calibration, simulation, export, validation) uses
 ``inference.body.conventions`` first: yaw/heading, turns about Z and the wxyz <-> scipy
 crossing, over scipy. This module is for what may meet a tensor, and for 6D and Euler.
+The ``*_np`` functions near the end are some of these operations once more for one frame's
+small numpy arrays (the live poser's step), where the shim's per-call cost would dominate.
 """
 
 from __future__ import annotations
