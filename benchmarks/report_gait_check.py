@@ -225,8 +225,9 @@ def shank_gyro_analysis(motion, seed: int = 0):
 def detector_analysis(motion, seed: int = 0):
     """The truth's body with the events the report gets from the shank contact detector when both shanks
     are worn: the detector (``inference.poser.contact_detector``, the shipped weights) run on the shanks'
-    synthesized 20 Hz features as ``imucap evaluate`` makes them (same noise model and per-clip seed), as the
-    live poser runs it on its kept history; the first ``CONTEXT - 1`` frames, where the poser's history
+    synthesized 20 Hz features as the model sets' reconstructions get them (noise-free, the same per-clip
+    seed; with the evaluation's calibrated sensor noise the figures move by under 0.3 ms and 0.1 points), as
+    the live poser runs it on its kept history; the first ``CONTEXT - 1`` frames, where the poser's history
     still holds its standing start, give no event. The poser's own contact values are these to 1e-6."""
     from inference.evaluation.runner import clip_input, clip_seed
     from inference.poser.contact_detector import DETECTOR_THRESHOLD, SHANK_INDEX, DetectorKernel
