@@ -14,6 +14,7 @@ import pytest
 
 from app.capture.twins import free_udp_port
 from drivers import make_device
+from drivers._math import quat_from_euler_zyx
 from drivers.hub import Hub, Interpolation
 from drivers.vmc import protocol as vmc
 from inference.signals.resample import slerp_unit
@@ -27,7 +28,7 @@ def poses(t: float) -> list[vmc.DevicePose]:
     w = V_CIRCLE / R_CIRCLE
     hand = np.array([0.3 + R_CIRCLE * math.cos(w * t), -0.3 + R_CIRCLE * math.sin(w * t), 1.0])
     yaw = YAW_RATE * t
-    head_q = np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
+    head_q = quat_from_euler_zyx(yaw, 0.0, 0.0)
     return [vmc.DevicePose("hmd", "HMD", np.array([0.0, 0.0, 1.64]), head_q),
             vmc.DevicePose("con", "CON-L", np.array([0.1, 0.25, 0.9]), np.array([1.0, 0, 0, 0])),
             vmc.DevicePose("con", "CON-R", hand, np.array([1.0, 0, 0, 0]))]
