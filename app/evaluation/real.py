@@ -116,7 +116,7 @@ def recording_phases(rec: Recording) -> tuple[np.ndarray, np.ndarray]:
     return t, classify_phases(R, fps)
 
 
-def _phase_at(t_raw: np.ndarray, labels: np.ndarray, t: np.ndarray) -> np.ndarray:
+def phase_at(t_raw: np.ndarray, labels: np.ndarray, t: np.ndarray) -> np.ndarray:
     """The label of the raw frame nearest each time in ``t``."""
     hi = np.clip(np.searchsorted(t_raw, t), 0, len(t_raw) - 1)
     lo = np.maximum(hi - 1, 0)
@@ -173,7 +173,7 @@ def score_recording(rec: Recording, model: str = "diffusion", seed: int = 0,
         poses = replay_recording(rec, built.fresh(), sensors=sites, causal=built.causal).poses
         left = [s for s in rec.sites if s not in sites]
         out[label] = {"sensors": list(sites), **held_out_errors(poses, full, left),
-                      **split_errors(poses, full, left, lambda t: _phase_at(t_raw, labels, t))}
+                      **split_errors(poses, full, left, lambda t: phase_at(t_raw, labels, t))}
     return out
 
 
