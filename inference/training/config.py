@@ -196,13 +196,18 @@ class TrainConfig:
     sensor_effects: SensorEffects = field(default_factory=SensorEffects)
     # diffusion only: distillation. A model file whose live answer is the target instead of
     # the truth: its own chain (``teacher_steps``, mean start, replacement of the known
-    # entries, one window, no mirror) on each training window of ``window`` frames; the
+    # entries, one window, no mirror unless ``teacher_mirror_chains``) on each training window of ``window`` frames; the
     # student answers in one call at the top level from the newest ``model.window`` frames of
     # it. One call trained on the truth learns the mean of what the sensors allow (a stand
     # between standing and sitting comes out bent); trained on the chain's answer it learns
     # the chain's choice (docs/model.md, "One step")
     teacher: str | None = None
     teacher_steps: str = "10D:3"
+    # the target is the teacher's answer averaged over the window and its mirror image, each
+    # a whole chain (as ``Poser(mirror_chains=True)`` answers live): a student that learns it
+    # is near mirror-equivariant itself and can answer live without averaging, one window a
+    # pose instead of two
+    teacher_mirror_chains: bool = False
 
     def to_dict(self) -> dict:
         d = asdict(self)

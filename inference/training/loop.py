@@ -289,8 +289,15 @@ def _distilled(model: nn.Module, ctx: StepContext, x: Tensor, xn: Tensor, xm: Te
     m = torch.as_tensor(random_observation_mask(rng, B, N, cfg.mask))
     start = torch.where(m, xm, torch.zeros(()))
     with torch.no_grad():
-        answer = inpaint(ctx.teacher, start, m, height, parse_steps(cfg.teacher_steps), schedule=ctx.schedule,
-                         mode="replace-ddim", mask_input=True, start="mean")
+        if cfg.teacher_mirror_chains:
+            op = MirrorAveraged(ctx.teacher, ctx.mean, ctx.std)
+            both = inpaint(ctx.teacher, torch.cat([start, op.mirror(start)]), torch.cat([m, m[..., op.idx]]),
+                           torch.cat([height, height]), parse_steps(cfg.teacher_steps), schedule=ctx.schedule,
+                           mode="replace-ddim", mask_input=True, start="mean")
+            answer = 0.5 * (both[:B] + op.mirror(both[B:]))
+        else:
+            answer = inpaint(ctx.teacher, start, m, height, parse_steps(cfg.teacher_steps), schedule=ctx.schedule,
+                             mode="replace-ddim", mask_input=True, start="mean")
     target = torch.where(m, xn, answer)
     keep = slice(N - cfg.model.window, N)
     t = torch.full((B,), ctx.schedule.T, dtype=torch.long)

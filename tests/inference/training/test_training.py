@@ -698,3 +698,40 @@ def test_distillation_targets_the_teachers_chain_over_the_students_window(tmp_pa
                infer_steps="1"), tmp_path / "init", progress=False, init_from=teacher_file)
     started = torch.load(tmp_path / "init" / "last.pt", weights_only=False)["model"]
     assert torch.equal(started["pos"], with_window(teacher, 21).model.state_dict()["pos"])
+
+
+def test_distillation_from_mirror_chains_targets_both_chains_averaged(tmp_path):
+    """With ``teacher_mirror_chains`` the target is the teacher's chain averaged with the chain
+    of the window's mirror image, each started from the data mean (as ``Poser(mirror_chains=True)``
+    answers live): at one step, a student that is exactly that scores zero; the plain teacher,
+    and the teacher averaged per call (whose mirror half starts from the mean's mirror image),
+    do not."""
+    from inference.features.mirror import MirrorAveraged
+    from inference.model.diffusion import Schedule
+    from inference.training.loop import load_teacher
+
+    masked = {**TINY, "mask_input": True, "dropout": 0.0}
+    train(_cfg(steps=2, cond_prob=1.0, model=masked), tmp_path / "base", progress=False)
+    teacher_file = tmp_path / "base" / "model.pt"
+    teacher = load_model(teacher_file)
+    batch = synthetic_dataset(3, 70, seed=0).sample(np.random.default_rng(0), 4, 61)
+    mean, std = torch.as_tensor(teacher.norm_mean), torch.as_tensor(teacher.norm_std)
+    cfg = _cfg(cond_prob=1.0, model=masked, teacher=str(teacher_file), teacher_steps="1", teacher_mirror_chains=True,
+               augment_yaw=False, augment_mirror=0.0)
+    ctx = StepContext(cfg=cfg, mean=mean, std=std, schedule=Schedule.cosine(),
+                      teacher=load_teacher(cfg, teacher.norm_mean, teacher.norm_std))
+    op = MirrorAveraged(teacher.model, mean, std)
+
+    class BothChains(torch.nn.Module):
+        def forward(self, z, t, h, m):
+            mm = m[..., op.idx]
+            y = teacher.model(torch.cat([z, torch.where(mm, op.mirror(z), torch.zeros(()))]), torch.cat([t, t]),
+                              torch.cat([h, h]), torch.cat([m, mm]))
+            return 0.5 * (y[:len(z)] + op.mirror(y[len(z):]))
+
+    def simple(student) -> float:
+        return batch_loss(student, batch, ctx, np.random.default_rng(1), torch.Generator().manual_seed(1))[1]["simple"]
+
+    assert simple(BothChains()) < 1e-10
+    assert simple(teacher.model) > 1e-6
+    assert simple(op) > 1e-6
