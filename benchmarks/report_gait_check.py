@@ -320,7 +320,8 @@ def write_expected(result: dict, model: str, n_clips: int, path: Path = EXPECTED
     d = json.loads(path.read_text())
     d["synthesized"] = {
         "about": (f"Mean over {n_clips} synthesized walks (half CMU, half Bandai) of the absolute difference "
-                  "between the report's figure from the reconstruction and from the truth; "
+                  "between the report's figure from the reconstruction and from the truth (stride time and stance "
+                  "stride by stride over the strides both found, take_*: the take means); "
                   f"benchmarks/report_gait_check.py, model {model}. *_pct of cadence and speed are relative (%)."),
         "sets": {k: {"sites": v["sites"], "errors": {e: (None if x is None else round(x, 4))
                                                      for e, x in v["errors"].items()}} for k, v in result.items()
