@@ -112,12 +112,18 @@ def test_bench_times_the_default_beside_the_settings_it_replaced(capsys):
     ref = res["reference"]
     assert ref["interleaved"] and ref["frames"] == 3
     assert ref["default"]["passes_per_pose"] == 2 and ref["default"]["steps"] == [1000]
-    # the replaced settings: 61 frames, 1000 / 400 / 0, the same mirror averaging, the live runtime
+    # the replaced settings: 61 frames, 1000 / 400 / 0, whole-chain mirror averaging, the live runtime
     assert ref["reference"]["window"] == cli_bench.REFERENCE_WINDOW == 61
     assert ref["reference"]["steps"] == [1000, 400, 0] and ref["reference"]["passes_per_pose"] == 6
-    assert ref["reference"]["runtime"] == ref["default"]["runtime"]
+    assert ref["reference"]["mirror_chains"] and ref["reference"]["runtime"] == ref["default"]["runtime"]
     for k in ("ratio_p50", "ratio_p99"):
         assert ref[k] > 0
+    # a default that answers without averaging is still timed against the averaged chains
+    main(["bench", "--json", "--random-weights", "--frames", "3", "--warmup", "1", "--threads", "1",
+          "--steps", "1", "--no-mirror", "--no-paper", "--no-variants", "--no-confidence"])
+    ref = json.loads(capsys.readouterr().out)["reference"]
+    assert ref["default"]["passes_per_pose"] == 1 and not ref["default"]["mirror"]
+    assert ref["reference"]["passes_per_pose"] == 6 and ref["reference"]["mirror_chains"]
 
 
 def test_the_reference_of_a_short_window_file_is_its_whole_trained_window(tmp_path):
