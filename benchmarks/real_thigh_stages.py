@@ -84,7 +84,6 @@ def features_and_truth(rec, built):
 
 def stages(rec, built, lags: int) -> dict:
     from app.evaluation.offset import constant_and_dynamic, mean_rotation
-
     from app.evaluation.real import phase_at, recording_phases
 
     F, M, truth, as_replayed, t = features_and_truth(rec, built)
@@ -137,9 +136,12 @@ def stages(rec, built, lags: int) -> dict:
     if labels[-1] == "standing":  # the log ends standing: each segment's heading and lean there
         n = len(labels) - int(np.flatnonzero(labels != "standing")[-1]) - 1
         stand = {"seconds": round(n / 20.0, 2)}
+
+        def yaw_pitch(R: np.ndarray) -> np.ndarray:
+            return np.round(Rotation.from_matrix(R[-n:]).as_euler("ZYX", degrees=True).mean(0)[:2], 1)
+
         for s in SENSORS + THIGHS:
             i = SEGMENT_INDEX[s]
-            yaw_pitch = lambda R: np.round(Rotation.from_matrix(R[-n:]).as_euler("ZYX", degrees=True).mean(0)[:2], 1)
             stand[s] = {"sensor_yaw_pitch": yaw_pitch(truth[:, i]).tolist(),
                         "model_yaw_pitch": yaw_pitch(as_replayed[:, i]).tolist(),
                         "deg": round(float(angle_deg(as_replayed[-n:, i], truth[-n:, i]).mean()), 1)}
