@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import tempfile
 from pathlib import Path
 
@@ -155,6 +154,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--lags", type=int, default=6, help="frames back in the window to score (default 6)")
     ap.add_argument("--json", type=Path, default=None)
     a = ap.parse_args(argv)
+    import torch
+
+    # one thread, as the CLI's replays: torch's default threads crawl beside any other job
+    torch.set_num_threads(1)
     from app.cli.importing import import_paths
     from app.evaluation.real import real_logs
     from app.export.formats import body_for_recording
@@ -180,5 +183,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
     raise SystemExit(main())
