@@ -28,7 +28,8 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from inference.body.rotations import rot6d_to_matrix
+from inference.body.conventions import rot_z, yaw_of
+from inference.body.rotations import matrix_angle_between, rot6d_to_matrix
 from inference.body.skeleton import SEGMENT_INDEX
 from inference.features.layout import SL_ROT
 from inference.poser.poser import reconstruct_offline
@@ -38,17 +39,13 @@ THIGHS = ("l_thigh", "r_thigh")
 SKIP = 20  # frames: the calibration's standing start
 
 
-def angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Geodesic angle between rotation matrices, (...,)."""
-    rel = np.einsum("...ji,...jk->...ik", a, b)
-    return np.degrees(np.linalg.norm(Rotation.from_matrix(rel.reshape(-1, 3, 3)).as_rotvec(), axis=-1)).reshape(
-        rel.shape[:-2])
+def deg_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.degrees(np.asarray(matrix_angle_between(a, b)))
 
 
 def forward_swing_deg(seg: np.ndarray, pelvis: np.ndarray) -> np.ndarray:
     """(T,) the long axis's lean forward in the pelvis's heading frame (sagittal swing)."""
-    yaw = np.arctan2(pelvis[:, 1, 0], pelvis[:, 0, 0])
-    turn = Rotation.from_euler("z", yaw[:, None]).as_matrix()
+    turn = rot_z(yaw_of(pelvis))
     z = np.einsum("nji,nj->ni", turn, seg[:, :, 2])
     return np.degrees(np.arctan2(z[:, 0], z[:, 2]))
 
@@ -90,7 +87,7 @@ def stages(rec, built, lags: int) -> dict:
     out: dict = {"frames": T, "output": {}, "window": {}, "sagittal": {}, "constant": {}, "last_stand": None}
 
     def score(rot: np.ndarray) -> dict[str, float]:
-        return {s: round(float(angle_deg(rot[SKIP:T, SEGMENT_INDEX[s]], truth[SKIP:, SEGMENT_INDEX[s]]).mean()), 2)
+        return {s: round(float(deg_between(rot[SKIP:T, SEGMENT_INDEX[s]], truth[SKIP:, SEGMENT_INDEX[s]]).mean()), 2)
                 for s in THIGHS}
 
     out["output"]["as replayed"] = score(as_replayed)
@@ -117,7 +114,7 @@ def stages(rec, built, lags: int) -> dict:
     for k in range(K):
         est = rot6d_to_matrix(w[k:, K - 1 - k])  # step t's answer for frame t - k
         out["window"][f"{k} back"] = {
-            s: round(float(angle_deg(est[SKIP:, j], truth[SKIP:T - k, SEGMENT_INDEX[s]]).mean()), 2)
+            s: round(float(deg_between(est[SKIP:, j], truth[SKIP:T - k, SEGMENT_INDEX[s]]).mean()), 2)
             for j, s in enumerate(THIGHS)}
     pelvis = truth[:, SEGMENT_INDEX["pelvis"]]
     for s in THIGHS:
@@ -143,7 +140,7 @@ def stages(rec, built, lags: int) -> dict:
             i = SEGMENT_INDEX[s]
             stand[s] = {"sensor_yaw_pitch": yaw_pitch(truth[:, i]).tolist(),
                         "model_yaw_pitch": yaw_pitch(as_replayed[:, i]).tolist(),
-                        "deg": round(float(angle_deg(as_replayed[-n:, i], truth[-n:, i]).mean()), 1)}
+                        "deg": round(float(deg_between(as_replayed[-n:, i], truth[-n:, i]).mean()), 1)}
         out["last_stand"] = stand
     return out
 
