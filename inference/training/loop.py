@@ -27,6 +27,7 @@ Data interface (``FeatureDataset`` in inference/training/dataset.py, or ``ArrayD
 from __future__ import annotations
 
 import copy
+import functools
 import json
 import math
 import os
@@ -126,6 +127,11 @@ class StepContext:
     std: Tensor
     schedule: Schedule
     teacher: nn.Module | None = None  # the distillation's teacher network (``TrainConfig.teacher``)
+
+    @functools.cached_property
+    def teacher_mirror(self) -> MirrorAveraged:
+        """The teacher's mirror image operator (``TrainConfig.teacher_mirror_chains``), built once."""
+        return MirrorAveraged(self.teacher, self.mean, self.std)
 
 
 def step_seeds(seed: int, rank: int, step: int) -> tuple[np.random.Generator, torch.Generator]:
@@ -290,7 +296,7 @@ def _distilled(model: nn.Module, ctx: StepContext, x: Tensor, xn: Tensor, xm: Te
     start = torch.where(m, xm, torch.zeros(()))
     with torch.no_grad():
         if cfg.teacher_mirror_chains:
-            op = MirrorAveraged(ctx.teacher, ctx.mean, ctx.std)
+            op = ctx.teacher_mirror
             both = inpaint(ctx.teacher, torch.cat([start, op.mirror(start)]), torch.cat([m, m[..., op.idx]]),
                            torch.cat([height, height]), parse_steps(cfg.teacher_steps), schedule=ctx.schedule,
                            mode="replace-ddim", mask_input=True, start="mean")
