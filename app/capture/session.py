@@ -134,6 +134,11 @@ class CaptureSession:
     def start(self) -> CaptureSession:
         import drivers
 
+        # the model's first call builds its runtime (seconds on a busy machine, holding the
+        # interpreter): before the devices open and the guided steps' clock starts, not inside
+        # the first step. Done after them, it left the serial readers without a turn for a
+        # second while the subject held the N-pose, and three of six sensors uncalibrated.
+        self.pipeline.warm_up()
         devices = {}
         for name, url in self.setup.urls().items():
             devices[name] = drivers.make_device(url)
@@ -148,7 +153,7 @@ class CaptureSession:
         self._state = {name: "ok" for name in devices}
         if self.options.calibration is not None:
             self.pipeline.set_calibration(self.options.calibration, self.started_at)
-        self.live = LivePipeline(self.pipeline, self.hub).start()
+        self.live = LivePipeline(self.pipeline, self.hub).start(warm_up=False)
         return self
 
     def stop(self) -> None:

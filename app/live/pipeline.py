@@ -246,6 +246,13 @@ class Pipeline:
     def add_sink(self, sink: Sink) -> None:
         self.sinks.append(sink)
 
+    def warm_up(self) -> None:
+        """The model's first call, its answer thrown away (``Poser.warm_up``): the runtime
+        builds its graph and sizes its buffers there rather than on a live frame."""
+        warm_up = getattr(self.poser, "warm_up", None)
+        if warm_up is not None:
+            warm_up()
+
     def set_calibration(self, calibration: Calibration, t: float) -> None:
         """Use ``calibration`` from now on: the poser restarts from a standing history (the
         old one was in another frame of reference) and the resampler from empty."""

@@ -65,12 +65,12 @@ class LivePipeline:
         self.error: BaseException | None = None
         self._commands: deque[Callable[[Pipeline], Any]] = deque()
 
-    def start(self) -> LivePipeline:
-        # the model's first call is slow (its runtime builds and sizes itself): here, not on
-        # the first pose after calibration
-        warm_up = getattr(self.pipeline.poser, "warm_up", None)
-        if warm_up is not None:
-            warm_up()
+    def start(self, warm_up: bool = True) -> LivePipeline:
+        """Start the ingest and inference threads. ``warm_up``: make the model's first call
+        here (its runtime builds and sizes itself), not on the first pose after calibration;
+        a caller that already did (``Pipeline.warm_up``) before opening its devices says False."""
+        if warm_up:
+            self.pipeline.warm_up()
         if sys.getswitchinterval() < SWITCH_INTERVAL_S:
             sys.setswitchinterval(SWITCH_INTERVAL_S)
         self._stop.clear()

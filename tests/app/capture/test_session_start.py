@@ -1,0 +1,44 @@
+"""`CaptureSession.start`: the model's first call (its runtime's build, seconds on a busy
+machine with the interpreter held) is made before the devices open and the guided steps'
+clock starts. Made after, it left the serial readers without a turn for a second while the
+subject held the N-pose, and three of six sensors came out uncalibrated."""
+
+from __future__ import annotations
+
+import pytest
+
+from app.capture import session as session_module
+from app.capture.session import CaptureOptions, CaptureSession
+from app.capture.setup_file import parse_setup
+
+SETUP = """\
+[subject]
+id = "S1"
+height = 1.75
+
+[sensors]
+pelvis = "xbus:///tmp/imucap-no-such-tty?baud=115200"
+"""
+
+
+class Stop(Exception):
+    """Raised by the intercepted hub start: the test needs nothing after it."""
+
+
+def test_the_model_is_warm_before_the_devices_open(monkeypatch, tmp_path):
+    (tmp_path / "s.toml").write_text(SETUP)
+    setup = parse_setup(SETUP, tmp_path / "s.toml")
+    session = CaptureSession(setup, CaptureOptions(threads=1))
+    order: list[str] = []
+    warm_up = session.poser.warm_up
+    monkeypatch.setattr(session.poser, "warm_up", lambda: (order.append("warm up"), warm_up())[-1])
+
+    def hub_start(hub):
+        order.append("devices open")
+        raise Stop
+
+    monkeypatch.setattr(session_module.Hub, "start", hub_start)
+    with pytest.raises(Stop):
+        session.start()
+    assert order == ["warm up", "devices open"]
+    assert session.started_at is not None  # the guided steps' clock: set just before the devices open
