@@ -41,12 +41,14 @@ def _one_torch_thread():
     yield
 
 
-# Tests that need the machine to keep up in real time (simulated devices streaming through
-# the drivers and the hub, the live demo) and the tests that load or train on the whole real
-# dataset (minutes of full CPU, more in a fresh clone that has no dataset cache) share one
-# xdist group, so under `--dist loadgroup` they run one after another on one worker instead
-# of starving each other: a suit test lost a device's samples for whole seconds while the
-# other worker built a dataset.
+# scripts/test.sh runs the suite as two pytest runs at the same time: the real-time one at full
+# priority, the rest niced (nice 10 weighs a tenth of nice 0 with the scheduler), so the CPU-bound
+# tests take only the cores the real-time ones leave. In the real-time run the solo modules go
+# one after another on one worker and the realtime modules one after another on the other.
+#
+# Tests that need the machine to keep up in real time (simulated devices streaming through the
+# drivers and the hub, the live demo, a window): one at a time, at full priority. Niced beside
+# CPU-bound tests, a suit test lost a device's samples for whole seconds.
 REALTIME_MODULES = {"sim_devices/test_suit.py", "drivers/test_batched.py",
                     "drivers/test_end_to_end.py",
                     "app/gui/test_main_window.py", "app/cli/test_demo.py", "app/capture/test_identify.py",
@@ -54,19 +56,24 @@ REALTIME_MODULES = {"sim_devices/test_suit.py", "drivers/test_batched.py",
                     "app/capture/test_capture_loopback.py",
                     "app/gui/test_window_unplug.py", "app/gui/test_window_workflow.py",
                     "app/gui/test_window_simulate.py",
-                    "app/cli/test_bench_latency.py"}
+                    "app/cli/test_bench_latency.py", "sim_devices/test_xsens_can_twin.py",
+                    "drivers/xsens_can/test_shared_bus.py", "app/gui/test_outdoor_view.py", "app/streams/test_cli.py",
+                    "sim_devices/test_wireless_twins.py", "test_lean_install.py", "app/capture/test_simulate_vr.py",
+                    "drivers/test_ximu3_loss.py", "drivers/test_ximu3_tcp.py"}
 
 
 # Separate processes in real time (a simulator, `imucap capture`) whose figures (a calibration
 # from integrated accelerations, poses per second) depend on the cores being free: with another
-# test on the second core the capture's walk calibration put a CAN wrist 10-20 deg off.
-# scripts/test.sh runs these alone, after the parallel pass.
+# CPU-bound test at the same priority the capture's walk calibration put a CAN wrist 10-20 deg
+# off. One at a time, at full priority, beside the realtime modules (which mostly wait on the
+# clock); their own replays and evaluates run niced (tests/app/capture/live_capture.py).
 SOLO_MODULES = {"app/capture/test_capture_e2e.py", "test_readme.py", "app/capture/test_replay_reproduces_capture.py",
                 "app/capture/test_capture_wireless.py", "app/capture/test_capture_vr.py"}
 
 
-# Real-data tests that only read files, in one process on one core, like any unit test: they
-# need not wait for the realtime group (the loaders' "every file loads" tests were 270 s of it).
+# Real-data tests that only read files, in one process on one core, like any unit test: spread
+# over both workers per test. The other real-data modules (loading or training on the whole
+# dataset) keep each module on one worker, so its module fixtures are built once.
 DATA_ONE_CORE_MODULES = {"inference/loaders/test_real_data.py", "inference/loaders/test_cmu.py"}
 
 
@@ -75,9 +82,12 @@ def pytest_collection_modifyitems(config, items):
         module = item.path.relative_to(REPO / "tests").as_posix()
         if module in SOLO_MODULES:
             item.add_marker(pytest.mark.solo)
-        heavy_data = item.get_closest_marker("data") is not None and module not in DATA_ONE_CORE_MODULES
-        if heavy_data or module in REALTIME_MODULES:
-            item.add_marker(pytest.mark.xdist_group("realtime_or_heavy"))
+            item.add_marker(pytest.mark.xdist_group("solo"))
+        elif module in REALTIME_MODULES:
+            item.add_marker(pytest.mark.realtime)
+            item.add_marker(pytest.mark.xdist_group("realtime"))
+        elif item.get_closest_marker("data") is not None and module not in DATA_ONE_CORE_MODULES:
+            item.add_marker(pytest.mark.xdist_group(module))  # its module fixtures built once
     if getattr(config.option, "loadgroup", False):  # an xdist worker under --dist loadgroup
         _name_groups(items)
 

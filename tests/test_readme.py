@@ -45,7 +45,10 @@ def test_readme_capture_without_hardware_runs_as_written(tmp_path):
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
            "PYTHONUNBUFFERED": "1"}
     proc = subprocess.Popen(["bash", "-c", script], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stderr=subprocess.PIPE, text=True, process_group=0)
+    # a process group of its own (to end the simulator with it), not a session of its own: a
+    # new session is a new scheduling group under Linux's autogroup, where the suite's niced
+    # tests beside it would weigh as much as it (scripts/test.sh)
     try:
         out, err = proc.communicate(timeout=600)
     finally:

@@ -15,8 +15,6 @@ from sim_devices.devices import DeviceFaults, make_sim_device, spinning_signals
 from sim_devices.devices.can_loopback import SERVERS, loopback_channel, split_host_port
 from sim_devices.devices.other_twins import SIM_CAN_BUSES
 
-pytestmark = pytest.mark.xdist_group("realtime_or_heavy")  # streams in real time
-
 OFFSETS = (0x100, 0x200, 0x300)
 
 

@@ -27,7 +27,7 @@ from app.batch.task import JOURNAL, RESULT, RUNNING
 from app.capture.offline_session import write_session
 from inference.loaders import load_motion
 
-pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("realtime_or_heavy")]
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("batch")]
 CLI = [sys.executable, "-m", "app.cli.main"]
 N = 10
 SUBSET = "pelvis,l_shank,r_shank"

@@ -20,7 +20,7 @@ import pytest
 from app.batch.task import RESULT, RUNNING
 from app.capture.offline_session import write_session
 
-pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("realtime_or_heavy")]
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("batch_faults")]
 HOOKED = [sys.executable, str(Path(__file__).with_name("hooked_batch.py"))]
 N = 5
 

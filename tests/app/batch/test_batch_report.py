@@ -18,7 +18,7 @@ from app.report.html import SECTIONS
 from inference.signals.synthesis import kinematics
 from sim_devices.motions import generate
 
-pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("realtime_or_heavy")]
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("batch_report")]
 CLI = [sys.executable, "-m", "app.cli.main"]
 WALK_SEED = 3
 

@@ -135,10 +135,17 @@ def run_capture(capture_args: list[str], sim_args: list[str], done: Callable[[Si
         return subprocess.CompletedProcess(cmd, cap.returncode, out.read(), err.read()), sim
 
 
+# what is not real time (a replay, an evaluate, an export) runs niced: the suite's real-time
+# tests run beside these at full priority (scripts/test.sh), and a capture that shares the
+# cores with one (test_capture_e2e.py's second) keeps its turn
+OFFLINE_NICE = 10
+
+
 def cli(args: list[str]) -> subprocess.Popen:
-    """`imucap ARGS` started, for ``finish``: once the real-time part of a test is over, its
-    replay and evaluate run side by side (each on one core)."""
-    return subprocess.Popen([*CLI, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    """`imucap ARGS` started, niced, for ``finish``: once the real-time part of a test is over,
+    its replay and evaluate run side by side (each on one core)."""
+    return subprocess.Popen(["nice", "-n", str(OFFLINE_NICE), *CLI, *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
 
 
 def finish(proc: subprocess.Popen, timeout: float = 300) -> subprocess.CompletedProcess:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import queue
+import re
 import socket
 import subprocess
 import sys
@@ -187,7 +188,9 @@ def test_check_names_a_dead_url_and_a_slow_device(devices, tmp_path):
     shank = next(i for i, line in enumerate(blocks) if line.startswith("l_shank"))
     assert "does not answer (check power/cable/URL)" in blocks[shank + 2]
     head = next(i for i, line in enumerate(blocks) if line.startswith("head"))
-    assert "rate 20 Hz, expected >= 50" in blocks[head + 2]
+    # the rate on the host's clock: a loaded machine reads a 20 Hz device at 18-22 Hz
+    rate = re.search(r"rate (\d+) Hz, expected >= 50", blocks[head + 2])
+    assert rate and 15 <= int(rate.group(1)) <= 25, blocks[head + 2]
     pel = next(i for i, line in enumerate(blocks) if line.startswith("pelvis"))
     assert blocks[pel + 1].endswith(": ok")
     assert "2 of 3 device(s) with a problem" in r.stdout

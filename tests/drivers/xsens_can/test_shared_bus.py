@@ -21,9 +21,6 @@ from drivers.xsens_can.driver import XsensCanDevice, owned_ids
 from drivers.xsens_can.shared_bus import BusRegistry, Tap
 from sim_devices.devices import DeviceFaults, make_sim_device, spinning_signals
 
-# these stream in real time: under --dist loadgroup they run with the other real-time tests
-pytestmark = pytest.mark.xdist_group("realtime_or_heavy")
-
 JOIN_S = 10.0  # generous: a deadlock, not a slow machine, is what fails a join
 
 
