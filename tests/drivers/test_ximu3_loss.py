@@ -38,7 +38,7 @@ def _capture(rate: float, seconds: float, url_rate: int | None, seed: int, out: 
     finally:
         dev.close()
         sim.stop()
-    out.update(sent=list(sim.send_log), got=len(got), lost=dev.stats.lost_packets,
+    out.update(sent=list(sim.send_log), dropped=sim.stats["dropped"], got=len(got), lost=dev.stats.lost_packets,
                bad=dev.stats.bad_frame, lost_before=sum(s.extra.get("lost_before", 0) for s in got))
 
 
@@ -52,13 +52,16 @@ def test_loss_is_counted_at_the_rate_the_stream_shows():
         th.join(60)
     for (rate, _), r in runs.items():
         # every datagram sent after the driver started reading arrived (loopback): the truth is the
-        # counters missing between the first and the last of those
+        # counters missing between the first and the last of those. They include the twin's
+        # dropped packets (about 2 %, as set) and, on a loaded machine, the ticks a late twin
+        # skipped to keep to its clock: a gap in the stream all the same
         sent = [c for c, _ in r["sent"]]
+        assert 0.01 < r["dropped"] / (len(sent) + r["dropped"]) < 0.04, (rate, r["dropped"], len(sent))
         assert r["bad"] == 0 and 0 < r["got"] <= len(sent), (rate, r)
         first, last = sent[len(sent) - r["got"]], sent[-1]
         true_lost = (last - first + 1) - r["got"]
         span = last - first + 1
-        assert 0.01 < true_lost / span < 0.04, (rate, true_lost, span)  # about 2 %, as set
+        assert true_lost / span > 0.01, (rate, true_lost, span)
         reported = r["lost"] / (r["got"] + r["lost"])
         assert abs(reported - true_lost / span) < 0.005, (rate, r["lost"], true_lost, span)
         assert r["lost_before"] <= r["lost"]
