@@ -21,12 +21,14 @@ fi
 # every test module again (half of a collection's CPU) and each CLI subprocess compiled the
 # package anew
 unset PYTHONDONTWRITEBYTECODE
-# Two runs at the same time (tests/conftest.py sorts the tests; docs/testing.md):
-# - the real-time run at full priority, two workers: the solo captures one after another on one, the
-#   other real-time tests one after another on the other; they mostly wait on the clock;
-# - everything else niced, two workers: it takes the cores the real-time run leaves, and the
-#   scheduler gives the real-time run its share first (nice 10 weighs a tenth of nice 0).
-# Each has its own X server (-n), temporary folder and log; the logs are printed when both end.
+# Three runs at the same time (tests/conftest.py sorts the tests; docs/testing.md), each at its priority:
+# - solo, nice 0, one worker: the captures in a process of their own whose figures (a calibration, a
+#   score against the truth) depend on getting the cores when they ask;
+# - realtime, nice 5, one worker: the other tests that must keep up in real time (devices streaming,
+#   the demo, the windows); they mostly wait on the clock;
+# - rest, nice 10, two workers: everything else, on the cores the other two leave (the scheduler
+#   weighs nice 0 / 5 / 10 as 1024 / 335 / 110).
+# Each has its own X server (-n), temporary folder and log; the logs are printed when all have ended.
 # pytest's 5 means "nothing collected" (a -k that leaves a run empty); each run has a ceiling too
 # (pytest-timeout covers a test, not a worker that never exits).
 LOGS=$(mktemp -d)
@@ -34,21 +36,22 @@ LOGS=$(mktemp -d)
 # pixels took a quarter of the window tests' CPU off (test_outdoor_view 34.6 -> 26.1 s, the workflow and
 # unplug windows 53.3 -> 40.8 s); the tests check what is drawn, not its size
 export QT_SCALE_FACTOR=${QT_SCALE_FACTOR:-0.5}
-run() {  # run NAME NICE DISPLAY MARKERS [pytest args]
-  local name=$1 prio=$2 display=$3 markers=$4; shift 4
+run() {  # run NAME NICE DISPLAY WORKERS MARKERS [pytest args]
+  local name=$1 prio=$2 display=$3 workers=$4 markers=$5; shift 5
   local rc=0
   nice -n "$prio" timeout -k 30 1500 xvfb-run -a -n "$display" -s "-screen 0 1280x1024x24" \
-    .venv/bin/python -m pytest -n 2 --dist loadgroup -q -p no:cacheprovider --basetemp "$LOGS/$name" \
+    .venv/bin/python -m pytest -n "$workers" --dist loadgroup -q -p no:cacheprovider --basetemp "$LOGS/$name" \
     -m "$markers" "$@" >"$LOGS/$name.log" 2>&1 || rc=$?
   [ "$rc" = 5 ] && rc=0
   echo "$rc" >"$LOGS/$name.rc"
 }
-DISPLAY_RT=$((100 + RANDOM % 300)); DISPLAY_REST=$((DISPLAY_RT + 400))
-run realtime 0 "$DISPLAY_RT" "solo or realtime" "$@" &
-run rest 10 "$DISPLAY_REST" "not solo and not realtime" "$@" &
+DISPLAY_BASE=$((100 + RANDOM % 300))
+run solo 0 "$DISPLAY_BASE" 1 "solo" "$@" &
+run realtime 5 $((DISPLAY_BASE + 300)) 1 "realtime" "$@" &
+run rest 10 $((DISPLAY_BASE + 600)) 2 "not solo and not realtime" "$@" &
 wait
 ok=0
-for name in realtime rest; do
+for name in solo realtime rest; do
   echo "=== $name ($(cat "$LOGS/$name.rc" 2>/dev/null || echo none))"
   cat "$LOGS/$name.log"
   [ "$(cat "$LOGS/$name.rc" 2>/dev/null)" = 0 ] || ok=1

@@ -41,14 +41,14 @@ def _one_torch_thread():
     yield
 
 
-# scripts/test.sh runs the suite as two pytest runs at the same time: the real-time one at full
-# priority, the rest niced (nice 10 weighs a tenth of nice 0 with the scheduler), so the CPU-bound
-# tests take only the cores the real-time ones leave. In the real-time run the solo modules go
-# one after another on one worker and the realtime modules one after another on the other.
+# scripts/test.sh runs the suite as three pytest runs at the same time, each at its priority: the
+# solo modules (nice 0), the realtime modules (nice 5), the rest (nice 10, two workers), so the
+# CPU-bound tests take only the cores the real-time ones leave (the scheduler weighs nice 0 / 5 / 10
+# as 1024 / 335 / 110).
 #
 # Tests that need the machine to keep up in real time (simulated devices streaming through the
-# drivers and the hub, the live demo, a window): one at a time, at full priority. Niced beside
-# CPU-bound tests, a suit test lost a device's samples for whole seconds.
+# drivers and the hub, the live demo, a window): one at a time, above the rest. At the same
+# priority as CPU-bound tests, a suit test lost a device's samples for whole seconds.
 REALTIME_MODULES = {"sim_devices/test_suit.py", "drivers/test_batched.py",
                     "drivers/test_end_to_end.py",
                     "app/gui/test_main_window.py", "app/cli/test_demo.py", "app/capture/test_identify.py",
@@ -65,8 +65,9 @@ REALTIME_MODULES = {"sim_devices/test_suit.py", "drivers/test_batched.py",
 # Separate processes in real time (a simulator, `imucap capture`) whose figures (a calibration
 # from integrated accelerations, poses per second) depend on the cores being free: with another
 # CPU-bound test at the same priority the capture's walk calibration put a CAN wrist 10-20 deg
-# off. One at a time, at full priority, beside the realtime modules (which mostly wait on the
-# clock); their own replays and evaluates run niced (tests/app/capture/live_capture.py).
+# off. One at a time, at full priority: above the realtime modules too (a window's software GL
+# at the same priority starved a capture's N-pose); their own replays and evaluates run niced
+# (tests/app/capture/live_capture.py).
 SOLO_MODULES = {"app/capture/test_capture_e2e.py", "test_readme.py", "app/capture/test_replay_reproduces_capture.py",
                 "app/capture/test_capture_wireless.py", "app/capture/test_capture_vr.py"}
 
