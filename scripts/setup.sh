@@ -7,10 +7,10 @@ PY=${PYTHON:-python3.11}
 command -v "$PY" >/dev/null || PY=python3
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
 .venv/bin/pip install -q --upgrade pip
-# --no-compile: Python compiles what a process imports when it first imports it; pip compiling every
-# file of every package (torch, PySide6) took 17 of a fresh set-up's 47 s
-.venv/bin/pip install -q --no-compile "torch==2.13.0"
-.venv/bin/pip install -q --no-compile -e ".[test,all]"  # every optional part: the tests cover them all
+# compiled at install (17 of a fresh set-up's 47 s): with --no-compile each process compiled what it
+# first imported, and a fresh clone's first capture stalled in its N-pose doing so
+.venv/bin/pip install -q "torch==2.13.0"
+.venv/bin/pip install -q -e ".[test,all]"  # every optional part: the tests cover them all
 # pylsl's Linux x86_64 wheel (glibc >= 2.35) carries liblsl; elsewhere pylsl needs one it can find
 # (PYLSL_LIB, or the system's). Only `--stream lsl` needs it, so a missing one is a note, not a failure.
 .venv/bin/python -c "import pylsl" 2>/dev/null || echo "setup: pylsl finds no liblsl; for --stream lsl install it" \
