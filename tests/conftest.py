@@ -41,10 +41,8 @@ def _one_torch_thread():
     yield
 
 
-# scripts/test.sh runs the suite as three pytest runs at the same time, each at its priority: the
-# solo modules (nice 0), the realtime modules (nice 5), the rest (nice 10, two workers), so the
-# CPU-bound tests take only the cores the real-time ones leave (the scheduler weighs nice 0 / 5 / 10
-# as 1024 / 335 / 110).
+# scripts/test.sh runs the realtime modules (nice 0) and the rest (nice 10, two workers) at the same
+# time, so the CPU-bound tests take only the cores the real-time ones leave, then the solo modules alone.
 #
 # Tests that need the machine to keep up in real time (simulated devices streaming through the
 # drivers and the hub, the live demo, a window): one at a time, above the rest. At the same
@@ -65,8 +63,8 @@ REALTIME_MODULES = {"sim_devices/test_suit.py", "drivers/test_batched.py",
 # Separate processes in real time (a simulator, `imucap capture`) whose figures (a calibration
 # from integrated accelerations, poses per second) depend on the cores being free: with another
 # CPU-bound test at the same priority the capture's walk calibration put a CAN wrist 10-20 deg
-# off. One at a time, at full priority: above the realtime modules too (a window's software GL
-# at the same priority starved a capture's N-pose); their own replays and evaluates run niced
+# off. Alone, after the others: beside them, even above them in priority, their guided N-pose
+# got no data in three of four fresh clones' runs. Their own replays and evaluates run niced
 # (tests/app/capture/live_capture.py).
 SOLO_MODULES = {"app/capture/test_capture_e2e.py", "test_readme.py", "app/capture/test_replay_reproduces_capture.py",
                 "app/capture/test_capture_wireless.py", "app/capture/test_capture_vr.py"}
