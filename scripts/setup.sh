@@ -7,8 +7,6 @@ PY=${PYTHON:-python3.11}
 command -v "$PY" >/dev/null || PY=python3
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
 .venv/bin/pip install -q --upgrade pip
-# compiled at install (17 of a fresh set-up's 47 s): with --no-compile, where each process compiles
-# what it first imports, a fresh clone's first capture lost its N-pose in two of three suite runs
 .venv/bin/pip install -q "torch==2.13.0"
 .venv/bin/pip install -q -e ".[test,all]"  # every optional part: the tests cover them all
 # pylsl's Linux x86_64 wheel (glibc >= 2.35) carries liblsl; elsewhere pylsl needs one it can find

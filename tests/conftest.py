@@ -81,10 +81,8 @@ def pytest_collection_modifyitems(config, items):
         module = item.path.relative_to(REPO / "tests").as_posix()
         if module in SOLO_MODULES:
             item.add_marker(pytest.mark.solo)
-            item.add_marker(pytest.mark.xdist_group("solo"))
         elif module in REALTIME_MODULES:
             item.add_marker(pytest.mark.realtime)
-            item.add_marker(pytest.mark.xdist_group("realtime"))
         elif item.get_closest_marker("data") is not None and module not in DATA_ONE_CORE_MODULES:
             item.add_marker(pytest.mark.xdist_group(module))  # its module fixtures built once
     if getattr(config.option, "loadgroup", False):  # an xdist worker under --dist loadgroup

@@ -47,8 +47,8 @@ def test_readme_capture_without_hardware_runs_as_written(tmp_path):
     proc = subprocess.Popen(["bash", "-c", script], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, process_group=0)
     # a process group of its own (to end the simulator with it), not a session of its own: a
-    # new session is a new scheduling group under Linux's autogroup, where the suite's niced
-    # tests beside it would weigh as much as it (scripts/test.sh)
+    # new session is a new scheduling group under Linux's autogroup, outside the priorities
+    # scripts/test.sh gives its runs
     try:
         out, err = proc.communicate(timeout=600)
     finally:

@@ -135,9 +135,8 @@ def run_capture(capture_args: list[str], sim_args: list[str], done: Callable[[Si
         return subprocess.CompletedProcess(cmd, cap.returncode, out.read(), err.read()), sim
 
 
-# what is not real time (a replay, an evaluate, an export) runs niced: the suite's real-time
-# tests run beside these at full priority (scripts/test.sh), and a capture that shares the
-# cores with one (test_capture_e2e.py's second) keeps its turn
+# what is not real time (a replay, an evaluate, an export) runs niced, so a capture that shares
+# the cores with one (test_capture_e2e.py's second) keeps its turn
 OFFLINE_NICE = 10
 
 

@@ -25,9 +25,8 @@ class Stop(Exception):
     """Raised by the intercepted hub start: the test needs nothing after it."""
 
 
-def test_the_model_is_warm_before_the_devices_open(monkeypatch, tmp_path):
-    (tmp_path / "s.toml").write_text(SETUP)
-    setup = parse_setup(SETUP, tmp_path / "s.toml")
+def test_the_model_is_warm_before_the_devices_open(monkeypatch):
+    setup = parse_setup(SETUP)
     session = CaptureSession(setup, CaptureOptions(threads=1))
     order: list[str] = []
     warm_up = session.poser.warm_up
