@@ -19,6 +19,13 @@ Stillness live: each sensor's angular speed from consecutive orientations, smoot
 when one exceeds ``moved_dps``. The window found is then checked by the same stillness
 measures as offline calibration.
 
+A still step holds on data, not on the clock: it starts holding only once every sensor
+streams, and starts again when one that streamed falls silent for ``gap_s`` (a wireless
+dropout, a reader or a whole process stalled on a busy machine). Otherwise a hold counted
+frames without samples, and a sensor silent for half the N-pose came out uncalibrated, or
+every sensor, with "no data". A sensor never heard from is waited for ``wait_all_s`` at the
+first still step and then left out, as before (the quality report names it).
+
 A walk also shows in the acceleration: a trunk sensor turns at 20-40 deg/s in a normal walk,
 under ``move_dps``, but its free acceleration swings by ~2 m/s^2 (spread over the last 0.5 s).
 A move step starts, and goes on, when either measure says walking (``move_acc``), so a setup
@@ -91,7 +98,8 @@ class GuidedCalibration:
 
     def __init__(self, sites: Sequence[str], protocol: str = "walk", countdown: float = 3.0, timeout: float = 20.0,
                  still_dps: float = 20.0, moved_dps: float = 35.0, move_dps: float = 45.0, move_acc: float = 1.0,
-                 limits: StillnessLimits | None = None, fps: float = 60.0, origin: float | None = None) -> None:
+                 limits: StillnessLimits | None = None, fps: float = 60.0, origin: float | None = None,
+                 gap_s: float = 0.3, wait_all_s: float = 3.0) -> None:
         if protocol not in PROTOCOLS:
             raise ValueError(f"unknown calibration protocol {protocol!r}; choose {' or '.join(PROTOCOLS)}")
         self.sites = tuple(sites)
@@ -103,6 +111,8 @@ class GuidedCalibration:
         self.move_acc = move_acc  # m/s^2: free-acceleration spread (0.5 s) that reads as walking
         self.limits = limits or StillnessLimits()
         self.fps = fps
+        self.gap_s = gap_s  # s of silence from a sensor that streamed that restarts a still hold
+        self.wait_all_s = wait_all_s  # s the first still step waits for a sensor never heard from
         self.reset(origin)
 
     # ------------------------------------------------------------------ state
@@ -119,6 +129,8 @@ class GuidedCalibration:
         self._acc_recent: list[tuple[float, np.ndarray]] = []
         self._acc_spread = np.full(len(self.sites), np.nan)
         self._speed = np.zeros(len(self.sites))
+        self._last_seen = np.full(len(self.sites), -np.inf)  # stream time each sensor last sent
+        self._waited_from: float | None = None  # when the first still step began waiting for data
         self._enter(0, origin)
 
     def _enter(self, index: int, t: float | None, countdown: bool = True) -> None:
@@ -202,6 +214,7 @@ class GuidedCalibration:
         self._frames.append((t, quat, nan3 if free_acc is None else np.asarray(free_acc, float),
                              nan3 if acc is None else np.asarray(acc, float),
                              nan3 if gyro is None else np.asarray(gyro, float), ok))
+        self._last_seen[ok] = t
         self._update_speed(t, quat, ok)
         self._update_acc_spread(t, self._frames[-1][2], ok)
         self._t_last = t
@@ -255,13 +268,22 @@ class GuidedCalibration:
         if t - self._step_t > self.timeout and self.phase in ("waiting_still", "waiting_move", "holding", "moving"):
             return self._fail(self._timeout_message(step))
         fast = self._speed > self.moved_dps
+        silent = self._silent(t) if step.kind == "still" else np.zeros(len(self.sites), bool)
         if self.phase in ("waiting_still", "holding"):
             self._unsteady += self._speed >= self.still_dps
         if self.phase == "waiting_still":
-            if np.all(self._speed < self.still_dps):
+            if silent.any():
+                self.message = f"waiting for data from {', '.join(np.array(self.sites)[silent])}"
+            elif np.all(self._speed < self.still_dps):
                 self.phase, self._hold_from = "holding", i
+                if self.message.startswith("waiting for data"):
+                    self.message = ""
         elif self.phase == "holding":
-            if fast.any():
+            if silent.any():
+                self._restarts += 1
+                self.message = f"waiting for data from {', '.join(np.array(self.sites)[silent])}"
+                self.phase, self._hold_from = "waiting_still", None
+            elif fast.any():
                 self._restarts += 1
                 self.message = f"{', '.join(np.array(self.sites)[fast])} moved: hold still"
                 self.phase, self._hold_from = "waiting_still", None
@@ -284,12 +306,32 @@ class GuidedCalibration:
                 return self._next(t)
         return None
 
+    def _silent(self, t: float) -> np.ndarray:
+        """(S,) the sensors a still step waits for: one that streamed and has sent nothing for
+        ``gap_s``, and, for ``wait_all_s`` from the first still step's start, one not heard
+        from yet (after that it is left out, in every step). With no sensor heard from at
+        all, every one."""
+        if self._waited_from is None:
+            self._waited_from = t
+        heard = np.isfinite(self._last_seen)
+        if not heard.any():
+            return np.ones(len(self.sites), bool)
+        quiet = heard & (t - self._last_seen > self.gap_s)
+        if t - self._waited_from < self.wait_all_s:
+            quiet |= ~heard
+        return quiet
+
     def _timeout_message(self, step: Step) -> str:
         if step.kind == "move" and self.phase == "waiting_move":
             return (f"{step.name}: no movement in {self.timeout:.0f} s; {step.prompt.lower()} "
                     f"(redo '{step.name}')")
         if step.kind == "move":
             return f"{step.name}: the subject did not stand still again within {self.timeout:.0f} s"
+        silent = self._silent(self._t_last if self._t_last is not None else 0.0)
+        if silent.any():
+            who = ", ".join(np.array(self.sites)[silent])
+            return (f"{step.name}: no data from {who} for more than {self.gap_s:g} s at a time; check that it is "
+                    f"switched on and in range, and redo '{step.name}'")
         # the sensors that kept the step from holding: most often above the still limit
         share = self._unsteady / max(self._unsteady.max(), 1.0)
         worst = [k for k in np.argsort(-self._unsteady)[:3] if self._unsteady[k] > 0 and share[k] > 0.5]

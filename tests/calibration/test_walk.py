@@ -195,3 +195,57 @@ def test_guided_walk_with_trunk_sensors_only(sites):
         if g2.phase in ("done", "failed"):
             break
     assert g2.phase == "failed" and "walk: no movement" in g2.error
+
+
+@pytest.fixture(scope="module")
+def long_npose():
+    """The session with an N-pose of 11 s: room for a still step to hold again after a gap."""
+    act = generate("walk", seconds=5, seed=1)
+    walk = generate("walk", seconds=6, seed=0)
+    return synthesize_walk_session(act, walk, WalkProtocol(npose=11.0), noise=NoiseModel.typical(), rng=3,
+                                   sites=SITES)
+
+
+def _feed_with_silence(g: GuidedCalibration, sig, silent: np.ndarray) -> None:
+    """Feed the session, ``silent`` (T, S) marking samples that never arrived (the hub's
+    frames go on, the sites absent), as a stalled reader or process leaves them."""
+    for i in range(len(sig)):
+        g.push(i / sig.fps, sig.quat[i], sig.free_acc[i], present=~silent[i])
+        if g.phase in ("done", "failed"):
+            return
+
+
+def test_a_still_step_holds_again_after_every_sensor_fell_silent(long_npose):
+    """Every sensor silent for 2 s, 1 s into the N-pose's hold (a stalled process on a busy
+    machine): the hold counted those frames, and the N-pose came out with no data from any
+    sensor. It starts again once they stream, and the N-pose's frames all hold data."""
+    sig, truth = long_npose
+    silent = np.zeros((len(sig), len(SITES)), bool)
+    silent[int(4.0 * sig.fps):int(6.0 * sig.fps)] = True
+    g = GuidedCalibration(SITES, "walk")
+    _feed_with_silence(g, sig, silent)
+    assert g.done, g.status()
+    assert g._data["npose"][4].all()  # every N-pose frame of every sensor present
+    assert g.calibration.valid.all() and segment_errors(g.calibration, sig, truth).max() < 3.0
+
+
+def test_a_sensor_never_heard_from_is_left_out_after_the_wait(long_npose):
+    sig, truth = long_npose
+    silent = np.zeros((len(sig), len(SITES)), bool)
+    k = SITES.index("head")
+    silent[:, k] = True
+    g = GuidedCalibration(SITES, "walk")
+    _feed_with_silence(g, sig, silent)
+    assert g.done, g.status()
+    assert not g.calibration.valid[k] and g.calibration.valid.sum() == len(SITES) - 1
+
+
+def test_a_sensor_that_stops_streaming_in_the_npose_is_named(long_npose):
+    sig, _ = long_npose
+    silent = np.zeros((len(sig), len(SITES)), bool)
+    k = SITES.index("l_shank")
+    silent[int(3.5 * sig.fps):, k] = True
+    g = GuidedCalibration(SITES, "walk", timeout=6.0)
+    _feed_with_silence(g, sig, silent)
+    assert g.phase == "failed"
+    assert "npose: no data from l_shank" in g.error and "redo 'npose'" in g.error
