@@ -20,7 +20,7 @@ when one exceeds ``moved_dps``. The window found is then checked by the same sti
 measures as offline calibration.
 
 A still step holds on data, not on the clock: it starts holding only once every sensor
-streams, and starts again when one that streamed falls silent for ``gap_s`` (a wireless
+streams, and starts again when one that streamed falls silent for ``gap_s`` (0.5 s: a wireless
 dropout, a reader or a whole process stalled on a busy machine). Otherwise a hold counted
 frames without samples, and a sensor silent for half the N-pose came out uncalibrated, or
 every sensor, with "no data". A sensor never heard from is waited for ``wait_all_s`` at the
@@ -99,7 +99,7 @@ class GuidedCalibration:
     def __init__(self, sites: Sequence[str], protocol: str = "walk", countdown: float = 3.0, timeout: float = 20.0,
                  still_dps: float = 20.0, moved_dps: float = 35.0, move_dps: float = 45.0, move_acc: float = 1.0,
                  limits: StillnessLimits | None = None, fps: float = 60.0, origin: float | None = None,
-                 gap_s: float = 0.3, wait_all_s: float = 3.0) -> None:
+                 gap_s: float = 0.5, wait_all_s: float = 3.0) -> None:
         if protocol not in PROTOCOLS:
             raise ValueError(f"unknown calibration protocol {protocol!r}; choose {' or '.join(PROTOCOLS)}")
         self.sites = tuple(sites)

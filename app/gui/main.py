@@ -562,7 +562,9 @@ def run_window(setup_window, args: Any = None) -> int:
                 hub = live.session.hub if live is not None else None
                 win.cost.write(stats, shown, {
                     "pipeline": live.perf() if live is not None else None,
-                    "hub": None if hub is None else hub.wait_status()})
+                    "hub": None if hub is None else hub.wait_status(),
+                    # why no pose was shown, when none was: the guided calibration's state
+                    "calibration": live.session.guided.status() if live is not None else None})
             shot = getattr(args, "screenshot", None)
             if shot:
                 Path(shot).parent.mkdir(parents=True, exist_ok=True)
