@@ -20,11 +20,12 @@ when one exceeds ``moved_dps``. The window found is then checked by the same sti
 measures as offline calibration.
 
 A still step holds on data, not on the clock: it starts holding only once every sensor
-streams, and starts again when one that streamed falls silent for ``gap_s`` (0.5 s: a wireless
-dropout, a reader or a whole process stalled on a busy machine). Otherwise a hold counted
-frames without samples, and a sensor silent for half the N-pose came out uncalibrated, or
-every sensor, with "no data". A sensor never heard from is waited for ``wait_all_s`` at the
-first still step and then left out, as before (the quality report names it).
+streams, and while one that streamed is silent for more than ``gap_s`` (0.5 s: a wireless
+dropout, a reader or a whole process stalled on a busy machine) the hold pauses, and goes on
+once it is back. A hold that counted the clock took frames without samples, and a sensor
+silent for half the N-pose came out uncalibrated, or every sensor, with "no data". A sensor
+never heard from is waited for ``wait_all_s`` at the first still step and then left out, as
+before (the quality report names it).
 
 A walk also shows in the acceleration: a trunk sensor turns at 20-40 deg/s in a normal walk,
 under ``move_dps``, but its free acceleration swings by ~2 m/s^2 (spread over the last 0.5 s).
@@ -111,7 +112,7 @@ class GuidedCalibration:
         self.move_acc = move_acc  # m/s^2: free-acceleration spread (0.5 s) that reads as walking
         self.limits = limits or StillnessLimits()
         self.fps = fps
-        self.gap_s = gap_s  # s of silence from a sensor that streamed that restarts a still hold
+        self.gap_s = gap_s  # s of silence from a sensor that streamed that pauses a still hold
         self.wait_all_s = wait_all_s  # s the first still step waits for a sensor never heard from
         self.reset(origin)
 
@@ -143,6 +144,8 @@ class GuidedCalibration:
         self._phase_t = t
         self._step_t = t
         self._hold_from: int | None = None
+        self._held = 0.0  # s a still hold has held with every sensor streaming
+        self._held_t: float | None = None
         self._move_from: int | None = None
         self._restarts = 0
         self._unsteady = np.zeros(len(self.sites))  # frames each sensor was above still_dps in this step
@@ -192,7 +195,9 @@ class GuidedCalibration:
         if self.phase == "countdown" and t is not None and self._phase_t is not None:
             cd = max(self.countdown_s - (t - self._phase_t), 0.0)
         held = 0.0
-        if self.phase in ("holding", "settling") and self._hold_from is not None and self._frames:
+        if self.phase == "holding":
+            held = self._held
+        elif self.phase == "settling" and self._hold_from is not None and self._frames:
             held = self._frames[-1][0] - self._frames[self._hold_from][0]
         speeds = {s: round(float(v), 1) for s, v in zip(self.sites, self._speed)}
         moving = [s for s, v in speeds.items() if v > self.moved_dps]
@@ -275,20 +280,24 @@ class GuidedCalibration:
             if silent.any():
                 self.message = f"waiting for data from {', '.join(np.array(self.sites)[silent])}"
             elif np.all(self._speed < self.still_dps):
-                self.phase, self._hold_from = "holding", i
+                self.phase, self._hold_from, self._held, self._held_t = "holding", i, 0.0, t
                 if self.message.startswith("waiting for data"):
                     self.message = ""
         elif self.phase == "holding":
-            if silent.any():
-                self._restarts += 1
-                self.message = f"waiting for data from {', '.join(np.array(self.sites)[silent])}"
-                self.phase, self._hold_from = "waiting_still", None
-            elif fast.any():
+            if fast.any():
                 self._restarts += 1
                 self.message = f"{', '.join(np.array(self.sites)[fast])} moved: hold still"
                 self.phase, self._hold_from = "waiting_still", None
-            elif t - self._frames[self._hold_from][0] >= step.seconds:
-                self._data[step.name] = self._arrays(self._hold_from, i + 1)
+                return None
+            if silent.any():  # paused: what was held before the gap stands
+                self.message = f"waiting for data from {', '.join(np.array(self.sites)[silent])}"
+            else:
+                self._held += t - self._held_t
+                if self.message.startswith("waiting for data"):
+                    self.message = ""
+            self._held_t = t
+            if self._held >= step.seconds:
+                self._data[step.name] = self._arrays(self._hold_from, i + 1, drop_empty=True)
                 self.message = ""
                 return self._next(t)
         elif self.phase == "waiting_move":
@@ -355,8 +364,13 @@ class GuidedCalibration:
         return cal
 
     # ------------------------------------------------------------------ the maths
-    def _arrays(self, a: int, b: int) -> tuple[np.ndarray, ...]:
+    def _arrays(self, a: int, b: int, drop_empty: bool = False) -> tuple[np.ndarray, ...]:
+        """The frames a..b of the step; ``drop_empty``: without the frames in which no
+        sensor sent (a still window's gaps, which carry nothing and would count against
+        every sensor's share of the window)."""
         rows = self._frames[a:b]
+        if drop_empty:
+            rows = [r for r in rows if r[5].any()] or rows
         return tuple(np.stack([r[k] for r in rows]) for k in range(1, 6))
 
     def _calibrate(self) -> Calibration:

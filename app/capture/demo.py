@@ -182,6 +182,9 @@ class DemoRun:
     def start(self) -> DemoRun:
         sim = self.spec.simulator
         try:
+            # the model's first call (seconds on a busy machine) before the simulated subject's
+            # clock starts: done after it, it ate the lead-in, and the guided N-pose ran into the walk
+            self.session.pipeline.warm_up()
             sim.start()
             if self.spec.truth_path is not None:
                 self.truth_sink.truth = read_truth(self.spec.truth_path)

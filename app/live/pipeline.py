@@ -218,6 +218,7 @@ class Pipeline:
         # a calibration was in use and has been dropped, and the first frame that went back
         # to the calibrator has not been announced yet (see _calibrating)
         self._had_calibration = False
+        self._warmed = False  # warm_up done
         self.set_active_sites(active_sites if active_sites is not None else self.sites, insoles)
         if calibration is not None:
             self.set_calibration(calibration, t=0.0)
@@ -248,10 +249,15 @@ class Pipeline:
 
     def warm_up(self) -> None:
         """The model's first call, its answer thrown away (``Poser.warm_up``): the runtime
-        builds its graph and sizes its buffers there rather than on a live frame."""
+        builds its graph and sizes its buffers there rather than on a live frame. Once per
+        pipeline: a front end that starts a simulated subject warms up before it (its
+        N-pose clock starts with it), and the session's start then finds it done."""
+        if self._warmed:
+            return
         warm_up = getattr(self.poser, "warm_up", None)
         if warm_up is not None:
             warm_up()
+        self._warmed = True
 
     def set_calibration(self, calibration: Calibration, t: float) -> None:
         """Use ``calibration`` from now on: the poser restarts from a standing history (the

@@ -41,3 +41,26 @@ def test_the_model_is_warm_before_the_devices_open(monkeypatch):
         session.start()
     assert order == ["warm up", "devices open"]
     assert session.started_at is not None  # the guided steps' clock: set just before the devices open
+
+
+def test_the_demo_warms_up_before_its_simulated_subject_starts_and_once(monkeypatch, tmp_path):
+    """The demo's simulated subject stands in its N-pose from the moment its process is up:
+    a warm-up after that (seconds on a busy machine) ate the lead-in, and the guided N-pose
+    ran into the walk ("N-pose: not still"). The session's start then finds it done."""
+    from app.capture.demo import DemoConfig, DemoRun, demo_spec
+
+    run = DemoRun(DemoConfig(seconds=5.0, threads=1), demo_spec(DemoConfig(seconds=5.0, threads=1), tmp_path))
+    order: list[str] = []
+    warm_up = run.session.poser.warm_up
+    monkeypatch.setattr(run.session.poser, "warm_up", lambda: (order.append("warm up"), warm_up())[-1])
+
+    def sim_start(*args, **kwargs):
+        order.append("simulator")
+        raise Stop
+
+    monkeypatch.setattr(run.spec.simulator, "start", sim_start)
+    with pytest.raises(Stop):
+        run.start()
+    assert order == ["warm up", "simulator"]
+    run.session.pipeline.warm_up()  # as CaptureSession.start calls it: already done
+    assert order == ["warm up", "simulator"]
