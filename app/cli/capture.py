@@ -124,14 +124,6 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"imucap capture: {exc}", file=sys.stderr)
         return 2
-    if args.wait:
-        from app.capture.waiting import wait_for_devices
-
-        try:
-            wait_for_devices(setup.urls(), args.wait, say=lambda m: print(f"imucap capture: {m}", file=sys.stderr))
-        except (OSError, ValueError) as exc:
-            print(f"imucap capture: {exc}", file=sys.stderr)
-            return 2
     headless = args.headless or not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
     term = _Terminal()
     options = CaptureOptions(record=record, calibration=cal, countdown=args.countdown, timeout=args.timeout,
@@ -143,6 +135,17 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, OSError) as exc:
         print(f"imucap capture: {exc}", file=sys.stderr)
         return 2
+    # the model's first call (its runtime's build: seconds on a busy machine) while the devices
+    # are switched on, not once they stream: a subject already in the N-pose waits less
+    session.pipeline.warm_up()
+    if args.wait:
+        from app.capture.waiting import wait_for_devices
+
+        try:
+            wait_for_devices(setup.urls(), args.wait, say=lambda m: print(f"imucap capture: {m}", file=sys.stderr))
+        except (OSError, ValueError) as exc:
+            print(f"imucap capture: {exc}", file=sys.stderr)
+            return 2
     if not headless:
         from app.gui.capture_window import run_capture_window
 

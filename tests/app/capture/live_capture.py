@@ -2,11 +2,10 @@
 capture tests run them (``SOLO_MODULES``, tests/conftest.py), each test's capture ended as
 soon as what it asserts on is there.
 
-The capture starts first, with ``--wait``: it imports what it needs while the simulator
-synthesizes its session, and opens the devices as soon as they appear. Its process imports
-torch before it waits (``CAPTURE``), so that what is left to do once the devices are there
-is building the poser: the simulated subject's lead-in (N-pose before the protocol) only has
-to cover that, not the capture's whole start. The capture then runs until ``done()`` says so
+The capture starts first, with ``--wait``: it loads the model and makes its first call
+(``Pipeline.warm_up``) while the simulator synthesizes its session, and opens the devices as
+soon as they appear, so the simulated subject's lead-in (N-pose before the protocol) only has
+to cover the devices' opening, not the capture's whole start. The capture then runs until ``done()`` says so
 (the session played out, enough poses recorded) and is ended with Ctrl-C, as a user ends it.
 """
 
@@ -25,9 +24,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 CLI = [sys.executable, "-m", "app.cli.main"]
-# `imucap capture` with torch imported before the command runs (the CLI imports it when the
-# capture builds its poser, after --wait): otherwise the same process and arguments
-CAPTURE = [sys.executable, "-c", "import sys, torch; from app.cli.main import main; sys.exit(main(sys.argv[1:]))"]
 SIM_READY_S = 180.0  # the simulator's synthesis of the session on a busy machine
 ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}
 
@@ -109,7 +105,7 @@ def run_capture(capture_args: list[str], sim_args: list[str], done: Callable[[Si
     once ``done(sim)()`` holds the capture gets Ctrl-C (with a window, ``done`` is None: it
     quits by its own ``--quit-after``). ``ceiling`` bounds the whole run."""
     with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
-        cmd = [*CAPTURE, "capture", "--wait", "120", *capture_args]
+        cmd = [*CLI, "capture", "--wait", "120", *capture_args]
         cap = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=out, stderr=err, text=True, env=ENV)
         sim = None
         try:
