@@ -5,7 +5,6 @@ inference thread drains it through the Pipeline; the GUI only reads ``latest()``
 
 from __future__ import annotations
 
-import sys
 import threading
 import time
 import traceback
@@ -17,13 +16,13 @@ from app.live.pipeline import LivePose, Pipeline, Sink
 from app.live.sources import FrameSource
 from drivers.hub import HubFrame
 
-SWITCH_INTERVAL_S = 0.02
-"""How long a Python thread may hold the interpreter lock before it must offer it (Python's
-default: 5 ms). A live process has several Python threads: the inference thread, the hub's
-readers and ingest, and a window's GUI thread. On a busy machine each forced hand-over can
-wait a scheduler slice, and a pose makes many of them between its native calls. What 20 ms
-changed beside busy processes and idle, and the command that measures it: docs/window.md,
-"What the window costs"."""
+# Python's switch interval stays at its default (5 ms). Raised to 20 ms, the window's poses came
+# sooner beside busy processes, but the hub's one selector thread, which hands the interpreter
+# over at every select and read, waited up to 20 ms each time behind the inference and hub
+# threads: beside the test suite the serial and UDP sensors of a capture went silent together
+# for 0.5-5 s (6-10 % of their samples lost, calibrations failed) while the CAN ones, on threads
+# of their own, lost 0.2 %. A reader loop beside two busy Python threads: worst gap 98 ms at
+# 5 ms, 826 ms at 20 ms (benchmarks/selector_gil.py; docs/window.md).
 
 
 class LivePipeline:
@@ -71,8 +70,6 @@ class LivePipeline:
         a caller that already did (``Pipeline.warm_up``) before opening its devices says False."""
         if warm_up:
             self.pipeline.warm_up()
-        if sys.getswitchinterval() < SWITCH_INTERVAL_S:
-            sys.setswitchinterval(SWITCH_INTERVAL_S)
         self._stop.clear()
         self._threads = [
             threading.Thread(target=self._guard, args=(self._ingest,), name="pipeline-ingest", daemon=True),
