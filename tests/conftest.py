@@ -61,10 +61,11 @@ REALTIME_MODULES = {"sim_devices/test_suit.py", "drivers/test_batched.py",
 
 
 # Separate processes in real time (a simulator, `imucap capture`) whose figures (a calibration
-# from integrated accelerations, poses per second) depend on the cores being free: with another
-# CPU-bound test at the same priority the capture's walk calibration put a CAN wrist 10-20 deg
-# off. Alone, after the others: beside them, even above them in priority, their guided N-pose
-# got no data in three of four fresh clones' runs. Their own replays and evaluates run niced
+# from integrated accelerations, poses per second) depend on the cores: with another CPU-bound
+# test at the same priority the capture's walk calibration put a CAN wrist 10-20 deg off. One at a
+# time, beside the realtime modules and above the rest (scripts/test.sh). Their guided N-pose got
+# no data beside the others until the live process left Python's switch interval at 5 ms and a
+# still hold paused through gaps (docs/testing.md). Their own replays and evaluates run niced
 # (tests/app/capture/live_capture.py).
 SOLO_MODULES = {"app/capture/test_capture_e2e.py", "test_readme.py", "app/capture/test_replay_reproduces_capture.py",
                 "app/capture/test_capture_wireless.py", "app/capture/test_capture_vr.py"}
