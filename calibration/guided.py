@@ -20,12 +20,15 @@ when one exceeds ``moved_dps``. The window found is then checked by the same sti
 measures as offline calibration.
 
 A still step holds on data, not on the clock: it starts holding only once every sensor
-streams, and while one that streamed is silent for more than ``gap_s`` (0.5 s: a wireless
-dropout, a reader or a whole process stalled on a busy machine) the hold pauses, and goes on
-once it is back. A hold that counted the clock took frames without samples, and a sensor
-silent for half the N-pose came out uncalibrated, or every sensor, with "no data". A sensor
-never heard from is waited for ``wait_all_s`` at the first still step and then left out, as
-before (the quality report names it).
+streams (none silent for more than ``gap_s``, 0.5 s), counts only frames that carry data
+(a reader or a whole process stalled on a busy machine leaves frames with none), and ends
+once it has held ``seconds`` with every sensor in enough of those frames for the calibration
+(``StillnessLimits.min_fraction``: a flaky wireless link holds longer; after twice the
+step's time the calibration's own check decides). A hold that
+counted the clock took frames without samples, and a sensor silent for half the N-pose came
+out uncalibrated, or every sensor, with "no data". A sensor never heard from is waited for
+``wait_all_s`` at the first still step and then left out, as before (the quality report
+names it).
 
 A walk also shows in the acceleration: a trunk sensor turns at 20-40 deg/s in a normal walk,
 under ``move_dps``, but its free acceleration swings by ~2 m/s^2 (spread over the last 0.5 s).
@@ -112,7 +115,7 @@ class GuidedCalibration:
         self.move_acc = move_acc  # m/s^2: free-acceleration spread (0.5 s) that reads as walking
         self.limits = limits or StillnessLimits()
         self.fps = fps
-        self.gap_s = gap_s  # s of silence from a sensor that streamed that pauses a still hold
+        self.gap_s = gap_s  # s of silence from a sensor that streamed before a still hold may start
         self.wait_all_s = wait_all_s  # s the first still step waits for a sensor never heard from
         self.reset(origin)
 
@@ -144,8 +147,10 @@ class GuidedCalibration:
         self._phase_t = t
         self._step_t = t
         self._hold_from: int | None = None
-        self._held = 0.0  # s a still hold has held with every sensor streaming
+        self._held = 0.0  # s of a still hold's frames that carry data
         self._held_t: float | None = None
+        self._hold_frames = 0  # a still hold's frames with data, and in how many each sensor is present
+        self._hold_present = np.zeros(len(self.sites))
         self._move_from: int | None = None
         self._restarts = 0
         self._unsteady = np.zeros(len(self.sites))  # frames each sensor was above still_dps in this step
@@ -281,6 +286,7 @@ class GuidedCalibration:
                 self.message = f"waiting for data from {', '.join(np.array(self.sites)[silent])}"
             elif np.all(self._speed < self.still_dps):
                 self.phase, self._hold_from, self._held, self._held_t = "holding", i, 0.0, t
+                self._hold_frames, self._hold_present = 0, np.zeros(len(self.sites))
                 if self.message.startswith("waiting for data"):
                     self.message = ""
         elif self.phase == "holding":
@@ -289,14 +295,20 @@ class GuidedCalibration:
                 self.message = f"{', '.join(np.array(self.sites)[fast])} moved: hold still"
                 self.phase, self._hold_from = "waiting_still", None
                 return None
-            if silent.any():  # paused: what was held before the gap stands
-                self.message = f"waiting for data from {', '.join(np.array(self.sites)[silent])}"
-            else:
-                self._held += t - self._held_t
-                if self.message.startswith("waiting for data"):
-                    self.message = ""
+            ok = self._frames[-1][5]
+            if ok.any():  # a frame with data: it counts; one with none (every sensor silent) does not
+                self._held += min(t - self._held_t, 0.1)
+                self._hold_frames += 1
+                self._hold_present += ok
             self._held_t = t
-            if self._held >= step.seconds:
+            heard = np.isfinite(self._last_seen)
+            short = heard & (self._hold_present < self.limits.min_fraction * max(self._hold_frames, 1))
+            self.message = (f"waiting for data from {', '.join(np.array(self.sites)[short | silent])}"
+                            if (short | silent).any() else "")
+            elapsed = t - self._frames[self._hold_from][0]
+            # held long enough with data, and every sensor in enough of it; a sensor that stays short is
+            # left to the calibration's own check after twice the step (used if in half, else left out)
+            if self._held >= step.seconds and (not short.any() or elapsed >= 2 * step.seconds):
                 self._data[step.name] = self._arrays(self._hold_from, i + 1, drop_empty=True)
                 self.message = ""
                 return self._next(t)

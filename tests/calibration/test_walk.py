@@ -215,10 +215,10 @@ def _feed_with_silence(g: GuidedCalibration, sig, silent: np.ndarray) -> None:
             return
 
 
-def test_a_still_hold_pauses_while_every_sensor_is_silent(long_npose):
+def test_a_still_hold_counts_only_frames_with_data(long_npose):
     """Every sensor silent for 2 s, 1 s into the N-pose's hold (a stalled process on a busy
     machine): the hold counted those frames, and the N-pose came out with no data from any
-    sensor. It pauses and goes on once they stream: 3 s held with data, the gap left out."""
+    sensor. It goes on once they stream: 3 s held with data, the gap left out."""
     sig, truth = long_npose
     silent = np.zeros((len(sig), len(SITES)), bool)
     silent[int(4.0 * sig.fps):int(6.0 * sig.fps)] = True
@@ -226,8 +226,7 @@ def test_a_still_hold_pauses_while_every_sensor_is_silent(long_npose):
     _feed_with_silence(g, sig, silent)
     assert g.done, g.status()
     present = g._data["npose"][4]
-    # 3 s held, of which up to gap_s before the silence was noticed: frames with data only
-    assert present.all() and len(present) >= (3.0 - g.gap_s) * sig.fps - 2
+    assert present.all() and len(present) >= 3.0 * sig.fps - 2  # 3 s of frames with data, none without
     assert g.calibration.valid.all() and segment_errors(g.calibration, sig, truth).max() < 3.0
 
 
@@ -251,3 +250,18 @@ def test_a_sensor_that_stops_streaming_in_the_npose_is_named(long_npose):
     _feed_with_silence(g, sig, silent)
     assert g.phase == "failed"
     assert "npose: no data from l_shank" in g.error and "redo 'npose'" in g.error
+
+
+def test_a_flaky_sensor_still_calibrates(long_npose):
+    """The pelvis's link drops for 0.6 s in every 1.3 s through the whole session (a wireless
+    sensor at the edge of its range): the still steps start between its gaps and end with it
+    in enough of their frames, and the calibration uses what came. A hold that paused at
+    every gap never ended within the subject's 3.5 s stand."""
+    sig, truth = long_npose
+    silent = np.zeros((len(sig), len(SITES)), bool)
+    t = np.arange(len(sig)) / sig.fps
+    silent[:, SITES.index("pelvis")] = (t % 1.3) >= 0.7
+    g = GuidedCalibration(SITES, "walk")
+    _feed_with_silence(g, sig, silent)
+    assert g.done, g.status()
+    assert g.calibration.valid.all() and segment_errors(g.calibration, sig, truth).max() < 3.0
