@@ -62,11 +62,10 @@ REALTIME_MODULES = {"sim_devices/test_suit.py", "drivers/test_batched.py",
 
 # Separate processes in real time (a simulator, `imucap capture`) whose figures (a calibration
 # from integrated accelerations, poses per second) depend on the cores: with another CPU-bound
-# test at the same priority the capture's walk calibration put a CAN wrist 10-20 deg off. One at a
-# time, beside the realtime modules and above the rest (scripts/test.sh). Their guided N-pose got
-# no data beside the others until the live process left Python's switch interval at 5 ms and a
-# still hold paused through gaps (docs/testing.md). Their own replays and evaluates run niced
-# (tests/app/capture/live_capture.py).
+# test at the same priority the capture's walk calibration put a CAN wrist 10-20 deg off. Alone,
+# after the others (scripts/test.sh): beside them a capture's serial and UDP sensors lose samples in
+# bursts and 1-2 of these tests failed in about half the runs (docs/testing.md). Their own replays
+# and evaluates run niced (tests/app/capture/live_capture.py).
 SOLO_MODULES = {"app/capture/test_capture_e2e.py", "test_readme.py", "app/capture/test_replay_reproduces_capture.py",
                 "app/capture/test_capture_wireless.py", "app/capture/test_capture_vr.py"}
 
