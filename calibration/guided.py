@@ -24,11 +24,10 @@ streams (none silent for more than ``gap_s``, 0.5 s), counts only frames that ca
 (a reader or a whole process stalled on a busy machine leaves frames with none), and ends
 once it has held ``seconds`` with every sensor in enough of those frames for the calibration
 (``StillnessLimits.min_fraction``: a flaky wireless link holds longer; after twice the
-step's time the calibration's own check decides). A hold that
-counted the clock took frames without samples, and a sensor silent for half the N-pose came
-out uncalibrated, or every sensor, with "no data". A sensor never heard from is waited for
-``wait_all_s`` at the first still step and then left out, as before (the quality report
-names it).
+step's time the calibration's own check decides). A hold that counted the clock took frames
+without samples, and a sensor silent for half the N-pose came out uncalibrated, or every
+sensor, with "no data". A sensor never heard from is waited for ``wait_all_s`` at the first
+still step and then left out, as before (the quality report names it).
 
 A walk also shows in the acceleration: a trunk sensor turns at 20-40 deg/s in a normal walk,
 under ``move_dps``, but its free acceleration swings by ~2 m/s^2 (spread over the last 0.5 s).
@@ -146,14 +145,17 @@ class GuidedCalibration:
         self.phase = "countdown" if countdown and self.countdown_s > 0 else self._first_phase()
         self._phase_t = t
         self._step_t = t
-        self._hold_from: int | None = None
-        self._held = 0.0  # s of a still hold's frames that carry data
-        self._held_t: float | None = None
-        self._hold_frames = 0  # a still hold's frames with data, and in how many each sensor is present
-        self._hold_present = np.zeros(len(self.sites))
+        self._begin_hold(None, t)
         self._move_from: int | None = None
         self._restarts = 0
         self._unsteady = np.zeros(len(self.sites))  # frames each sensor was above still_dps in this step
+
+    def _begin_hold(self, index: int | None, t: float | None) -> None:
+        """A still hold from frame ``index`` (None: none yet): the time it has held with data
+        and, over its frames with data, in how many each sensor is present."""
+        self._hold_from = index
+        self._held, self._held_t = 0.0, t
+        self._hold_frames, self._hold_present = 0, np.zeros(len(self.sites))
 
     def _first_phase(self) -> str:
         return "waiting_still" if self.step.kind == "still" else "waiting_move"
@@ -285,8 +287,8 @@ class GuidedCalibration:
             if silent.any():
                 self.message = f"waiting for data from {', '.join(np.array(self.sites)[silent])}"
             elif np.all(self._speed < self.still_dps):
-                self.phase, self._hold_from, self._held, self._held_t = "holding", i, 0.0, t
-                self._hold_frames, self._hold_present = 0, np.zeros(len(self.sites))
+                self.phase = "holding"
+                self._begin_hold(i, t)
                 if self.message.startswith("waiting for data"):
                     self.message = ""
         elif self.phase == "holding":

@@ -245,8 +245,7 @@ class MainWindow(QtWidgets.QMainWindow):
             s = session or CaptureSession(setup, options or CaptureOptions())
             sim = simulation
             try:
-                if make_simulation is not None or (sim is not None and restart_simulation):
-                    s.pipeline.warm_up()  # before the simulated subject's clock starts (DemoRun.start)
+                s.pipeline.warm_up()  # before a simulated subject's clock starts (DemoRun.start); once
                 if make_simulation is not None:
                     sim = make_simulation()
                 elif sim is not None and restart_simulation:
