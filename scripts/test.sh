@@ -21,16 +21,13 @@ fi
 # every test module again (half of a collection's CPU) and each CLI subprocess compiled the
 # package anew
 unset PYTHONDONTWRITEBYTECODE
-# The realtime modules and the rest at the same time, each at its priority, then the solo captures alone
-# (tests/conftest.py sorts the tests; docs/testing.md):
+# Three runs at the same time, each at its priority (tests/conftest.py sorts the tests; docs/testing.md):
 # - realtime, nice 0, one worker: the tests that must keep up in real time (devices streaming, the demo,
 #   the windows); they mostly wait on the clock;
-# - rest, nice 10, two workers: everything else, on the cores the realtime tests leave (the scheduler
-#   weighs nice 0 / 10 as 1024 / 110);
-# - then solo, alone: the captures in a process of their own whose figures (a calibration, a score
-#   against the truth) need free cores. Beside the others (the whole script 9:30-9:40 from a fresh clone)
-#   a capture's serial and UDP sensors still lose 1-16 % of their samples in bursts, and 1-2 of these
-#   tests failed in about half the runs, at nice 0 and at nice -5 alike (docs/testing.md).
+# - solo, nice 0, one worker: the captures in a process of their own whose figures (a calibration, a
+#   score against the truth) need a core, one at a time;
+# - rest, nice 10, two workers: everything else, on the cores the others leave (the scheduler weighs
+#   nice 0 / 10 as 1024 / 110).
 # Each run has its own X server (-n), temporary folder and log; the logs are printed at the end.
 # pytest's 5 means "nothing collected" (a -k that leaves a run empty); each run has a ceiling too
 # (pytest-timeout covers a test, not a worker that never exits).
@@ -50,9 +47,9 @@ run() {  # run NAME NICE DISPLAY WORKERS MARKERS [pytest args]
 }
 DISPLAY_BASE=$((100 + RANDOM % 300))
 run realtime 0 "$DISPLAY_BASE" 1 "realtime" "$@" &
+run solo 0 $((DISPLAY_BASE + 600)) 1 "solo" "$@" &
 run rest 10 $((DISPLAY_BASE + 300)) 2 "not solo and not realtime" "$@" &
 wait
-run solo 0 $((DISPLAY_BASE + 600)) 1 "solo" "$@"
 ok=0
 for name in realtime rest solo; do
   echo "=== $name ($(cat "$LOGS/$name.rc" 2>/dev/null || echo none))"

@@ -57,7 +57,8 @@ REALTIME_MODULES = {"sim_devices/test_suit.py", "drivers/test_batched.py",
                     "app/cli/test_bench_latency.py", "sim_devices/test_xsens_can_twin.py",
                     "drivers/xsens_can/test_shared_bus.py", "app/gui/test_outdoor_view.py", "app/streams/test_cli.py",
                     "sim_devices/test_wireless_twins.py", "test_lean_install.py", "app/capture/test_simulate_vr.py",
-                    "drivers/test_ximu3_loss.py", "drivers/test_ximu3_tcp.py"}
+                    "drivers/test_ximu3_loss.py", "drivers/test_ximu3_tcp.py",
+                    "drivers/test_hub_readers.py"}
 
 
 # Separate processes in real time (a simulator, `imucap capture`) whose figures (a calibration

@@ -24,6 +24,7 @@ answer as it is.
 
 from __future__ import annotations
 
+import gc
 import time
 import traceback
 from collections import deque
@@ -251,12 +252,21 @@ class Pipeline:
         """The model's first call, its answer thrown away (``Poser.warm_up``): the runtime
         builds its graph and sizes its buffers there rather than on a live frame. Once per
         pipeline: a front end that starts a simulated subject warms up before it (its
-        N-pose clock starts with it), and the session's start then finds it done."""
+        N-pose clock starts with it), and the session's start then finds it done.
+
+        Then what the process holds so far (the model, torch, the modules: ~210,000 objects)
+        is frozen out of the garbage collector's full passes (``gc.freeze``). A full pass
+        holds the interpreter while it walks every tracked object, and with it every reader
+        thread: in a capture with the walk calibration two of them took 96-116 ms each, none
+        once frozen (``benchmarks/capture_drops.py`` times a capture's collections). A cycle
+        among the frozen objects that becomes garbage later stays until the process ends."""
         if self._warmed:
             return
         warm_up = getattr(self.poser, "warm_up", None)
         if warm_up is not None:
             warm_up()
+        gc.collect()
+        gc.freeze()
         self._warmed = True
 
     def set_calibration(self, calibration: Calibration, t: float) -> None:

@@ -324,7 +324,10 @@ class Hub:
         return self._site_rings[site]
 
     def poll(self, now: float | None = None) -> list[HubFrame]:
-        """All grid frames that are due (``now - latency``), oldest first."""
+        """All grid frames that are due (``now - latency``), oldest first. The devices the
+        selector reads are read first (``Readers.catch_up``): a stall of the process must not
+        decide which of the samples it held up make their frames."""
+        self.readers.catch_up()
         self._drain()
         now = self.clock() if now is None else now
         self._relax(now)

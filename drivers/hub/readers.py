@@ -78,6 +78,10 @@ class Readers:
         self.selector = selector
         self._stop = stop_event
         self.selector_thread: threading.Thread | None = None
+        self._selectable: list[Track] = []
+        # the selector's scan and reads, and ``catch_up``'s, one at a time: a device's decoder
+        # is not to be read from two threads
+        self._read_lock = threading.Lock()
 
     def start(self) -> None:
         selectable: list[Track] = []
@@ -88,6 +92,7 @@ class Readers:
                 selectable.append(tr)
             else:
                 tr.thread = self._spawn(tr, until_selectable=False)
+        self._selectable = selectable
         if selectable:
             self.selector_thread = threading.Thread(
                 target=self._select, args=(selectable,), name="hub-selector", daemon=True
@@ -133,22 +138,8 @@ class Readers:
         ``latency``, so a sample still reaches the frame it belongs to.
         """
         while not self._stop.is_set():
-            fds: dict[int, Track] = {}
-            ready: list[Track] = []
-            for tr in tracks:
-                if tr.thread is not None:
-                    if tr.thread.is_alive():
-                        continue  # being reconnected by its own thread
-                    tr.thread = None
-                dev = tr.device
-                fd = dev.fileno() if dev.is_open else None
-                if fd is None:
-                    if dev.is_open:
-                        tr.thread = self._spawn(tr, until_selectable=True)
-                    continue
-                if dev.has_buffered():
-                    ready.append(tr)
-                fds[fd] = tr
+            with self._read_lock:
+                fds, ready = self._scan(tracks)
             if not fds:
                 self._stop.wait(0.05)
                 continue
@@ -156,15 +147,66 @@ class Readers:
                 r, _, _ = select.select(list(fds), [], [], 0.0 if ready else 0.1)
             except (OSError, ValueError):  # a descriptor closed under us: look again
                 r = []
-                ready = [tr for tr in fds.values()]
+                ready = list(fds.values())
             ready.extend(fds[fd] for fd in r if fds[fd] not in ready)
-            for tr in ready:
-                batch = tr.device.read_many(0.0)
-                self.forward_events(tr)
-                if batch:
-                    self.deliver(tr.name, batch)
+            with self._read_lock:
+                self._read_ready(ready)
             if self.read_interval:
                 time.sleep(self.read_interval)  # cheaper than Event.wait; stop() joins within one interval
+
+    def catch_up(self) -> None:
+        """Read, on the caller's thread, whatever the selector's devices hold right now.
+
+        The hub's ``poll`` calls this before it puts samples on the grid. When the
+        process stalls (a turn on a core it waits for, a collection, a thread that holds
+        the interpreter), the selector and the thread that polls resume together, and
+        whichever ran first decided whether the samples that arrived meanwhile made their
+        frames: beside the test suite a capture's serial and UDP sensors went missing
+        together for 0.2-0.7 s at a time while its CAN sensors, whose threads block on
+        their own queues, did not. Read here first, the samples waiting in the kernel's
+        buffers are on the grid before the frames they belong to go out (their times come
+        from the device clocks, ``ClockModel``, not from when they were read)."""
+        if not self._selectable or self._stop.is_set():
+            return
+        with self._read_lock:
+            fds, ready = self._scan(self._selectable, spawn=False)
+            if not fds:
+                return
+            try:
+                r, _, _ = select.select(list(fds), [], [], 0.0)
+            except (OSError, ValueError):
+                return  # a descriptor closed under us: the selector sorts it out
+            ready.extend(fds[fd] for fd in r if fds[fd] not in ready)
+            self._read_ready(ready)
+
+    def _scan(self, tracks: list[Track], spawn: bool = True) -> tuple[dict[int, Track], list[Track]]:
+        """The descriptors to wait on, and the devices whose own buffers already hold data.
+        A device without a descriptor while open is reconnecting: ``spawn`` gives it a thread
+        of its own until it has one again (the selector does; ``catch_up`` passes it over)."""
+        fds: dict[int, Track] = {}
+        ready: list[Track] = []
+        for tr in tracks:
+            if tr.thread is not None:
+                if tr.thread.is_alive() or not spawn:
+                    continue  # being reconnected by its own thread
+                tr.thread = None
+            dev = tr.device
+            fd = dev.fileno() if dev.is_open else None
+            if fd is None:
+                if dev.is_open and spawn:
+                    tr.thread = self._spawn(tr, until_selectable=True)
+                continue
+            if dev.has_buffered():
+                ready.append(tr)
+            fds[fd] = tr
+        return fds, ready
+
+    def _read_ready(self, ready: list[Track]) -> None:
+        for tr in ready:
+            batch = tr.device.read_many(0.0)
+            self.forward_events(tr)
+            if batch:
+                self.deliver(tr.name, batch)
 
     def forward_events(self, tr: Track) -> None:
         """Pass the device's new connection events on."""

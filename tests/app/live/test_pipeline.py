@@ -216,3 +216,19 @@ def test_frames_passed_over_still_reach_the_sinks_and_the_calibration(session):
     twenty_hz = len(poses) + pipe.stats.poses_skipped
     assert pipe.stats.poses_skipped > 0 and abs(twenty_hz - calibrated / 3) <= 3, (twenty_hz, calibrated)
     assert np.all(np.diff([lp.index for lp in poses]) > 0)
+
+
+def test_warm_up_freezes_the_heap_it_starts_from(session):
+    """What the model, torch and the modules left is frozen out of the collector's full
+    passes (``gc.freeze``), once: a full collection holds the interpreter, so every reader
+    thread, for as long as it walks them (96-116 ms in a capture, docs/testing.md)."""
+    import gc
+
+    _, truth = session
+    gc.unfreeze()
+    pipe = _pipeline(truth)
+    pipe.warm_up()
+    frozen = gc.get_freeze_count()
+    assert frozen > 10_000
+    pipe.warm_up()  # once per pipeline
+    assert gc.get_freeze_count() == frozen
