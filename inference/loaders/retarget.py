@@ -221,6 +221,27 @@ def tpose_rotations(
     return Q
 
 
+# T-pose rotations by rig: they depend on the zero pose alone, and every file of a dataset
+# (Bandai's 2,300, each actor's HDM05 and CMU takes) shares a few rigs; a third of a
+# Bandai file's load was spent finding the same rotations again
+_TPOSE_CACHE: dict[tuple, np.ndarray] = {}
+_TPOSE_CACHE_SIZE = 64
+
+
+def _tpose_rotations_cached(src: SourceSkeleton, jmap: JointMap, W: np.ndarray, ours_to_src: dict[int, int],
+                            src_child: dict[int, list[int]]) -> np.ndarray:
+    key = (tuple(src.names), tuple(src.parents), np.ascontiguousarray(src.rest, float).tobytes(),
+           tuple(sorted((j, np.asarray(e, float).tobytes()) for j, e in src.end_sites.items())),
+           repr(jmap), np.ascontiguousarray(W, float).tobytes())
+    Q = _TPOSE_CACHE.get(key)
+    if Q is None:
+        Q = tpose_rotations(src, jmap, W, ours_to_src, src_child)
+        if len(_TPOSE_CACHE) >= _TPOSE_CACHE_SIZE:
+            _TPOSE_CACHE.pop(next(iter(_TPOSE_CACHE)))
+        _TPOSE_CACHE[key] = Q
+    return Q.copy()
+
+
 def retarget(
     src: SourceSkeleton,
     jmap: JointMap,
@@ -252,7 +273,7 @@ def retarget(
     Wt = W.T
     if template is not None and (template.names != src.names or template.parents != src.parents):
         raise ValueError("a retargeting template must be a skeleton of the same rig (same joints)")
-    Q = tpose_rotations(template or src, jmap, W, ours_to_src, src_child)
+    Q = _tpose_rotations_cached(template or src, jmap, W, ours_to_src, src_child)
     pelvis = ours_to_src[0]
 
     # source T-pose joint positions (FK with Q), root at the origin
