@@ -28,7 +28,8 @@ unset PYTHONDONTWRITEBYTECODE
 #   score against the truth) need a core, one at a time;
 # - rest, nice 10, two workers: everything else, on the cores the others leave (the scheduler weighs
 #   nice 0 / 10 as 1024 / 110).
-# Each run has its own X server (-n), temporary folder and log; the logs are printed at the end.
+# Each run has its own X server (-n), temporary folder and log; the logs are printed at the end. Each
+# collects only its own modules (IMUCAP_TEST_RUN, tests/conftest.py).
 # pytest's 5 means "nothing collected" (a -k that leaves a run empty); each run has a ceiling too
 # (pytest-timeout covers a test, not a worker that never exits).
 LOGS=$(mktemp -d)
@@ -39,7 +40,7 @@ export QT_SCALE_FACTOR=${QT_SCALE_FACTOR:-0.5}
 run() {  # run NAME NICE DISPLAY WORKERS MARKERS [pytest args]
   local name=$1 prio=$2 display=$3 workers=$4 markers=$5; shift 5
   local rc=0
-  nice -n "$prio" timeout -k 30 1500 xvfb-run -a -n "$display" -s "-screen 0 1280x1024x24" \
+  IMUCAP_TEST_RUN=$name nice -n "$prio" timeout -k 30 1500 xvfb-run -a -n "$display" -s "-screen 0 1280x1024x24" \
     .venv/bin/python -m pytest -n "$workers" --dist loadgroup -q -p no:cacheprovider --basetemp "$LOGS/$name" \
     -m "$markers" "$@" >"$LOGS/$name.log" 2>&1 || rc=$?
   [ "$rc" = 5 ] && rc=0

@@ -63,10 +63,9 @@ REALTIME_MODULES = {"sim_devices/test_suit.py", "drivers/test_batched.py",
 
 # Separate processes in real time (a simulator, `imucap capture`) whose figures (a calibration
 # from integrated accelerations, poses per second) depend on the cores: with another CPU-bound
-# test at the same priority the capture's walk calibration put a CAN wrist 10-20 deg off. Alone,
-# after the others (scripts/test.sh): beside them a capture's serial and UDP sensors lose samples in
-# bursts and 1-2 of these tests failed in about half the runs (docs/testing.md). Their own replays
-# and evaluates run niced (tests/app/capture/live_capture.py).
+# test at the same priority the capture's walk calibration put a CAN wrist 10-20 deg off. One at a
+# time, in a run of their own beside the realtime one and the niced rest (scripts/test.sh). Their
+# own replays and evaluates run niced (tests/app/capture/live_capture.py).
 SOLO_MODULES = {"app/capture/test_capture_e2e.py", "test_readme.py", "app/capture/test_replay_reproduces_capture.py",
                 "app/capture/test_capture_wireless.py", "app/capture/test_capture_vr.py"}
 
@@ -75,6 +74,27 @@ SOLO_MODULES = {"app/capture/test_capture_e2e.py", "test_readme.py", "app/captur
 # over both workers per test. The other real-data modules (loading or training on the whole
 # dataset) keep each module on one worker, so its module fixtures are built once.
 DATA_ONE_CORE_MODULES = {"inference/loaders/test_real_data.py", "inference/loaders/test_cmu.py"}
+
+
+# scripts/test.sh names each run's share (``IMUCAP_TEST_RUN``: realtime, solo or rest) so that its
+# workers import only the modules they will run: every worker collected all ~1,400 tests (torch,
+# Qt and the model's modules each time) to deselect most of them by marker
+_RUN_MODULES = {"realtime": REALTIME_MODULES, "solo": SOLO_MODULES}
+
+
+def pytest_ignore_collect(collection_path, config):
+    run = os.environ.get("IMUCAP_TEST_RUN")
+    if run is None or collection_path.suffix != ".py" or not collection_path.name.startswith("test_"):
+        return None
+    try:
+        module = collection_path.relative_to(REPO / "tests").as_posix()
+    except ValueError:
+        return None
+    if run in _RUN_MODULES:
+        return True if module not in _RUN_MODULES[run] else None
+    if run == "rest":
+        return True if module in REALTIME_MODULES or module in SOLO_MODULES else None
+    return None
 
 
 def pytest_collection_modifyitems(config, items):
