@@ -164,8 +164,10 @@ class Readers:
         frames: beside the test suite a capture's serial and UDP sensors went missing
         together for 0.2-0.7 s at a time while its CAN sensors, whose threads block on
         their own queues, did not. Read here first, the samples waiting in the kernel's
-        buffers are on the grid before the frames they belong to go out (their times come
-        from the device clocks, ``ClockModel``, not from when they were read)."""
+        buffers are on the grid before the frames they belong to go out: their times come
+        from the device clocks (``ClockModel``), not from when they were read. A stream
+        with no clock of its own (a BNO08x in RVC mode) is stamped when read, so this
+        helps it only when the thread that polls is running while the selector is not."""
         if not self._selectable or self._stop.is_set():
             return
         with self._read_lock:
