@@ -162,7 +162,7 @@ class Readers:
         the interpreter), the selector and the thread that polls resume together, and
         whichever ran first decided whether the samples that arrived meanwhile made their
         frames: beside the test suite a capture's serial and UDP sensors went missing
-        together for 0.2-0.7 s at a time while its CAN sensors, whose threads block on
+        together for 0.2-1.1 s at a time while its CAN sensors, whose threads block on
         their own queues, did not. Read here first, the samples waiting in the kernel's
         buffers are on the grid before the frames they belong to go out: their times come
         from the device clocks (``ClockModel``), not from when they were read. A stream

@@ -1,6 +1,6 @@
 """The hub's selector thread held up while the grid goes on: the samples that waited in the
 port's buffer still make their frames, because ``poll`` reads the selector's devices first
-(``Readers.catch_up``). Beside the test suite a capture's selector got no turn for 0.2-0.7 s at a
+(``Readers.catch_up``). Beside the test suite a capture's selector got no turn for 0.2-1.1 s at a
 time and its serial and UDP sensors went missing together from those frames (docs/testing.md).
 
 Real parts: a BNO08x RVC twin writing to a pseudo-terminal at 100 Hz, the driver reading it with
