@@ -31,7 +31,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 Array = Any  # np.ndarray or torch.Tensor; typed loosely so torch stays an optional import.
 
@@ -428,15 +427,7 @@ def euler_to_quat(angles: Array, order: str) -> Array:
 
 
 def euler_to_matrix(angles: Array, order: str) -> Array:
-    """Matrix of Euler angles; intrinsic "ZXY" gives ``Rz(a0) @ Rx(a1) @ Ry(a2)``.
-
-    numpy angles of a Tait-Bryan order go through scipy's ``Rotation`` (the same convention:
-    upper case intrinsic, lower case extrinsic), a third of the time of the quaternion
-    product: the motion loaders turn every joint's channels of every file into matrices."""
-    if isinstance(angles, np.ndarray) and len(set(order.lower())) == 3:
-        _parse_order(order)  # the same errors for a bad order
-        a = np.asarray(angles, float)
-        return Rotation.from_euler(order, a.reshape(-1, 3)).as_matrix().reshape(*a.shape[:-1], 3, 3)
+    """Matrix of Euler angles; intrinsic "ZXY" gives ``Rz(a0) @ Rx(a1) @ Ry(a2)``."""
     return quat_to_matrix(euler_to_quat(angles, order))
 
 
