@@ -37,6 +37,12 @@ TRUTH_FORMAT = "imucap-truth"
 # the subject's; the capture's calibration has to find that turn as it finds an IMU's heading.
 VR_FRAME_YAW_DEG = 35.0
 VR_FRAME_ORIGIN = (1.2, -0.8, 0.0)
+# A person told to stand still after the walk stands until the next prompt; the simulated one
+# cannot hear it and plays a fixed timeline. These seconds more of standing than the protocol's
+# own 3.5 s keep the guided stand step inside the stand when the capture runs a second or two
+# behind the subject (a busy machine): with 1 s to spare, a window demo's stand step once began
+# after the subject had walked off (docs/testing.md).
+STAND_MARGIN_S = 1.5
 
 
 @dataclass
@@ -76,7 +82,8 @@ class SimulatedSubject:
         if self.setup.calibration == "walk":
             walk = generate("walk", seconds=6.0, seed=self.seed + 7, height=act.body.height)
             walk = Motion(rot=walk.rot, root=walk.root, fps=walk.fps, body=act.body, name="walk")
-            proto = WalkProtocol(npose=WalkProtocol().npose + self.lead_in)
+            base = WalkProtocol()
+            proto = WalkProtocol(npose=base.npose + self.lead_in, stand=base.stand + STAND_MARGIN_S)
             sig, truth = synthesize_walk_session(act, walk, proto, noise=self.noise, rng=self.seed, sites=sites)
         else:
             proto = Protocol(table=7.0 + self.lead_in, strap=2.0, tpose=6.0, blend=1.0)

@@ -213,13 +213,17 @@ def test_hub_selector_survives_an_unplugged_xbus_and_forwards_events():
             assert hub.readers.selector_thread is not None  # both are served by the selector
             list(hub.frames(duration=0.5))
             sims["pelvis"].disconnect(0.4)
+            skipped = sims["head"].stats["skipped"]
             frames = list(hub.frames(duration=3.0))
             kinds = [e.kind for e in hub.events if e.device_id == "pelvis"]
             assert "disconnected" in kinds and "reconnected" in kinds
             present = np.array([f.present for f in frames])
-            # head kept flowing (what the hub saw, should it not have)
-            assert present[:, 1].mean() > 0.9, (np.flatnonzero(~present[:, 1]), hub.status(), hub.stats,
-                                                [(e.kind, e.device_id, round(e.t, 2)) for e in hub.events])
+            # head kept flowing (what the hub saw, should it not have), but for the ticks its twin, a
+            # thread of this process, was not run to send (a busy machine: a real sensor would have)
+            unsent = 60.0 * (sims["head"].stats["skipped"] - skipped) / sims["head"].rate
+            assert present[:, 1].sum() > 0.9 * len(frames) - unsent, (
+                np.flatnonzero(~present[:, 1]), unsent, hub.status(), hub.stats,
+                [(e.kind, e.device_id, round(e.t, 2)) for e in hub.events])
             assert sims["pelvis"].commands.count(0x10) >= 2  # re-configured after the re-plug
             deadline = time.monotonic() + 2.0
             while hub.tracks["pelvis"].thread is not None and time.monotonic() < deadline:

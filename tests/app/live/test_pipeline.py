@@ -230,5 +230,8 @@ def test_warm_up_freezes_the_heap_it_starts_from(session):
     pipe.warm_up()
     frozen = gc.get_freeze_count()
     assert frozen > 10_000
+    # a second warm-up freezes nothing more: not these 20,000 objects made since (the count may
+    # drop a little meanwhile, as frozen objects another thread held are freed)
+    since = [[] for _ in range(20_000)]  # tracked by the collector, as empty dicts are not
     pipe.warm_up()  # once per pipeline
-    assert gc.get_freeze_count() == frozen
+    assert gc.get_freeze_count() < frozen + len(since) // 2
