@@ -329,18 +329,27 @@ class Pipeline:
             return []
         return self._take(frame, t_start, pose=True)
 
-    def push_newest(self, frames: Sequence[HubFrame]) -> list[LivePose]:
+    def push_newest(self, frames: Sequence[HubFrame],
+                    calls: Sequence[tuple[int, Callable[[Pipeline], Any]]] = ()) -> list[LivePose]:
         """Frames that waited for the live loop, oldest first: each goes in as with ``push``
         (sinks, calibration, resampler), but of the 20 Hz frames they complete only the
         newest is posed; the older ones are skipped as ``pass_over`` skips them
         (``poses_skipped``, ``POSE_SKIPPED_EVENT``), their time already past. A loop that
         keeps up finds one frame at a time and poses every 20 Hz frame; one whose pose came
         late computes the next from the freshest data instead of working through a queue,
-        so it is never more than the one late pose behind."""
+        so it is never more than the one late pose behind. ``calls``: ``(k, fn)``, in order,
+        ``fn(self)`` run before frame ``k`` (``len(frames)``: after the last, before the pose),
+        so that a command given while these frames waited (a recording started or stopped)
+        takes effect where it was given in the stream."""
+        todo = list(calls)
         self._pending = []
         try:
-            for f in frames:
+            for k, f in enumerate(frames):
+                while todo and todo[0][0] <= k:
+                    todo.pop(0)[1](self)
                 self.push(f)
+            for _, fn in todo:
+                fn(self)
         finally:
             pending, self._pending = self._pending, None
         for _index, t20, *_ in pending[:-1]:

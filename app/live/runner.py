@@ -62,7 +62,10 @@ class LivePipeline:
         self._latest: LivePose | None = None
         self._threads: list[threading.Thread] = []
         self.error: BaseException | None = None
-        self._commands: deque[Callable[[Pipeline], Any]] = deque()
+        # each command with the number of frames queued before it was called: it runs after
+        # those frames and before the later ones (``call``)
+        self._commands: deque[tuple[Callable[[Pipeline], Any], int]] = deque()  # (fn, frames before it)
+        self._queued_total = 0  # frames ever put in the queue (dropped ones included)
 
     def start(self, warm_up: bool = True) -> LivePipeline:
         """Start the ingest and inference threads. ``warm_up``: make the model's first call
@@ -102,10 +105,13 @@ class LivePipeline:
         return self._latest
 
     def call(self, fn: Callable[[Pipeline], Any]) -> None:
-        """Run ``fn(pipeline)`` on the inference thread before the next frame (changing the
-        active sites, recalibrating, adding a sink) without locking the chain."""
-        self._commands.append(fn)
+        """Run ``fn(pipeline)`` on the inference thread (changing the active sites,
+        recalibrating, adding or closing a sink) without locking the chain: after every frame
+        queued before the call and before any queued after it. On a busy machine the queue
+        holds a second or more; run ahead of it, a recorder closed at the user's "stop" lost
+        the frames of that second, and one added at "record" gained frames from before."""
         with self._cv:
+            self._commands.append((fn, self._queued_total))
             self._cv.notify_all()
 
     def stats(self) -> dict[str, Any]:
@@ -136,6 +142,7 @@ class LivePipeline:
                             self._q.popleft()
                             self.pipeline.stats.dropped += 1  # under the lock, as the inference thread's
                         self._q.append(f)
+                        self._queued_total += 1
                     self._cv.notify_all()
             wait = self.poll_interval
             if due_in is not None:
@@ -149,27 +156,39 @@ class LivePipeline:
                     self._cv.wait(0.1)
                 batch = list(self._q)
                 self._q.clear()
-            while self._commands:
-                self._commands.popleft()(self.pipeline)
-            if self.max_lag is not None and batch:
-                newest = batch[-1].t
-                late = [f for f in batch if newest - f.t > self.max_lag]
-                with self._cv:  # the ingest thread counts its drops into the same counter
-                    self.pipeline.stats.dropped += len(late)
-                for f in late:  # not reconstructed, but recorded and calibrated from
-                    self.pipeline.pass_over(f)
-                batch = [f for f in batch if newest - f.t <= self.max_lag]
-            if self.max_lag is None:  # every frame posed, however late
-                for f in batch:
-                    if self._stop.is_set():
-                        break
-                    for lp in self.pipeline.push(f):
-                        self._latest = lp
-            elif batch and not self._stop.is_set():
-                # of the 20 Hz frames the batch completes, the newest is posed and the older
-                # ones skipped: a late pose makes the next from fresh data, not a queue
-                for lp in self.pipeline.push_newest(batch):
+                first = self._queued_total - len(batch)  # the number of the batch's first frame
+                # each command before the batch's frame it was called ahead of
+                calls = [(min(max(before - first, 0), len(batch)), fn) for fn, before in self._commands]
+                self._commands.clear()
+            self._work(batch, calls)
+
+    def _work(self, batch: list[HubFrame], calls: list[tuple[int, Callable[[Pipeline], Any]]]) -> None:
+        p = self.pipeline
+        if self.max_lag is None:  # every frame posed, however late
+            for k, f in enumerate(batch):
+                _run_calls(calls, k, p)
+                if self._stop.is_set():
+                    return
+                for lp in p.push(f):
                     self._latest = lp
+            _run_calls(calls, len(batch), p)
+            return
+        newest = batch[-1].t if batch else 0.0
+        n_late = sum(newest - f.t > self.max_lag for f in batch)  # the oldest ones: the hub's frames are in time order
+        with self._cv:  # the ingest thread counts its drops into the same counter
+            p.stats.dropped += n_late
+        for k in range(n_late):  # not reconstructed, but recorded and calibrated from
+            _run_calls(calls, k, p)
+            p.pass_over(batch[k])
+        if n_late == len(batch) or self._stop.is_set():
+            _run_calls(calls, len(batch), p)
+            return
+        # of the 20 Hz frames the rest completes, the newest is posed and the older ones
+        # skipped: a late pose makes the next from fresh data, not a queue
+        rest = batch[n_late:]
+        poses = p.push_newest(rest, calls=[(k - n_late, fn) for k, fn in calls]) if calls else p.push_newest(rest)
+        for lp in poses:
+            self._latest = lp
 
     def wait_for(self, predicate: Callable[[], bool], timeout: float) -> bool:
         """Block until ``predicate()`` or ``timeout`` s (polling; for tests and the CLI)."""
@@ -199,3 +218,9 @@ def close_sink(live: LivePipeline | None, pipeline: Pipeline, sink: Sink, timeou
         live.wait_for(lambda: bool(done), timeout)
     if not done:
         detach(pipeline)
+
+
+def _run_calls(calls: list[tuple[int, Callable[[Pipeline], Any]]], k: int, pipeline: Pipeline) -> None:
+    """Run (and take off the front of ``calls``) the commands due before frame ``k``."""
+    while calls and calls[0][0] <= k:
+        calls.pop(0)[1](pipeline)

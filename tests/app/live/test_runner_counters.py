@@ -65,3 +65,61 @@ def test_every_frame_is_pushed_or_counted_dropped_by_both_threads(session):
     # both threads dropped: the inference thread the late frames it passed over, the ingest thread the rest
     assert len(passed_over) > 0 and pipe.stats.dropped > len(passed_over) and pipe.stats.frames_in > 0
     assert pipe.stats.frames_in + pipe.stats.dropped == total
+
+
+class HandFedSource:
+    """Gives what the test put in, on the next poll."""
+
+    def __init__(self) -> None:
+        self.waiting: list = []
+
+    def poll(self):
+        out, self.waiting = self.waiting, []
+        return out
+
+
+class FrameTimes:
+    def __init__(self) -> None:
+        self.t: list[float] = []
+
+    def on_frame(self, frame) -> None:
+        self.t.append(frame.t)
+
+    def close(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize("max_lag", [0.15, None])
+def test_a_command_takes_effect_where_it_was_given_in_the_stream(session, max_lag):
+    """A sink added while frames wait for a busy inference thread gets the frames that came
+    after, and one taken off gets those that came before (a recording started and stopped on
+    a busy machine holds what was streamed between the two key presses, no more, no less)."""
+    import threading
+
+    frames, body = session
+    pipe = Pipeline(make_poser("floor", body=body), SITES, calibrator=Calibrator(SITES, schedule=PROTO.schedule()))
+    source = HandFedSource()
+    live = LivePipeline(pipe, source, poll_interval=1e-3, max_lag=max_lag).start()
+    gate = threading.Event()
+    sink = FrameTimes()
+    try:
+        live.call(lambda p: gate.wait(30))  # the inference thread busy, as with a slow pose
+
+        def feed(chunk) -> None:
+            n = len(live._q)  # noqa: SLF001 - it only grows while the inference thread is held
+            source.waiting = list(chunk)
+            assert live.wait_for(lambda: len(live._q) == n + len(chunk), 10)  # noqa: SLF001
+
+        feed(frames[:10])
+        live.call(lambda p: p.add_sink(sink))
+        feed(frames[10:25])
+        live.call(lambda p: p.sinks.remove(sink))
+        feed(frames[25:30])
+        gate.set()
+        assert live.wait_for(lambda: not live._q and not live._commands, 10)  # noqa: SLF001
+        live.wait_for(lambda: len(sink.t) >= 15, 2)
+    finally:
+        gate.set()
+        live.stop()
+    assert live.error is None
+    assert sink.t == [f.t for f in frames[10:25]]
