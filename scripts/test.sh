@@ -21,16 +21,13 @@ fi
 # every test module again (half of a collection's CPU) and each CLI subprocess compiled the
 # package anew
 unset PYTHONDONTWRITEBYTECODE
-# The realtime modules and the rest at the same time, each at its priority, then the solo captures alone
-# (tests/conftest.py sorts the tests; docs/testing.md):
+# Three runs at the same time, each at its priority (tests/conftest.py sorts the tests; docs/testing.md):
 # - realtime, nice 0, one worker: the tests that must keep up in real time (devices streaming, the demo,
 #   the windows); they mostly wait on the clock;
-# - rest, nice 10, two workers: everything else, on the cores the realtime tests leave (the scheduler
-#   weighs nice 0 / 10 as 1024 / 110);
-# - then solo, alone: the captures in a process of their own whose figures (a calibration, a score
-#   against the truth) need free cores. All three at once take 9:10-9:50 from a fresh clone, but with the
-#   solo captures at nice 0 beside them a realtime test failed in three of five runs (a window's stand
-#   step never still, a hub's head stream missing its last 0.5 s), docs/testing.md.
+# - solo, nice 0, one worker: the captures in a process of their own whose figures (a calibration, a
+#   score against the truth) need a core, one at a time;
+# - rest, nice 10, two workers: everything else, on the cores the others leave (the scheduler weighs
+#   nice 0 / 10 as 1024 / 110).
 # Each run has its own X server (-n), temporary folder and log; the logs are printed at the end. Each
 # collects only its own modules (IMUCAP_TEST_RUN, tests/conftest.py).
 # pytest's 5 means "nothing collected" (a -k that leaves a run empty); each run has a ceiling too
@@ -51,9 +48,9 @@ run() {  # run NAME NICE DISPLAY WORKERS MARKERS [pytest args]
 }
 DISPLAY_BASE=$((100 + RANDOM % 300))
 run realtime 0 "$DISPLAY_BASE" 1 "realtime" "$@" &
+run solo 0 $((DISPLAY_BASE + 600)) 1 "solo" "$@" &
 run rest 10 $((DISPLAY_BASE + 300)) 2 "not solo and not realtime" "$@" &
 wait
-run solo 0 $((DISPLAY_BASE + 600)) 1 "solo" "$@"
 ok=0
 for name in realtime rest solo; do
   echo "=== $name ($(cat "$LOGS/$name.rc" 2>/dev/null || echo none))"
