@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from .base import CounterTracker, Device, DeviceEvent, DeviceGone, DeviceStats, Sample, Unwrapper
+from .base import CounterTracker, Device, DeviceEvent, DeviceGone, DeviceNotReady, DeviceStats, Sample, Unwrapper
 from .urls import DeviceURL, build_url, parse_url
 
 SCHEMES = ("xbus", "bno08x-rvc", "xsens-can", "dualsense", "moticon-udp", "movella-dot", "ximu3", "vmc-in")
@@ -106,6 +106,7 @@ __all__ = [
     "Device",
     "DeviceEvent",
     "DeviceGone",
+    "DeviceNotReady",
     "DeviceStats",
     "DeviceURL",
     "SCHEMES",

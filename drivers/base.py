@@ -27,6 +27,14 @@ class DeviceGone(OSError):
     """The transport vanished (port unplugged, socket closed). The base reconnects."""
 
 
+class DeviceNotReady(DeviceGone):
+    """The transport opened, but the device on it is not taking what is written to it yet
+    (a serial write that timed out: the other end is not reading). Unlike a port that is
+    not there (a typo in the URL), this is a device that is there but busy or still
+    starting: ``Device.open`` opens it disconnected and the reconnect loop configures it
+    once it reads again."""
+
+
 @dataclass(slots=True)
 class Sample:
     """One decoded measurement of one sensor.
@@ -209,10 +217,22 @@ class Device(ABC):
     # --- lifecycle -------------------------------------------------------------------------------------
     def open(self) -> Device:
         """Open the transport. Raises if the device is not there at all (a typo in
-        the URL must be an error, not an endless reconnect loop)."""
+        the URL must be an error, not an endless reconnect loop); one that is there but not
+        taking writes yet (``DeviceNotReady``) opens disconnected, and reconnects."""
         with self._lock:
             if not self._is_open:
-                self._open()
+                try:
+                    self._open()
+                except DeviceNotReady as exc:
+                    if not self.reconnect:
+                        raise
+                    self._is_open, self._connected = True, False
+                    self._event("opened", self.describe())
+                    self.stats.disconnects += 1
+                    self._backoff = self.backoff_min
+                    self._next_attempt = self.clock() + self._backoff
+                    self._event("disconnected", str(exc))
+                    return self
                 self._is_open = self._connected = True
                 self._event("opened", self.describe())
         return self

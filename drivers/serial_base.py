@@ -15,7 +15,7 @@ from typing import Any
 
 import serial
 
-from .base import Device, DeviceGone
+from .base import Device, DeviceGone, DeviceNotReady
 
 
 class SerialDevice(Device):
@@ -54,6 +54,9 @@ class SerialDevice(Device):
             raise DeviceGone("port closed")
         try:
             self._ser.write(data)
+        except serial.SerialTimeoutException as exc:
+            raise DeviceNotReady(f"write timed out after {self._ser.write_timeout:g} s: {self.port} is not "
+                                 "reading") from exc
         except (serial.SerialException, OSError) as exc:
             raise DeviceGone(f"write failed: {exc}") from exc
 

@@ -100,10 +100,11 @@ def test_a_command_takes_effect_where_it_was_given_in_the_stream(session, max_la
     pipe = Pipeline(make_poser("floor", body=body), SITES, calibrator=Calibrator(SITES, schedule=PROTO.schedule()))
     source = HandFedSource()
     live = LivePipeline(pipe, source, poll_interval=1e-3, max_lag=max_lag).start()
-    gate = threading.Event()
+    gate, held = threading.Event(), threading.Event()
     sink = FrameTimes()
     try:
-        live.call(lambda p: gate.wait(30))  # the inference thread busy, as with a slow pose
+        live.call(lambda p: (held.set(), gate.wait(30)))  # the inference thread busy, as with a slow pose
+        assert held.wait(10)  # and held before any frame is queued
 
         def feed(chunk) -> None:
             n = len(live._q)  # noqa: SLF001 - it only grows while the inference thread is held
