@@ -98,6 +98,7 @@ from inference.poser.models import (
 )
 from inference.poser.pelvis_odometry import PELVIS_INDEX, Odometry, OdometryKernel
 from inference.poser.smoothing import ROOT_SMOOTHING, ROTATION_SMOOTHING, RotationOneEuro, VectorOneEuro
+from inference.poser.stand_prior import StandPrior
 from inference.poser.stride import FOOT_SEGMENTS, SHANK_SITES, StrideScale
 from inference.signals.resample import FPS_MODEL, acc_filter_of
 
@@ -196,6 +197,7 @@ class Poser:
         noise: str | None = None,
         smoothing: bool = True,
         knee_hinge: bool = True,
+        stand_prior: bool = True,
         contact_threshold: float | None = None,
         contact_detector: ContactDetector | str | os.PathLike | None = "default",
         mirror: bool | None = None,
@@ -246,6 +248,8 @@ class Poser:
         self._odometry = OdometryKernel(self.pelvis_odometry) if self.pelvis_odometry is not None else None
         # the floor is by definition the standing pose wherever nothing is measured
         self.knee_hinge = knee_hinge and self.kind != "floor"
+        # a still, upright stand straightens the knees the hinge leaves to the model (stand_prior.py)
+        self._stand_prior = StandPrior() if stand_prior and self.knee_hinge else None
         # output only: the integrated root path (and so every later frame) is unfiltered
         self.smoothing = smoothing
         self._filters = ((VectorOneEuro(FPS_MODEL, ROOT_SMOOTHING), RotationOneEuro(FPS_MODEL, ROTATION_SMOOTHING))
@@ -325,6 +329,8 @@ class Poser:
     # ------------------------------------------------------------------ state
     def reset(self, root_xy0: tuple[float, float] | None = None) -> None:
         """Back to a standing history (e.g. after recalibration or a long dropout)."""
+        if getattr(self, "_stand_prior", None) is not None:
+            self._stand_prior.reset()
         if root_xy0 is not None:
             self.root_xy0 = (float(root_xy0[0]), float(root_xy0[1]))
         N, K = self.window, self._keep
@@ -539,6 +545,8 @@ class Poser:
         seg_measured = m[SL_ROT].reshape(N_SEGMENTS, 6).all(axis=-1)
         if self.knee_hinge:
             R = constrain_knees(R, seg_measured)
+            if self._stand_prior is not None:
+                R = self._stand_prior(R, seg_measured)
         y[SL_ROT] = np.where(m[SL_ROT], y[SL_ROT], matrix_to_rot6d_np(R).reshape(-1))
         prob = np.clip(y[SL_CONTACT], 0.0, 1.0)
         threshold = self.contact_threshold

@@ -1,7 +1,7 @@
 """A walk that ends in a stand: once every measured segment is still, the unmeasured thighs
-settle near the stand (inference/evaluation/standing.py). The goal is 5 deg; the shipped
-model holds 2-8 deg at the stand's end on these walks (NOTES.md, "A standing body"), and
-this guards that level."""
+settle on the stand (inference/evaluation/standing.py). The goal is 5 deg; with the stand
+prior (inference/poser/stand_prior.py) the thighs end 0.2-0.3 deg off on these walks, 5.3-5.7
+without it (the model's own estimate of a stand, docs/real_signals.md, "A standing body")."""
 
 from __future__ import annotations
 
@@ -19,8 +19,7 @@ def test_thighs_settle_on_a_stand_after_a_walk():
     mean = summary(res)
     for r in res:
         # settling through the stand: its end nearer than its mean from 1 s on, both sides
-        assert r.at_end["l_thigh"] < 9.0 and r.at_end["r_thigh"] < 9.0, r
-        assert r.deg["l_thigh"] < 13.0 and r.deg["r_thigh"] < 13.0, r
-        assert r.at_end["r_thigh"] <= r.deg["r_thigh"] + 0.5, r
+        assert r.at_end["l_thigh"] < 2.0 and r.at_end["r_thigh"] < 2.0, r
+        assert r.deg["l_thigh"] < 3.0 and r.deg["r_thigh"] < 3.0, r
     # the measured segments are what the sensors say
     assert mean["pelvis"] < 2.0 and mean["l_shank"] < 2.0 and mean["r_shank"] < 2.0

@@ -1,0 +1,101 @@
+"""A still, upright stand straightens the knees the sensors leave open.
+
+With a shank measured and its thigh not, the knee hinge (``joint_constraints``) rebuilds
+the thigh from the shank and leaves only the knee's flexion to the model. Standing still,
+that flexion is the model's estimate of a stand, and the training data's stands are
+bent-kneed (60 Bandai clips' still frames: shanks 12-15 deg forward, thighs 7-11 back) or
+not stands at all: with the pelvis and both shanks exactly upright and still the shipped
+model holds each thigh 5 deg bent, and on the real x-IMU3 log's closing stand it bends the
+right thigh 8.7 deg forward while its sensor hangs straight (docs/real_signals.md, "A
+standing body"). The inpainting then keeps that pose: it is its own history.
+
+So when every measured segment has been still for a moment and a measured shank hangs
+upright, the knee's flexion is taken down to zero over the next ``settle_s`` (a leg whose
+shank is upright and whose knee is straight is a standing leg); the straightened thigh
+goes into the history, so the model goes on from the stand the sensors imply. A shank that
+leans (a bent-kneed stance, a squat held still), a knee the model bends far (sitting with
+the shank upright) or any motion leaves the model's flexion as it is, at once.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from inference.body.rotations import matrix_about_axis_np
+from inference.poser.joint_constraints import KNEE_AXIS, KNEES, hinge_angle
+from inference.signals.resample import FPS_MODEL
+
+
+@dataclass
+class StandPrior:
+    """Per-frame state: how long the measured segments have been still.
+
+    still_deg_s: the fastest a measured segment may turn and still count as still, judged
+    over ``span_s`` (frame to frame, a sensor's own orientation noise reads as turning).
+    upright_deg: the most a shank's long axis may lean from vertical.
+    onset_s / settle_s: still over ``span_s`` and then for ``onset_s`` before the flexion
+    starts to go, gone ``settle_s`` later (by default a second after the body stopped).
+    max_flexion_deg: a knee bent further than this is not straightened (sitting).
+    """
+
+    still_deg_s: float = 15.0
+    span_s: float = 0.25
+    upright_deg: float = 8.0
+    onset_s: float = 0.0
+    settle_s: float = 0.75
+    max_flexion_deg: float = 30.0
+    fps: float = FPS_MODEL
+
+    def __post_init__(self) -> None:
+        self._axis = np.asarray(KNEE_AXIS)
+        self._span = max(1, round(self.span_s * self.fps))
+        self._cos_still = np.cos(np.radians(self.still_deg_s * self._span / self.fps))
+        self._cos_upright = np.cos(np.radians(self.upright_deg))
+        self._max_flexion = np.radians(self.max_flexion_deg)
+        self.reset()
+
+    def reset(self) -> None:
+        self._recent: deque[np.ndarray] = deque(maxlen=self._span)  # the measured segments' last frames
+        self._prev_measured: np.ndarray | None = None
+        self.still_frames = 0
+
+    def weight(self) -> float:
+        """How much of the knee's flexion goes now: 0 moving, 1 settled."""
+        t = self.still_frames / self.fps - self.onset_s
+        return float(np.clip(t / self.settle_s, 0.0, 1.0))
+
+    def __call__(self, R: np.ndarray, measured: np.ndarray) -> np.ndarray:
+        """``R`` (24, 3, 3) global orientations after the knee hinge, ``measured`` (24,)
+        bool. Returns ``R`` with the settled knees straightened (a copy when changed)."""
+        self._update(R, measured)
+        w = self.weight()
+        if w <= 0.0:
+            return R
+        out = R
+        for t, s in KNEES:
+            if not measured[s] or measured[t] or R[s, 2, 2] < self._cos_upright:
+                continue
+            theta = hinge_angle(R[t].T @ R[s], self._axis)
+            if abs(theta) > self._max_flexion:
+                continue
+            if out is R:
+                out = R.copy()
+            out[t] = R[s] @ matrix_about_axis_np(self._axis, (1.0 - w) * theta).T
+        return out
+
+    def _update(self, R: np.ndarray, measured: np.ndarray) -> None:
+        idx = np.flatnonzero(measured)
+        if self._prev_measured is None or not np.array_equal(self._prev_measured, measured) or len(idx) == 0:
+            self._recent.clear()  # another set of sensors: start counting again
+            self.still_frames = 0
+        self._prev_measured = measured.copy()
+        now = R[idx]
+        if len(self._recent) == self._span:
+            then = self._recent[0]
+            # cos of each segment's turn over the span: (trace(A^T B) - 1) / 2
+            cos = (np.einsum("nij,nij->n", then, now) - 1.0) / 2.0
+            self.still_frames = self.still_frames + 1 if bool(np.all(cos >= self._cos_still)) else 0
+        self._recent.append(now.copy())

@@ -1,0 +1,63 @@
+"""The stand prior straightens a measured-shank knee only on a still, upright stand."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from inference.body.rotations import matrix_about_axis_np, matrix_angle_between
+from inference.body.skeleton import N_SEGMENTS, SEGMENT_INDEX
+from inference.poser.joint_constraints import KNEE_AXIS
+from inference.poser.stand_prior import StandPrior
+
+PELVIS, LT, LS, RT, RS = (SEGMENT_INDEX[s] for s in ("pelvis", "l_thigh", "l_shank", "r_thigh", "r_shank"))
+AXIS = np.asarray(KNEE_AXIS)
+
+
+def frame(flexion_deg: float = 10.0, shank_lean_deg: float = 0.0, turn_deg: float = 0.0) -> tuple[np.ndarray, ...]:
+    """Pelvis and shanks measured; each thigh the shank turned back about the knee."""
+    R = np.tile(np.eye(3), (N_SEGMENTS, 1, 1))
+    shank = matrix_about_axis_np(AXIS, np.radians(shank_lean_deg)) @ matrix_about_axis_np(
+        np.array([0.0, 0.0, 1.0]), np.radians(turn_deg))
+    for t, s in ((LT, LS), (RT, RS)):
+        R[s] = shank
+        R[t] = shank @ matrix_about_axis_np(AXIS, np.radians(flexion_deg)).T
+    measured = np.zeros(N_SEGMENTS, dtype=bool)
+    measured[[PELVIS, LS, RS]] = True
+    return R, measured
+
+
+def bend(R: np.ndarray, t: int, s: int) -> float:
+    return float(np.degrees(matrix_angle_between(R[t], R[s])))
+
+
+def test_a_still_upright_stand_settles_straight_within_a_second():
+    prior = StandPrior()
+    R, m = frame(10.0)
+    out = [prior(R, m) for _ in range(30)]
+    assert bend(out[0], LT, LS) == pytest.approx(10.0, abs=1e-6)  # moving or just stopped: the model's
+    assert bend(out[4], LT, LS) == pytest.approx(10.0, abs=1e-6)  # still for less than 0.25 s: not yet
+    assert 0.5 < bend(out[10], LT, LS) < 9.5  # on the way
+    assert bend(out[20], LT, LS) < 1e-6 and bend(out[20], RT, RS) < 1e-6  # settled a second after it stopped
+    assert np.array_equal(out[20][[PELVIS, LS, RS]], R[[PELVIS, LS, RS]])  # measured ones untouched
+
+
+@pytest.mark.parametrize("case", ["leaning shank", "sitting", "thigh measured"])
+def test_no_straightening_where_a_stand_is_not_what_the_sensors_say(case):
+    prior = StandPrior()
+    R, m = frame(70.0 if case == "sitting" else 10.0, shank_lean_deg=15.0 if case == "leaning shank" else 0.0)
+    if case == "thigh measured":
+        m[[LT, RT]] = True
+    for _ in range(40):
+        out = prior(R, m)
+    assert np.array_equal(out, R)
+
+
+def test_motion_gives_the_flexion_back_at_once():
+    prior = StandPrior()
+    R, m = frame(10.0)
+    for _ in range(30):
+        prior(R, m)
+    turned, _ = frame(10.0, turn_deg=5.0)  # a shank turning 100 deg/s
+    out = prior(turned, m)
+    assert bend(out, LT, LS) == pytest.approx(10.0, abs=1e-6) and prior.weight() == 0.0
