@@ -51,10 +51,32 @@ run realtime 0 "$DISPLAY_BASE" 1 "realtime" "$@" &
 run solo 0 $((DISPLAY_BASE + 600)) 1 "solo" "$@" &
 run rest 10 $((DISPLAY_BASE + 300)) 2 "not solo and not realtime" "$@" &
 wait
-ok=0
-for name in realtime rest solo; do
-  echo "=== $name ($(cat "$LOGS/$name.rc" 2>/dev/null || echo none))"
-  cat "$LOGS/$name.log"
-  [ "$(cat "$LOGS/$name.rc" 2>/dev/null)" = 0 ] || ok=1
+# A live test (realtime or solo) that failed beside the other runs gets one more run, alone, after them: their
+# figures and timing need the cores (docs/testing.md, "A second run alone"). It passes only if it passes there; the
+# first failure stays in the log, named again at the end. A failure of the rest, a live run that failed without
+# naming its tests (a crash, its ceiling) or a second failure fails the suite.
+again=()
+for name in realtime solo; do
+  [ "$(cat "$LOGS/$name.rc" 2>/dev/null)" = 0 ] && continue
+  mapfile -t ids < <(sed -n -E 's/^(FAILED|ERROR) ([^ ]+).*/\2/p' "$LOGS/$name.log" | sort -u)
+  if [ "${#ids[@]}" = 0 ]; then again=(); echo none >"$LOGS/again.rc"; break; fi
+  again+=("${ids[@]}")
 done
+if [ "${#again[@]}" -gt 0 ] && [ ! -f "$LOGS/again.rc" ]; then
+  run again 0 $((DISPLAY_BASE + 900)) 1 "realtime or solo" "${again[@]}"
+fi
+ok=0
+for name in realtime rest solo again; do
+  [ -f "$LOGS/$name.rc" ] || continue
+  echo "=== $name ($(cat "$LOGS/$name.rc" 2>/dev/null || echo none))"
+  [ -f "$LOGS/$name.log" ] && cat "$LOGS/$name.log"
+done
+[ "$(cat "$LOGS/rest.rc")" = 0 ] || ok=1
+for name in realtime solo; do
+  if [ "$(cat "$LOGS/$name.rc")" != 0 ] && [ "$(cat "$LOGS/again.rc" 2>/dev/null)" != 0 ]; then ok=1; fi
+done
+if [ "${#again[@]}" -gt 0 ] && [ "$(cat "$LOGS/again.rc" 2>/dev/null)" = 0 ]; then
+  echo "=== passed on a second run alone, failed beside the other runs:"
+  printf '  %s\n' "${again[@]}"
+fi
 exit $ok
