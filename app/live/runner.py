@@ -168,10 +168,10 @@ class LivePipeline:
             for k, f in enumerate(batch):
                 _run_calls(calls, k, p)
                 if self._stop.is_set():
-                    return
+                    break
                 for lp in p.push(f):
                     self._latest = lp
-            _run_calls(calls, len(batch), p)
+            _run_calls(calls, len(batch), p)  # those still due (a sink to close) even when stopping
             return
         newest = batch[-1].t if batch else 0.0
         n_late = sum(newest - f.t > self.max_lag for f in batch)  # the oldest ones: the hub's frames are in time order
