@@ -11,7 +11,9 @@ last 60 frames) and whose last frame holds the new measurement. Each step:
    (``diffusion.inpaint``, Algorithm 1) -- or, for the baselines, one regressor pass or
    the standing pose;
 3. clean the reconstructed frame (6D -> rotation -> 6D, contacts to 0/1, each knee a
-   hinge about its lateral axis: ``joint_constraints``, ``knee_hinge=False`` to skip), correct the
+   hinge about its lateral axis: ``joint_constraints``, ``knee_hinge=False`` to skip; on a still,
+   upright stand the hinge's flexion settles to a straight knee: ``stand_prior``,
+   ``stand_prior=False`` to skip), correct the
    root displacement from the predicted contacts, write it back into the history;
 4. with both shanks measured, scale the root displacement by the running ratio of the
    shanks' inertial strides to the reconstructed ones (``stride.StrideScale``;
