@@ -98,7 +98,8 @@ def test_the_real_log_reconstructs_to_a_body_that_walks_and_comes_back(shared_da
     log = shared_data / "ximu3" / "logged_lower_body"
     if not log.is_dir():
         pytest.skip("no x-IMU3 log in shared data")
-    out = _import(capsys, log, tmp_path / "real.h5", "--height", "1.75")
+    # the import's own reconstruction left out: the replays below make theirs
+    out = _import(capsys, log, tmp_path / "real.h5", "--height", "1.75", "--no-reconstruct")
     assert len(out["sites"]) == 7 and out["still_start_s"] > 1.0 and out["forward_from"] == "knees"
     rec = read_recording(tmp_path / "real.h5")
     # two functional estimates of the forward, from different motions, agree on real data
