@@ -226,12 +226,9 @@ class Device(ABC):
                 except DeviceNotReady as exc:
                     if not self.reconnect:
                         raise
-                    self._is_open, self._connected = True, False
+                    self._is_open = self._connected = True
                     self._event("opened", self.describe())
-                    self.stats.disconnects += 1
-                    self._backoff = self.backoff_min
-                    self._next_attempt = self.clock() + self._backoff
-                    self._event("disconnected", str(exc))
+                    self._lost(exc)  # as a loss: the reconnect loop's backoff takes it from here
                     return self
                 self._is_open = self._connected = True
                 self._event("opened", self.describe())

@@ -345,11 +345,9 @@ class Pipeline:
         self._pending = []
         try:
             for k, f in enumerate(frames):
-                while todo and todo[0][0] <= k:
-                    todo.pop(0)[1](self)
+                run_due(todo, k, self)
                 self.push(f)
-            for _, fn in todo:
-                fn(self)
+            run_due(todo, len(frames), self)
         finally:
             pending, self._pending = self._pending, None
         for _index, t20, *_ in pending[:-1]:
@@ -462,3 +460,10 @@ def _newest_sample(frame: HubFrame) -> float | None:
         return None
     st = st[frame.present & np.isfinite(st)]
     return float(st.max()) if st.size else None
+
+
+def run_due(calls: list[tuple[int, Callable[[Pipeline], Any]]], k: int, pipeline: Pipeline) -> None:
+    """Run, and take off the front of ``calls`` (``(k, fn)`` in order), the commands due
+    before frame ``k`` (``LivePipeline.call``, ``Pipeline.push_newest``)."""
+    while calls and calls[0][0] <= k:
+        calls.pop(0)[1](pipeline)

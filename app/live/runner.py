@@ -12,7 +12,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-from app.live.pipeline import LivePose, Pipeline, Sink
+from app.live.pipeline import LivePose, Pipeline, Sink, run_due
 from app.live.sources import FrameSource
 from drivers.hub import HubFrame
 
@@ -166,22 +166,22 @@ class LivePipeline:
         p = self.pipeline
         if self.max_lag is None:  # every frame posed, however late
             for k, f in enumerate(batch):
-                _run_calls(calls, k, p)
+                run_due(calls, k, p)
                 if self._stop.is_set():
                     break
                 for lp in p.push(f):
                     self._latest = lp
-            _run_calls(calls, len(batch), p)  # those still due (a sink to close) even when stopping
+            run_due(calls, len(batch), p)  # those still due (a sink to close) even when stopping
             return
         newest = batch[-1].t if batch else 0.0
         n_late = sum(newest - f.t > self.max_lag for f in batch)  # the oldest ones: the hub's frames are in time order
         with self._cv:  # the ingest thread counts its drops into the same counter
             p.stats.dropped += n_late
         for k in range(n_late):  # not reconstructed, but recorded and calibrated from
-            _run_calls(calls, k, p)
+            run_due(calls, k, p)
             p.pass_over(batch[k])
         if n_late == len(batch) or self._stop.is_set():
-            _run_calls(calls, len(batch), p)
+            run_due(calls, len(batch), p)
             return
         # of the 20 Hz frames the rest completes, the newest is posed and the older ones
         # skipped: a late pose makes the next from fresh data, not a queue
@@ -218,9 +218,3 @@ def close_sink(live: LivePipeline | None, pipeline: Pipeline, sink: Sink, timeou
         live.wait_for(lambda: bool(done), timeout)
     if not done:
         detach(pipeline)
-
-
-def _run_calls(calls: list[tuple[int, Callable[[Pipeline], Any]]], k: int, pipeline: Pipeline) -> None:
-    """Run (and take off the front of ``calls``) the commands due before frame ``k``."""
-    while calls and calls[0][0] <= k:
-        calls.pop(0)[1](pipeline)

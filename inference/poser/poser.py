@@ -331,7 +331,7 @@ class Poser:
     # ------------------------------------------------------------------ state
     def reset(self, root_xy0: tuple[float, float] | None = None) -> None:
         """Back to a standing history (e.g. after recalibration or a long dropout)."""
-        if getattr(self, "_stand_prior", None) is not None:
+        if self._stand_prior is not None:
             self._stand_prior.reset()
         if root_xy0 is not None:
             self.root_xy0 = (float(root_xy0[0]), float(root_xy0[1]))
