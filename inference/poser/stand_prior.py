@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from inference.body.rotations import matrix_about_axis_np
+from inference.body.rotations import matrix_about_axis_np, matrix_angle_between
 from inference.poser.joint_constraints import KNEE_AXIS, KNEES, hinge_angle
 from inference.signals.resample import FPS_MODEL
 
@@ -52,7 +52,7 @@ class StandPrior:
     def __post_init__(self) -> None:
         self._axis = np.asarray(KNEE_AXIS)
         self._span = max(1, round(self.span_s * self.fps))
-        self._cos_still = np.cos(np.radians(self.still_deg_s * self._span / self.fps))
+        self._still_rad = np.radians(self.still_deg_s * self._span / self.fps)
         self._cos_upright = np.cos(np.radians(self.upright_deg))
         self._max_flexion = np.radians(self.max_flexion_deg)
         self.reset()
@@ -95,7 +95,6 @@ class StandPrior:
         now = R[idx]
         if len(self._recent) == self._span:
             then = self._recent[0]
-            # cos of each segment's turn over the span: (trace(A^T B) - 1) / 2
-            cos = (np.einsum("nij,nij->n", then, now) - 1.0) / 2.0
-            self.still_frames = self.still_frames + 1 if bool(np.all(cos >= self._cos_still)) else 0
+            turned = np.asarray(matrix_angle_between(then, now))  # each measured segment's turn over the span
+            self.still_frames = self.still_frames + 1 if bool(np.all(turned <= self._still_rad)) else 0
         self._recent.append(now.copy())
