@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 
 from app.capture.session import CaptureOptions, CaptureSession, SessionEvent
+from app.cli.window_args import add_window_arguments
 from app.streams import add_stream_arguments, sinks_from_args
 
 
@@ -212,11 +213,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="with a VR rig: leave the arms as the model gives them instead of reaching the tracked "
                         "controllers (docs/vr_input.md)")
     add_stream_arguments(p)
-    p.add_argument("--screenshot", help="with a window: save it to this PNG after --quit-after seconds")
-    p.add_argument("--quit-after", type=float, default=0.0)
-    p.add_argument("--window-stats", metavar="FILE.json", default=None,
-                   help="with --quit-after: write what the window itself cost (GUI thread CPU, draws/s, draw and "
-                        "status times, timer lag; app/gui/gui_cost.py)")
-    p.add_argument("--view", choices=("desk", "outdoor"), default="desk",
-                   help="with a window: outdoor = large numbers on black for a runner glancing from a distance")
+    add_window_arguments(p)
     p.set_defaults(func=run)

@@ -39,6 +39,7 @@ import os
 import sys
 
 from app.capture.demo import DEFAULT_SENSORS, FRAMES_PATIENCE, PROTOCOL_CHOICES, DemoConfig, DemoRun
+from app.cli.window_args import add_window_arguments
 from app.streams import add_stream_arguments, parse_stream_spec, sinks_from_args
 
 
@@ -74,13 +75,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_stream_arguments(p)
     p.add_argument("--headless", action="store_true", help="no window")
     p.add_argument("--json", action="store_true", help="headless: print one JSON object")
-    p.add_argument("--screenshot", help="with the window: save it to this PNG after --quit-after seconds")
-    p.add_argument("--quit-after", type=float, default=0.0, help="with the window: close it after this many seconds")
-    p.add_argument("--window-stats", metavar="FILE.json", default=None,
-                   help="with --quit-after: write what the window itself cost (GUI thread CPU, draws/s, draw and "
-                        "status times, timer lag; app/gui/gui_cost.py)")
-    p.add_argument("--view", choices=("desk", "outdoor"), default="desk",
-                   help="with a window: outdoor = large numbers on black for a runner glancing from a distance")
+    add_window_arguments(p)
     p.set_defaults(func=run)
 
 

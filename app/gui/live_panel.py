@@ -38,11 +38,12 @@ class LivePanel(QtWidgets.QWidget):
         self._last_key: tuple[int, float] | None = None
         self._trail: list[np.ndarray] = []
         self.has_spread = False
+        self._recording_shown: bool | None = None  # the state the record label is styled for
         lay = QtWidgets.QHBoxLayout(self)
 
         # --- the view and its camera
         left = QtWidgets.QVBoxLayout()
-        self.view = views.make_skeleton_view(self)
+        self.view = views.make_skeleton_view(None)  # put in by views.add_view below
         bar = QtWidgets.QHBoxLayout()
         self.follow = QtWidgets.QCheckBox("Follow")
         self.follow.setChecked(True)
@@ -66,7 +67,7 @@ class LivePanel(QtWidgets.QWidget):
             note = QtWidgets.QLabel(f"2D view: {views.GL_PROBLEM or 'OpenGL is not available'}")
             note.setStyleSheet("color: #a05000")
             left.addWidget(note)
-        left.addWidget(self.view, 1)
+        views.add_view(self, left, self.view, 1)
         left.addWidget(self.legend)
         lay.addLayout(left, 3)
 
@@ -238,13 +239,18 @@ class LivePanel(QtWidgets.QWidget):
         self.recordToggled.emit(on)
 
     def set_recording(self, on: bool, text: str) -> None:
-        """Reflect the session's state without re-emitting ``recordToggled``."""
-        self.record_button.blockSignals(True)
-        self.record_button.setChecked(on)
-        self.record_button.setText("■ Stop recording (R)" if on else "● Record (R)")
-        self.record_button.blockSignals(False)
-        self.record_label.setText(text)
-        self.record_label.setStyleSheet("color: #c02020; font-weight: bold" if on else "")
+        """Reflect the session's state without re-emitting ``recordToggled`` (a few times a second
+        while recording: a style sheet re-polishes its widget, so it is set only on a change)."""
+        if self.record_button.isChecked() != on or self._recording_shown is None:
+            self.record_button.blockSignals(True)
+            self.record_button.setChecked(on)
+            self.record_button.setText("■ Stop recording (R)" if on else "● Record (R)")
+            self.record_button.blockSignals(False)
+        if self._recording_shown != on:
+            self._recording_shown = on
+            self.record_label.setStyleSheet("color: #c02020; font-weight: bold" if on else "")
+        if self.record_label.text() != text:
+            self.record_label.setText(text)
 
     def request_marker(self) -> None:
         self.marker_count += 1

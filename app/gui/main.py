@@ -24,7 +24,7 @@ from app.gui.devices_panel import DevicesPanel
 from app.gui.gui_cost import GuiCost
 from app.gui.live_panel import LivePanel
 from app.gui.live_session import LiveSession
-from app.gui.outdoor_view import OutdoorView
+from app.gui.outdoor_view import SKELETONS, OutdoorView
 from app.gui.recordings_panel import RecordingsPanel
 from app.gui.replay_panel import ReplayPanel
 from app.gui.setup_model import SetupModel
@@ -77,7 +77,9 @@ class MainWindow(QtWidgets.QMainWindow):
         self.live_panel = LivePanel()
         self.recordings_panel = RecordingsPanel(self.jobs, self.report)
         self.replay_panel = ReplayPanel(self.jobs, self.report)
-        self.outdoor = OutdoorView()  # the live view for a glance from a distance (app/gui/outdoor_view.py)
+        # the live view for a glance from a distance (app/gui/outdoor_view.py); its skeleton as last chosen
+        skeleton = str(self.settings.value("outdoor/skeleton", "2d"))
+        self.outdoor = OutdoorView(skeleton=skeleton if skeleton in SKELETONS else "2d")
         self.live_tab = "Live"  # where the window goes once calibrated
         self.gait: GaitSink | None = None
         for name, panel in zip(TABS, (self.setup_panel, self.devices_panel, self.calibration_panel, self.live_panel,
@@ -89,6 +91,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.calibration_panel.redoRequested.connect(self.redo)
         self.live_panel.recordToggled.connect(self.set_recording)
         self.outdoor.recordToggled.connect(self.set_recording)
+        self.outdoor.skeletonChosen.connect(lambda kind: self.settings.setValue("outdoor/skeleton", kind))
         self.live_panel.markerRequested.connect(self.add_marker)
         self.live_panel.noteRequested.connect(self.add_note)
         self.live_panel.activeSitesChosen.connect(self.set_active_sites)
@@ -551,6 +554,8 @@ def run_window(setup_window, args: Any = None) -> int:
     win = MainWindow()
     win.show()
     setup_window(win)
+    if getattr(args, "outdoor_skeleton", None):
+        win.outdoor.set_skeleton(args.outdoor_skeleton)  # for this run; the saved choice stays
     if getattr(args, "view", None) == "outdoor":
         win.show_outdoor()
     quit_after = float(getattr(args, "quit_after", 0) or 0)
@@ -563,6 +568,7 @@ def run_window(setup_window, args: Any = None) -> int:
                 hub = live.session.hub if live is not None else None
                 win.cost.write(stats, shown, {
                     "pipeline": live.perf() if live is not None else None,
+                    "outdoor": {"skeleton": win.outdoor.skeleton, "poses_not_redrawn": win.outdoor.frames_still},
                     "hub": None if hub is None else hub.wait_status(),
                     # why no pose was shown, when none was: the guided calibration's state
                     "calibration": live.session.guided.status() if live is not None else None})

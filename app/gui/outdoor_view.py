@@ -9,10 +9,17 @@ a number that needs attention turns orange.
 
 It draws what the window hands it (``show_pose`` at the view timer, ``show_numbers`` and
 ``show_devices`` a few times a second); the numbers come from ``app.live.gait.GaitSink``.
+
+The skeleton is drawn flat by default (``SKELETONS``: "2d", side on, the camera turning with
+the runner so the legs are always seen from the side), with thick lines for a glance from a
+distance; "3d" is the desk view's GL skeleton. On battery the drawing is the athlete's run
+time: the flat view costs a fraction of GL's (no GL pipeline; under software GL most of
+the window's CPU, docs/window.md), and nothing is redrawn for a pose that did not move.
 """
 
 from __future__ import annotations
 
+import numpy as np
 from PySide6 import QtCore, QtWidgets
 
 from app.gui import views
@@ -29,6 +36,8 @@ GOOD = "#22dd44"
 BAD = "#ff3030"
 ASYMMETRY_WARN_PCT = 10.0  # past this the left/right difference of knee range is worth a look
 STALE_S = 1.0  # a sensor silent this long shows no signal
+SKELETONS = ("2d", "3d")
+STILL_M = 0.002  # a pose whose joints all moved less than this since the one drawn is not drawn again
 
 
 def _label(text: str, px: int, colour: str = FG, bold: bool = False) -> QtWidgets.QLabel:
@@ -48,6 +57,7 @@ class _Number(QtWidgets.QWidget):
         self.caption = _label(caption, 26, FG, bold=True)
         row = QtWidgets.QHBoxLayout()
         self.value = _label("--", 84, ACCENT, bold=True)
+        self._colour = ACCENT
         self.unit = _label(unit, 30, FG)
         row.addWidget(self.value)
         row.addWidget(self.unit, 0, QtCore.Qt.AlignmentFlag.AlignBottom)
@@ -56,9 +66,12 @@ class _Number(QtWidgets.QWidget):
         lay.addLayout(row)
 
     def set(self, text: str, colour: str = ACCENT) -> None:
-        if self.value.text() != text:  # each change repaints: only when it changed
+        # each change repaints (a style sheet also re-polishes the widget): only what changed
+        if self.value.text() != text:
             self.value.setText(text)
-        self.value.setStyleSheet(f"color: {colour}; font-size: 84px; font-weight: bold;")
+        if colour != self._colour:
+            self._colour = colour
+            self.value.setStyleSheet(f"color: {colour}; font-size: 84px; font-weight: bold;")
 
 
 class _SensorBars(QtWidgets.QWidget):
@@ -70,6 +83,7 @@ class _SensorBars(QtWidgets.QWidget):
         self.grid.setContentsMargins(0, 0, 0, 0)
         self.grid.setHorizontalSpacing(10)
         self.rows: dict[str, tuple[QtWidgets.QLabel, QtWidgets.QProgressBar, QtWidgets.QProgressBar]] = {}
+        self._silent: dict[str, bool] = {}
 
     @staticmethod
     def _bar(colour: str) -> QtWidgets.QProgressBar:
@@ -94,29 +108,47 @@ class _SensorBars(QtWidgets.QWidget):
                 self.grid.addWidget(sig, k, 4)
                 self.rows[r.name] = (name, batt, sig)
             name, batt, sig = self.rows[r.name]
-            batt.setValue(int(round(r.battery)) if r.battery is not None else 0)
-            batt.setEnabled(r.battery is not None)
+            # a progress bar's setValue repaints at once, and with it whatever else waits to be
+            # drawn in the window: only what changed
+            level = int(round(r.battery)) if r.battery is not None else 0
+            if batt.value() != level:
+                batt.setValue(level)
+            if batt.isEnabled() != (r.battery is not None):
+                batt.setEnabled(r.battery is not None)
             silent = r.last_seen_s is None or r.last_seen_s > STALE_S or r.state != "ok"
-            signal = 0 if silent else int(round(100.0 - (r.loss_pct or 0.0)))
-            sig.setValue(max(0, min(100, signal)))
-            name.setStyleSheet(f"color: {BAD if silent else FG}; font-size: 20px; font-weight: bold;")
+            signal = max(0, min(100, 0 if silent else int(round(100.0 - (r.loss_pct or 0.0)))))
+            if sig.value() != signal:
+                sig.setValue(signal)
+            if self._silent.get(r.name) != silent:
+                self._silent[r.name] = silent
+                name.setStyleSheet(f"color: {BAD if silent else FG}; font-size: 20px; font-weight: bold;")
 
 
 class OutdoorView(QtWidgets.QWidget):
     recordToggled = QtCore.Signal(bool)
+    skeletonChosen = QtCore.Signal(str)  # "2d" or "3d", when the user switches
 
-    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+    def __init__(self, parent: QtWidgets.QWidget | None = None, skeleton: str = "2d") -> None:
         super().__init__(parent)
         self.setObjectName("outdoor")
         self.setAttribute(QtCore.Qt.WidgetAttribute.WA_StyledBackground, True)
         self.setStyleSheet(f"#outdoor {{ background: {BG}; }} QLabel {{ background: {BG}; }}")
         self._last_key: tuple[int, float] | None = None
+        self._drawn: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # joints, contacts, colours
         self.frames_shown = 0
+        self.frames_still = 0  # poses not drawn because nothing moved
         lay = QtWidgets.QHBoxLayout(self)
-        self.view = views.make_skeleton_view(self)
-        if hasattr(self.view, "setBackgroundColor"):
-            self.view.setBackgroundColor("k")
-        lay.addWidget(self.view, 3)
+        left = QtWidgets.QVBoxLayout()
+        self.skeleton_button = QtWidgets.QPushButton()
+        self.skeleton_button.setStyleSheet(f"QPushButton {{ background: #222; color: {FG}; font-size: 18px; "
+                                           f"border: 1px solid #888; padding: 4px 10px; }}")
+        self.skeleton_button.clicked.connect(self._toggle_skeleton)
+        left.addWidget(self.skeleton_button, 0, QtCore.Qt.AlignmentFlag.AlignLeft)
+        self.view_box = left
+        lay.addLayout(left, 3)
+        self.skeleton = ""
+        self.view: QtWidgets.QWidget | None = None
+        self.set_skeleton(skeleton)
 
         right = QtWidgets.QVBoxLayout()
         self.record_button = QtWidgets.QPushButton("● REC")
@@ -138,15 +170,55 @@ class OutdoorView(QtWidgets.QWidget):
         right.addWidget(self.sensors)
         lay.addLayout(right, 2)
 
+    # ------------------------------------------------------------------ the skeleton
+    def set_skeleton(self, kind: str) -> None:
+        """"2d" (side on, QPainter) or "3d" (GL, or the flat view where GL cannot run)."""
+        if kind not in SKELETONS:
+            raise ValueError(f"outdoor skeleton {kind!r}: choose one of {', '.join(SKELETONS)}")
+        if kind == self.skeleton:
+            return
+        if kind == "3d":
+            view = views.make_skeleton_view(self)
+        else:
+            from app.gui.view2d import Skeleton2DView
+
+            view = Skeleton2DView(self)
+            view.set_side_on(True)
+            view.line_px, view.joint_px, view.grid_alpha = 9.0, 6.0, 90
+        if hasattr(view, "setBackgroundColor"):
+            view.setBackgroundColor("k")
+        if self.view is not None:
+            self.view_box.removeWidget(self.view)
+            self.view.deleteLater()
+        self.view_box.addWidget(view, 1)
+        self.view, self.skeleton, self._drawn, self._last_key = view, kind, None, None
+        self.skeleton_button.setText("3D view" if kind == "2d" else "side view")
+
+    def _toggle_skeleton(self) -> None:
+        self.set_skeleton("3d" if self.skeleton == "2d" else "2d")
+        self.skeletonChosen.emit(self.skeleton)
+
     # ------------------------------------------------------------------ drawing
     def show_pose(self, lp: LivePose | None, body: Body) -> bool:
         if lp is None or (lp.index, lp.t) == self._last_key:
             return False
         self._last_key = (lp.index, lp.t)
-        self.view.set_segment_colours(segment_colours(lp.observed_sites, getattr(lp.pose, "spread_deg", None)))
-        self.view.show_pose(lp.pose.joints, lp.pose.rot, lp.pose.contacts, body)
+        colours = segment_colours(lp.observed_sites, getattr(lp.pose, "spread_deg", None))
+        joints = np.asarray(lp.pose.joints, dtype=np.float64)
+        contacts = np.asarray(lp.pose.contacts, dtype=bool)
+        if self._drawn is not None and self._still(joints, contacts, colours):
+            self.frames_still += 1  # a body standing still: the screen already shows it
+            return False
+        self._drawn = (joints, contacts, colours)
+        self.view.set_segment_colours(colours)
+        self.view.show_pose(joints, lp.pose.rot, contacts, body)
         self.frames_shown += 1
         return True
+
+    def _still(self, joints: np.ndarray, contacts: np.ndarray, colours: np.ndarray) -> bool:
+        j, c, col = self._drawn
+        return (j.shape == joints.shape and float(np.abs(joints - j).max()) < STILL_M
+                and np.array_equal(c, contacts) and np.array_equal(col, colours))
 
     def show_numbers(self, n: GaitNumbers) -> None:
         self.cadence.set("--" if n.cadence_spm is None else f"{n.cadence_spm:.0f}")
@@ -173,12 +245,15 @@ class OutdoorView(QtWidgets.QWidget):
         self.recordToggled.emit(on)
 
     def set_recording(self, on: bool, text: str) -> None:
-        """Reflect the session's state without re-emitting ``recordToggled``."""
-        self.record_button.blockSignals(True)
-        self.record_button.setChecked(on)
-        self.record_button.blockSignals(False)
-        self._style_record(on)
-        self.record_label.setText(text)
+        """Reflect the session's state without re-emitting ``recordToggled`` (a few times a
+        second while recording: the button restyled only when the state changes)."""
+        if self.record_button.isChecked() != on:
+            self.record_button.blockSignals(True)
+            self.record_button.setChecked(on)
+            self.record_button.blockSignals(False)
+            self._style_record(on)
+        if self.record_label.text() != text:
+            self.record_label.setText(text)
 
     def set_record_enabled(self, on: bool) -> None:
         self.record_button.setEnabled(on)

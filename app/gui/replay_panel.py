@@ -188,12 +188,12 @@ class ReplayPanel(QtWidgets.QWidget):
         labels.addWidget(self.ref_label, 1)
         labels.addWidget(self.other_label, 1)
         left.addLayout(labels)
-        self.view = views.make_skeleton_view(self)
+        self.view = views.make_skeleton_view(None)  # put in by views.add_view below
         self.view.add_figure(RERUN)
         self.view.follow = False
         self.view.set_view("pair")
         self.view.set_figure_visible(1, False)
-        left.addWidget(self.view, 1)
+        views.add_view(self, left, self.view, 1)
         self.legend = Legend()
         left.addWidget(self.legend)
 

@@ -4,6 +4,12 @@ start (a remote desktop, a virtual machine without a GPU driver, PyOpenGL not in
 Same calls as ``SkeletonView`` (``show_pose``, ``set_segment_colours``, ``set_trail``,
 ``set_view``, ``follow``), so every panel works with either; an orthographic projection
 of the same camera presets.
+
+It is also the outdoor view's skeleton by choice: drawn by QPainter it costs a fraction of
+what software GL does (no GL pipeline, no read-back of a rendered frame), and with
+``side_on`` the camera stays beside the subject as they turn, which is how a runner's legs
+are read. A frame's drawing is a few batched calls (one pen per colour, the grid's lines in
+one call), since on a laptop on battery every redraw is CPU.
 """
 
 from __future__ import annotations
@@ -16,10 +22,14 @@ from PySide6 import QtCore, QtGui, QtWidgets
 from app.gui.colours import CONTACT_OFF, CONTACT_ON, INFERRED, JOINT, TRAIL, qcolor_tuple
 from app.gui.skeleton_geometry import TRAIL_POINTS, VIEWS, bone_segments
 from inference.body.body import Body, contact_points
+from inference.body.conventions import wrap_angle, yaw_of
 from inference.body.skeleton import N_SEGMENTS
 
 SPAN_M = 2.6  # metres of world that fit the widget's height
 GRID_M = 0.5
+BACKGROUND = (24, 26, 30)
+SIDE_ELEVATION_DEG = 5.0
+HEADING_SMOOTH = 0.15  # per pose: the side-on camera follows the pelvis' heading over ~1/3 s, not its sway
 
 
 class _Figure2D:
@@ -31,6 +41,7 @@ class _Figure2D:
         self.contacts = np.zeros(4, bool)
         self.root = np.zeros(3)
         self.visible = True
+        self.groups: tuple[tuple[bytes, bytes], list] | None = None  # (colours and owners, lines by colour)
 
 
 class Skeleton2DView(QtWidgets.QWidget):
@@ -45,6 +56,25 @@ class Skeleton2DView(QtWidgets.QWidget):
         self.elevation, self.azimuth = VIEWS["free"]
         self.center = np.array([0.0, 0.0, 0.9])
         self._trail = np.zeros((0, 3))
+        self.background = QtGui.QColor(*BACKGROUND)
+        self.line_px = 4.0
+        self.joint_px = 3.5
+        self.grid_alpha = 50
+        # the camera on the subject's right, square to the pelvis' heading, whichever way they turn
+        self.side_on = False
+        self._heading: float | None = None
+        self._pens: dict[tuple[tuple[float, ...], float], QtGui.QPen] = {}
+
+    def setBackgroundColor(self, colour) -> None:  # noqa: N802 (SkeletonView's, pyqtgraph's name)
+        self.background = QtGui.QColor(colour) if not isinstance(colour, QtGui.QColor) else colour
+        self.update()
+
+    def set_side_on(self, on: bool) -> None:
+        self.side_on = on
+        self._heading = None
+        if on:
+            self.elevation = SIDE_ELEVATION_DEG
+        self.update()
 
     # ------------------------------------------------------------------ the SkeletonView calls
     def add_figure(self, colour: tuple[float, ...]) -> int:
@@ -64,7 +94,18 @@ class Skeleton2DView(QtWidgets.QWidget):
         f.root = j[0]
         if self.follow and figure == self.follow_figure:
             self.center = np.array([j[0, 0], j[0, 1], 0.9])
+            if self.side_on:
+                self._follow_heading(float(yaw_of(np.asarray(rot, np.float64)[0])))
         self.update()
+
+    def _follow_heading(self, heading: float) -> None:
+        """Camera on the subject's right: the azimuth 90 deg behind the smoothed heading, so the
+        subject walks left to right across the screen."""
+        if self._heading is None:
+            self._heading = heading
+        else:
+            self._heading += HEADING_SMOOTH * float(wrap_angle(heading - self._heading))
+        self.azimuth = math.degrees(self._heading) - 90.0
 
     def set_figure_visible(self, figure: int, on: bool) -> None:
         self.figures[figure].visible = on
@@ -105,11 +146,34 @@ class Skeleton2DView(QtWidgets.QWidget):
         y = self.height() / 2 - s * (d @ up)
         return np.stack([x, y], axis=-1)
 
+    @staticmethod
+    def _groups(f: _Figure2D) -> list[tuple[tuple[float, ...], list[int]]]:
+        """The figure's lines by colour, worked out again only when its colours change."""
+        key = (f.segment_colours.tobytes(), f.owner.tobytes())
+        if f.groups is None or f.groups[0] != key:
+            colours = f.segment_colours[f.owner]
+            groups = [(tuple(float(x) for x in c), np.flatnonzero((colours == c).all(axis=1)).tolist())
+                      for c in np.unique(colours, axis=0)]
+            f.groups = (key, groups)
+        return f.groups[1]
+
+    def _pen(self, colour: tuple[float, ...], width: float) -> QtGui.QPen:
+        key = (tuple(float(c) for c in colour), width)
+        pen = self._pens.get(key)
+        if pen is None:
+            pen = QtGui.QPen(QtGui.QColor(*qcolor_tuple(colour)), width, QtCore.Qt.PenStyle.SolidLine,
+                             QtCore.Qt.PenCapStyle.RoundCap)
+            self._pens[key] = pen
+        return pen
+
     def paintEvent(self, event: QtGui.QPaintEvent) -> None:  # noqa: N802 (Qt's name)
         p = QtGui.QPainter(self)
         p.setRenderHint(QtGui.QPainter.RenderHint.Antialiasing)
-        p.fillRect(self.rect(), QtGui.QColor(24, 26, 30))
-        self._grid(p)
+        p.fillRect(self.rect(), self.background)
+        if self.side_on:
+            self._ground(p)
+        else:
+            self._grid(p)
         if len(self._trail) >= 2:
             q = self._trail.copy()
             q[:, 2] = 0.0
@@ -121,27 +185,50 @@ class Skeleton2DView(QtWidgets.QWidget):
                 self._figure(p, f)
         p.end()
 
+    def _ground(self, p: QtGui.QPainter) -> None:
+        """Side on, the floor grid is a band of lines seen edge on: the floor's line and a tick
+        every GRID_M along it (they pass under the walker, so walking shows), unsmoothed."""
+        p.setRenderHint(QtGui.QPainter.RenderHint.Antialiasing, False)
+        p.setPen(QtGui.QPen(QtGui.QColor(255, 255, 255, self.grid_alpha), 2))
+        right, _ = self._axes()
+        along = np.array([right[0], right[1], 0.0])
+        half = 0.5 * SPAN_M * self.width() / max(self.height(), 1)
+        ends = self.center * np.array([1.0, 1.0, 0.0]) + np.outer([-half - GRID_M, half + GRID_M], along)
+        (x0, y0), (x1, y1) = self.project(ends)
+        p.drawLine(QtCore.QLineF(x0, y0, x1, y1))
+        s = float(self.center[:2] @ along[:2])  # the centre's place along the line, in metres
+        k = np.arange(np.floor((s - half) / GRID_M), np.ceil((s + half) / GRID_M) + 1) * GRID_M - s
+        feet = self.center * np.array([1.0, 1.0, 0.0]) + np.outer(k, along)
+        xy = self.project(feet)
+        tick = 0.012 * self.height()
+        p.drawLines([QtCore.QLineF(x, y, x, y + tick) for x, y in xy.tolist()])
+        p.setRenderHint(QtGui.QPainter.RenderHint.Antialiasing, True)
+
     def _grid(self, p: QtGui.QPainter) -> None:
-        p.setPen(QtGui.QPen(QtGui.QColor(255, 255, 255, 50), 1))
+        p.setPen(QtGui.QPen(QtGui.QColor(255, 255, 255, self.grid_alpha), 1))
         cx, cy = (round(c / GRID_M) * GRID_M for c in self.center[:2])
-        ticks = np.arange(-3.0, 3.0 + 1e-9, GRID_M)
-        for k in ticks:
-            for a, b in (((cx + k, cy - 3, 0), (cx + k, cy + 3, 0)), ((cx - 3, cy + k, 0), (cx + 3, cy + k, 0))):
-                (x0, y0), (x1, y1) = self.project(np.array([a, b], float))
-                p.drawLine(QtCore.QPointF(x0, y0), QtCore.QPointF(x1, y1))
+        k = np.arange(-3.0, 3.0 + 1e-9, GRID_M)
+        n = len(k)
+        ends = np.zeros((2 * n, 2, 3))  # lines along y at each x, then along x at each y, on the floor
+        ends[:n, :, 0] = (cx + k)[:, None]
+        ends[:n, 0, 1], ends[:n, 1, 1] = cy - 3.0, cy + 3.0
+        ends[n:, :, 1] = (cy + k)[:, None]
+        ends[n:, 0, 0], ends[n:, 1, 0] = cx - 3.0, cx + 3.0
+        xy = self.project(ends.reshape(-1, 3)).reshape(-1, 4)
+        p.drawLines([QtCore.QLineF(*row) for row in xy.tolist()])
 
     def _figure(self, p: QtGui.QPainter, f: _Figure2D) -> None:
-        xy = self.project(f.lines)
-        for k, seg in enumerate(f.owner):
-            p.setPen(QtGui.QPen(QtGui.QColor(*qcolor_tuple(f.segment_colours[seg])), 4,
-                                QtCore.Qt.PenStyle.SolidLine, QtCore.Qt.PenCapStyle.RoundCap))
-            p.drawLine(QtCore.QPointF(*xy[2 * k]), QtCore.QPointF(*xy[2 * k + 1]))
+        xy = self.project(f.lines).reshape(-1, 4).tolist()
+        for colour, rows in self._groups(f):  # one pen per colour: a handful of calls a frame
+            p.setPen(self._pen(colour, self.line_px))
+            p.drawLines([QtCore.QLineF(*xy[k]) for k in rows])
         pts = self.project(f.points)
         p.setPen(QtCore.Qt.PenStyle.NoPen)
-        for k, (x, y) in enumerate(pts):
+        r = self.joint_px
+        for k, (x, y) in enumerate(pts.tolist()):
             if k < N_SEGMENTS:
                 colour = JOINT
             else:
                 colour = CONTACT_ON if f.contacts[k - N_SEGMENTS] else CONTACT_OFF
             p.setBrush(QtGui.QColor(*qcolor_tuple(colour)))
-            p.drawEllipse(QtCore.QPointF(x, y), 3.5, 3.5)
+            p.drawEllipse(QtCore.QPointF(x, y), r, r)

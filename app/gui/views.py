@@ -64,3 +64,39 @@ def make_skeleton_view(parent: QtWidgets.QWidget | None = None, figures: int = 1
     from app.gui.view2d import Skeleton2DView
 
     return Skeleton2DView(parent, figures=figures)
+
+
+class _AttachOnShow(QtCore.QObject):
+    def __init__(self, panel: QtWidgets.QWidget, layout: QtWidgets.QBoxLayout, view: QtWidgets.QWidget,
+                 stretch: int) -> None:
+        super().__init__(panel)
+        self.layout_, self.view, self.stretch = layout, view, stretch
+        self.placeholder = QtWidgets.QWidget()
+        layout.addWidget(self.placeholder, stretch)
+        panel.installEventFilter(self)
+
+    def eventFilter(self, obj: QtCore.QObject, event: QtCore.QEvent) -> bool:  # noqa: N802 (Qt's name)
+        if event.type() == QtCore.QEvent.Type.Show and self.view is not None:
+            at = self.layout_.indexOf(self.placeholder)
+            self.layout_.removeWidget(self.placeholder)
+            self.placeholder.deleteLater()
+            self.layout_.insertWidget(at, self.view, self.stretch)
+            self.view = None
+            obj.removeEventFilter(self)
+        return False
+
+
+def add_view(panel: QtWidgets.QWidget, layout: QtWidgets.QBoxLayout, view: QtWidgets.QWidget,
+             stretch: int = 1) -> None:
+    """Put a skeleton view (made without a parent) into a panel's layout; a GL one only when
+    the panel is first shown.
+
+    Why wait: from the moment a GL widget is in a window, Qt composes the whole window
+    through OpenGL, every repaint of every label included. Under software GL (a laptop
+    without a driver, Xvfb) that is most of the window's CPU, so a window used only on
+    the outdoor view's flat skeleton must not carry the Live tab's hidden GL view. The
+    view works before it is shown (its calls only store what it will draw)."""
+    if getattr(view, "is_gl", False):
+        _AttachOnShow(panel, layout, view, stretch)
+    else:
+        layout.addWidget(view, stretch)

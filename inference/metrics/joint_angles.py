@@ -111,13 +111,22 @@ def _rx(deg: float) -> np.ndarray:
 def opensim_default_pose() -> np.ndarray:
     """(24, 3, 3) our global segment orientations in OpenSim's default pose: upright, arms
     hanging (lowered 90 deg about the forward axis), forearms and hands turned palms
-    forward (our T-pose has palms down). Mirror-symmetric left/right by construction."""
+    forward (our T-pose has palms down). Mirror-symmetric left/right by construction.
+    A read-only constant, made once (the live gait numbers ask for it a few times a second)."""
+    return _DEFAULT_POSE
+
+
+def _make_default_pose() -> np.ndarray:
     Q = np.broadcast_to(np.eye(3), (N_SEGMENTS, 3, 3)).copy()
     for side, down, palm in (("l", -90.0, 90.0), ("r", 90.0, -90.0)):
         Q[SEGMENT_INDEX[f"{side}_upperarm"]] = _rx(down)
         for seg in ("forearm", "hand", "fingers"):
             Q[SEGMENT_INDEX[f"{side}_{seg}"]] = rot_z(np.deg2rad(palm)) @ _rx(down)
+    Q.flags.writeable = False
     return Q
+
+
+_DEFAULT_POSE = _make_default_pose()
 
 
 def opensim_frames(R: np.ndarray, segments: list[str] | None = None) -> np.ndarray:
