@@ -205,6 +205,28 @@ def test_the_skeleton_is_drawn_with_and_without_opengl(qtbot, monkeypatch, gl):
     del obs
 
 
+def test_no_gl_widget_is_in_the_window_until_a_3d_tab_is_shown(qtbot, tmp_path):
+    """A GL widget makes Qt compose the whole window through OpenGL (software GL: most of the
+    window's CPU, docs/window.md), so the Live and Replay tabs' 3D views join the window only
+    when their tab is first shown; a window kept on the outdoor view's flat skeleton has none."""
+    from PySide6 import QtOpenGLWidgets
+
+    from app.gui import views
+    from tests.app.gui.helpers import shown_window
+
+    if not views.gl_available():
+        pytest.skip(f"no GL here: {views.GL_PROBLEM}")
+    win = shown_window(qtbot, tmp_path)
+    win.show_outdoor()
+    qtbot.wait(50)
+    assert win.live_panel.view.is_gl and win.replay_panel.view.is_gl
+    assert not win.findChildren(QtOpenGLWidgets.QOpenGLWidget)  # the hidden tabs' views are not in it yet
+    win.tabs.setCurrentWidget(win.live_panel)
+    qtbot.wait(50)
+    assert win.findChildren(QtOpenGLWidgets.QOpenGLWidget) == [win.live_panel.view]
+    assert win.live_panel.view.isVisible()
+
+
 def test_recordings_are_listed_from_their_headers(tmp_path):
     from app.gui.recordings_panel import fmt_length, scan_folder
     from app.live import frames_from_signals
