@@ -208,7 +208,7 @@ def _gait(T: int, fps: float, body: Body, speed: float, rng: np.random.Generator
         pose = _Pose.identity(n)
         c = np.cos(2 * np.pi * phase)
         yaw = e * (-yaw_amp * c)
-        pose.set("pelvis", rz(yaw) @ ry(np.full(n, lean * 0.5)) @ rx(e * (roll_amp * np.sin(4 * np.pi * phase))))
+        pose.set("pelvis", rz(yaw) @ ry(np.full(n, lean * 0.5)) @ rx(e * (roll_amp * np.sin(2 * np.pi * phase))))
         for s, p in (("l", pl), ("r", pr)):
             hip, knee, ankle = angles(p, e)
             pose.set(f"{s}_thigh", ry(-hip))
