@@ -252,16 +252,18 @@ def detector_analysis(motion, seed: int = 0):
 _DETECTOR = None
 
 
-def reconstructions(motions, model_spec: str, label: str, keep: Path | None) -> list[tuple[str, dict]]:
+def reconstructions(motions, model_spec: str, label: str, keep: Path | None,
+                    smoothing: bool = True) -> list[tuple[str, dict]]:
     """(clip name, {t, rot, root, contact_prob}) per motion for one set, from ``keep`` where stored there
-    (only the clips not stored are reconstructed)."""
-    folder = None if keep is None else keep / label.replace(" ", "_")
+    (only the clips not stored are reconstructed). ``smoothing=False``: the poser's answer before its
+    display filter (the 1-Euro filters of the root and the unmeasured segments)."""
+    folder = None if keep is None else keep / (label.replace(" ", "_") + ("" if smoothing else "_unsmoothed"))
     stored = {} if folder is None else {m.name: dict(np.load(folder / f"{m.name}.npz")) for m in motions
                                         if (folder / f"{m.name}.npz").is_file()}
     todo = [m for m in motions if m.name not in stored]
     if todo:
         model = resolve_models([model_spec])[model_spec]
-        _, results = evaluate_motions(todo, model, SETS[label], keep=True, desc=label)
+        _, results = evaluate_motions(todo, model, SETS[label], keep=True, desc=label, smoothing=smoothing)
         assert abs(1.0 / FPS_MODEL - STEP / FPS_SIGNAL) < 1e-9
         for r in results:
             rec = r.recon
@@ -276,7 +278,7 @@ def reconstructions(motions, model_spec: str, label: str, keep: Path | None) -> 
 
 
 def run(motions, sets: list[str], model_spec: str = "diffusion", done=None, keep: Path | None = None,
-        threshold: float = CONTACT_THRESHOLD, min_swing_s: float = MIN_SWING_S) -> dict:
+        threshold: float = CONTACT_THRESHOLD, min_swing_s: float = MIN_SWING_S, smoothing: bool = True) -> dict:
     """Every set over every motion; ``done(result so far)`` after each set. ``threshold`` / ``min_swing_s``:
     the model contacts' event detection (``app.report.events.foot_events``), to try others."""
     truths = {m.name: truth_analysis(m) for m in motions}
@@ -292,7 +294,7 @@ def run(motions, sets: list[str], model_spec: str = "diffusion", done=None, keep
         else:
             found = [(name, analyse(d["t"], d["rot"], d["root"], None, None, "model", events=foot_events(
                 d["t"], d["contact_prob"], "model", threshold=threshold, min_swing_s=min_swing_s)))
-                     for name, d in reconstructions(motions, model_spec, label, keep)]
+                     for name, d in reconstructions(motions, model_spec, label, keep, smoothing)]
         for name, an in found:
             tr = truths[name]
             ft, ff = clip_figures(tr), clip_figures(an)
@@ -345,6 +347,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--min-swing", type=float, default=MIN_SWING_S,
                     help="gaps in contact shorter than this are closed (s; to try others)")
     ap.add_argument("--keep", default=None, help="store / reuse the reconstructions here (module docstring)")
+    ap.add_argument("--no-smoothing", action="store_true",
+                    help="analyse the poser's answer before its display filter (1-Euro), as the report does")
     args = ap.parse_args(argv)
     root = Path(args.data) if args.data else data_root()
     motions = pick_clips(root, args.clips, args.seconds)
@@ -354,7 +358,7 @@ def main(argv: list[str] | None = None) -> int:
             Path(args.out).write_text(json.dumps(res, indent=1))
 
     res = run(motions, args.sets, args.model, done, None if args.keep is None else Path(args.keep),
-              args.contact_threshold, args.min_swing)
+              args.contact_threshold, args.min_swing, smoothing=not args.no_smoothing)
     if args.write_expected:
         write_expected(res, args.model, len(motions))
     if args.json:
