@@ -1,12 +1,14 @@
 """`imucap gui`: the window, with the last setup file (or the one given) loaded.
 
-    imucap gui [--setup FILE] [--tab TAB] [--screenshot PNG --quit-after S]
+    imucap gui [--setup FILE] [--tab TAB] [--view outdoor [--outdoor-skeleton 2d|3d]] [--screenshot PNG --quit-after S]
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+
+from app.cli.window_args import add_window_arguments
 
 
 def run(args: argparse.Namespace) -> int:
@@ -31,8 +33,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--setup", help="open this setup file (default: the last one opened or saved)")
     p.add_argument("--tab", choices=("Setup", "Devices", "Calibration", "Live", "Recordings", "Replay"),
                    help="start on this tab")
-    p.add_argument("--screenshot", help="save the window to this PNG after --quit-after seconds")
-    p.add_argument("--quit-after", type=float, default=0.0, help="close the window after this many seconds")
-    p.add_argument("--view", choices=("desk", "outdoor"), default="desk",
-                   help="with a window: outdoor = large numbers on black for a runner glancing from a distance")
+    add_window_arguments(p)
     p.set_defaults(func=run)
