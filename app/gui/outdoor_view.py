@@ -172,7 +172,8 @@ class OutdoorView(QtWidgets.QWidget):
 
     # ------------------------------------------------------------------ the skeleton
     def set_skeleton(self, kind: str) -> None:
-        """"2d" (side on, QPainter) or "3d" (GL, or the flat view where GL cannot run)."""
+        """Draw with the flat side-on skeleton ("2d", QPainter) or the desk view's ("3d": GL, or
+        the flat view where GL cannot run)."""
         if kind not in SKELETONS:
             raise ValueError(f"outdoor skeleton {kind!r}: choose one of {', '.join(SKELETONS)}")
         if kind == self.skeleton:
