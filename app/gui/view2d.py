@@ -29,6 +29,7 @@ SPAN_M = 2.6  # metres of world that fit the widget's height
 GRID_M = 0.5
 BACKGROUND = (24, 26, 30)
 SIDE_ELEVATION_DEG = 5.0
+PEN_CACHE = 64  # pens kept for reuse (a handful of colours per frame)
 HEADING_SMOOTH = 0.15  # per pose: the side-on camera follows the pelvis' heading over ~1/3 s, not its sway
 
 
@@ -161,6 +162,8 @@ class Skeleton2DView(QtWidgets.QWidget):
         key = (tuple(float(c) for c in colour), width)
         pen = self._pens.get(key)
         if pen is None:
+            if len(self._pens) >= PEN_CACHE:  # colours by spread change every frame: keep the cache small
+                self._pens.clear()
             pen = QtGui.QPen(QtGui.QColor(*qcolor_tuple(colour)), width, QtCore.Qt.PenStyle.SolidLine,
                              QtCore.Qt.PenCapStyle.RoundCap)
             self._pens[key] = pen
