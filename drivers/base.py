@@ -332,6 +332,14 @@ class Device(ABC):
         descriptor from one selector thread instead of one thread each."""
         return None
 
+    @property
+    def selectable(self) -> bool:
+        """Whether this transport has a descriptor to select on whenever it is connected (its
+        class gives ``fileno``), though it may have none now: a device that opened while its
+        other end was not ready yet (``DeviceNotReady``) joins the hub's selector once it
+        reconnects instead of keeping a thread of its own."""
+        return type(self).fileno is not Device.fileno
+
     def has_buffered(self) -> bool:
         """Whether ``read`` can return a sample without touching the transport."""
         return bool(getattr(self, "_pending", None))

@@ -88,7 +88,9 @@ class Readers:
         for tr in self.tracks.values():
             if not tr.device.is_open:
                 tr.device.open()
-            if self.selector and tr.device.fileno() is not None:
+            # a selectable device without a descriptor yet (opened while not ready) goes to the
+            # selector too: its scan gives it a thread until it reconnects and takes it back then
+            if self.selector and (tr.device.fileno() is not None or tr.device.selectable):
                 selectable.append(tr)
             else:
                 tr.thread = self._spawn(tr, until_selectable=False)

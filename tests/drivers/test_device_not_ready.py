@@ -9,6 +9,7 @@ import os
 import threading
 import time
 
+import numpy as np
 import pytest
 
 import drivers
@@ -67,6 +68,45 @@ def test_a_twin_not_reading_yet_opens_disconnected_and_is_configured_once_it_rea
             dev.close()
     finally:
         sim.stop()
+
+
+def test_in_a_hub_it_joins_the_selector_once_it_reads(tmp_path):
+    """Opened while not ready, the device reconnects on a thread of its own and then goes to the
+    selector that serves the other devices, as a device lost later does."""
+    from drivers.hub import Hub
+
+    link = str(tmp_path / "pelvis-tty")
+    sig = spinning_signals(("pelvis", "head"), seconds=30)
+    sim = make_sim_device("xbus", sig, "pelvis", name="pelvis", link_path=link)
+    head = make_sim_device("bno08x-rvc", sig, "head", name="head").start()
+    reading = threading.Event()
+    service = sim._service  # noqa: SLF001
+
+    def held_service(timeout: float) -> None:
+        if reading.is_set():
+            service(timeout)
+        else:
+            time.sleep(timeout)
+
+    sim._service = held_service  # noqa: SLF001
+    sim.start()
+    try:
+        assert _fill(link) > 0
+        devs = {"pelvis": drivers.make_device(f"xbus://{link}"), "head": drivers.make_device(head.url)}
+        with Hub(devs, latency=0.05) as hub:
+            pelvis = hub.tracks["pelvis"]
+            assert pelvis.device.selectable and not pelvis.device.connected
+            assert pelvis in hub.readers._selectable  # noqa: SLF001 (the selector's list)
+            reading.set()
+            deadline = time.monotonic() + 10.0
+            while (pelvis.thread is not None or not pelvis.device.connected) and time.monotonic() < deadline:
+                list(hub.frames(duration=0.2))
+            assert pelvis.device.connected and pelvis.thread is None, hub.events  # on the selector now
+            present = np.array([f.present for f in hub.frames(duration=1.0)])
+            assert present[:, 0].mean() > 0.9 and present[:, 1].mean() > 0.9
+    finally:
+        sim.stop()
+        head.stop()
 
 
 def test_a_port_that_is_not_there_is_still_an_error(tmp_path):
