@@ -34,9 +34,10 @@ def _fill(link: str) -> int:
         os.close(fd)
 
 
-def test_a_twin_not_reading_yet_opens_disconnected_and_is_configured_once_it_reads(tmp_path):
-    link = str(tmp_path / "pelvis-tty")
-    sim = make_sim_device("xbus", spinning_signals(("pelvis",), seconds=20), "pelvis", name="pelvis", link_path=link)
+def _xbus_not_reading(link: str, signals) -> tuple:
+    """An Xbus twin at ``link``, started, that does not read what comes in until the event it
+    returns is set (its own loop held), and whose port's buffer is full: (twin, event)."""
+    sim = make_sim_device("xbus", signals, "pelvis", name="pelvis", link_path=link)
     reading = threading.Event()
     service = sim._service  # noqa: SLF001
 
@@ -50,6 +51,16 @@ def test_a_twin_not_reading_yet_opens_disconnected_and_is_configured_once_it_rea
     sim.start()
     try:
         assert _fill(link) > 0
+    except BaseException:
+        sim.stop()
+        raise
+    return sim, reading
+
+
+def test_a_twin_not_reading_yet_opens_disconnected_and_is_configured_once_it_reads(tmp_path):
+    link = str(tmp_path / "pelvis-tty")
+    sim, reading = _xbus_not_reading(link, spinning_signals(("pelvis",), seconds=20))
+    try:
         dev = drivers.make_device(f"xbus://{link}")
         dev.open()  # the configuration's first write times out: open, not connected
         try:
@@ -77,21 +88,10 @@ def test_in_a_hub_it_joins_the_selector_once_it_reads(tmp_path):
 
     link = str(tmp_path / "pelvis-tty")
     sig = spinning_signals(("pelvis", "head"), seconds=30)
-    sim = make_sim_device("xbus", sig, "pelvis", name="pelvis", link_path=link)
-    head = make_sim_device("bno08x-rvc", sig, "head", name="head").start()
-    reading = threading.Event()
-    service = sim._service  # noqa: SLF001
-
-    def held_service(timeout: float) -> None:
-        if reading.is_set():
-            service(timeout)
-        else:
-            time.sleep(timeout)
-
-    sim._service = held_service  # noqa: SLF001
-    sim.start()
+    sim, reading = _xbus_not_reading(link, sig)
+    head = make_sim_device("bno08x-rvc", sig, "head", name="head")
     try:
-        assert _fill(link) > 0
+        head.start()
         devs = {"pelvis": drivers.make_device(f"xbus://{link}"), "head": drivers.make_device(head.url)}
         with Hub(devs, latency=0.05) as hub:
             pelvis = hub.tracks["pelvis"]
