@@ -186,8 +186,7 @@ class OutdoorView(QtWidgets.QWidget):
             view = Skeleton2DView(self)
             view.set_side_on(True)
             view.line_px, view.joint_px, view.grid_alpha = 9.0, 6.0, 90
-        if hasattr(view, "setBackgroundColor"):
-            view.setBackgroundColor("k")
+        view.setBackgroundColor(BG)  # both views take "#rrggbb" (the GL one through pyqtgraph's mkColor)
         if self.view is not None:
             self.view_box.removeWidget(self.view)
             self.view.deleteLater()

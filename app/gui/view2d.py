@@ -66,8 +66,12 @@ class Skeleton2DView(QtWidgets.QWidget):
         self._heading: float | None = None
         self._pens: dict[tuple[tuple[float, ...], float], QtGui.QPen] = {}
 
-    def setBackgroundColor(self, colour) -> None:  # noqa: N802 (SkeletonView's, pyqtgraph's name)
-        self.background = QtGui.QColor(colour) if not isinstance(colour, QtGui.QColor) else colour
+    def setBackgroundColor(self, colour: str | QtGui.QColor) -> None:  # noqa: N802 (SkeletonView's name)
+        """A QColor or a name Qt reads ("#rrggbb", "black"); anything else is an error, not black."""
+        c = QtGui.QColor(colour)
+        if not c.isValid():
+            raise ValueError(f"background colour {colour!r}: not a colour Qt reads (use \"#rrggbb\")")
+        self.background = c
         self.update()
 
     def set_side_on(self, on: bool) -> None:
