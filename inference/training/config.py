@@ -208,6 +208,11 @@ class TrainConfig:
     # is near mirror-equivariant itself and can answer live without averaging, one window a
     # pose instead of two
     teacher_mirror_chains: bool = False
+    # the teacher's weight in the target where the entries are unknown, the truth taking the
+    # rest: 1 distils the chain's choice, 0 is the one call trained on the truth (its mean
+    # answer keeps dg, loses the real stands); between, the student leans on the teacher
+    # where the sensors leave a choice and on the truth where the teacher's chain errs
+    teacher_share: float = 1.0
 
     def to_dict(self) -> dict:
         d = asdict(self)

@@ -286,8 +286,8 @@ def _distilled(model: nn.Module, ctx: StepContext, x: Tensor, xn: Tensor, xm: Te
                rng: np.random.Generator, told: tuple) -> tuple[Tensor, Tensor, Tensor]:
     """One distillation batch: (the student's answer, its target, the known entries), each
     over the student's window (the newest ``cfg.model.window`` frames). The target is the
-    teacher's chain on the whole window where unknown and the truth where known, as the
-    student's answer is."""
+    teacher's chain on the whole window where unknown (mixed with the truth by
+    ``teacher_share``) and the truth where known, as the student's answer is."""
     cfg = ctx.cfg
     if cfg.model.points or told:
         raise ValueError("distillation is for models without a position input or reading tokens")
@@ -304,6 +304,8 @@ def _distilled(model: nn.Module, ctx: StepContext, x: Tensor, xn: Tensor, xm: Te
         else:
             answer = inpaint(ctx.teacher, start, m, height, parse_steps(cfg.teacher_steps), schedule=ctx.schedule,
                              mode="replace-ddim", mask_input=True, start="mean")
+    if cfg.teacher_share != 1.0:
+        answer = cfg.teacher_share * answer + (1.0 - cfg.teacher_share) * xn
     target = torch.where(m, xn, answer)
     keep = slice(N - cfg.model.window, N)
     t = torch.full((B,), ctx.schedule.T, dtype=torch.long)
@@ -319,6 +321,8 @@ def load_teacher(cfg: TrainConfig, mean: np.ndarray, std: np.ndarray) -> nn.Modu
 
     if cfg.kind != "diffusion":
         raise ValueError("a teacher distils a diffusion model's chain; this run trains a regressor")
+    if not 0.0 <= cfg.teacher_share <= 1.0:
+        raise ValueError(f"teacher_share {cfg.teacher_share}: the teacher's weight in the target, from 0 to 1")
     teacher = load_model(cfg.teacher, window=None)
     if teacher.kind != "diffusion" or not teacher.config.mask_input:
         raise ValueError(f"teacher {cfg.teacher}: not a diffusion model that reads the mask")

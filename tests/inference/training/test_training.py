@@ -682,6 +682,28 @@ def test_distillation_targets_the_teachers_chain_over_the_students_window(tmp_pa
     assert terms("1", 61)["simple"] < 1e-10
     assert terms("10D:3", 61)["simple"] > 1e-6
     assert terms("10D:3", 21)["simple"] > 1e-6
+    # the teacher's share of the target where unknown: a student answering the truth scores
+    # zero at share 0 (the one call trained on the truth) and share^2 of its distance to the
+    # teacher's chain between
+    truth_n = (torch.as_tensor(batch["x"], dtype=torch.float32) - mean) / std
+
+    class Truth(torch.nn.Module):
+        def forward(self, z, t, h, m):
+            return truth_n
+
+    def share_simple(share: float) -> float:
+        cfg = _cfg(cond_prob=1.0, model=masked, teacher=str(teacher_file), teacher_steps="10D:3",
+                   teacher_share=share, augment_yaw=False, augment_mirror=0.0)
+        ctx = StepContext(cfg=cfg, mean=mean, std=std, schedule=Schedule.cosine(),
+                          teacher=load_teacher(cfg, teacher.norm_mean, teacher.norm_std))
+        return batch_loss(Truth(), batch, ctx, np.random.default_rng(1), torch.Generator().manual_seed(1))[1]["simple"]
+
+    whole = share_simple(1.0)
+    assert whole > 1e-6 and share_simple(0.0) < 1e-10
+    assert share_simple(0.5) == pytest.approx(0.25 * whole, rel=1e-4)
+    with pytest.raises(ValueError, match="teacher_share"):
+        load_teacher(_cfg(cond_prob=1.0, model=masked, teacher=str(teacher_file), teacher_share=1.5),
+                     teacher.norm_mean, teacher.norm_std)
     # a teacher of another reading of the features is refused, with what to do
     cfg = _cfg(cond_prob=1.0, model=masked, teacher=str(teacher_file))
     with pytest.raises(ValueError, match="--init"):
