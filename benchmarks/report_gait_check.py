@@ -53,7 +53,7 @@ import numpy as np
 
 from app.report.analysis import analyse
 from app.report.confidence import EXPECTED_FILE
-from app.report.events import MIN_SWING_S, foot_events, truth_contact_values
+from app.report.events import MIN_SWING_S, foot_events, model_contact_values, truth_contact_values
 from app.report.feet import sensor_events
 from app.report.normal import dataset_of, trial_curves
 from app.report.strides import match_strides
@@ -293,7 +293,8 @@ def run(motions, sets: list[str], model_spec: str = "diffusion", done=None, keep
             found = [(m.name, shank_gyro_analysis(m)) for m in motions]
         else:
             found = [(name, analyse(d["t"], d["rot"], d["root"], None, None, "model", events=foot_events(
-                d["t"], d["contact_prob"], "model", threshold=threshold, min_swing_s=min_swing_s)))
+                d["t"], model_contact_values(d["t"], d["contact_prob"]), "model", threshold=threshold,
+                min_swing_s=min_swing_s)))
                      for name, d in reconstructions(motions, model_spec, label, keep, smoothing)]
         for name, an in found:
             tr = truths[name]

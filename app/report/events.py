@@ -9,6 +9,10 @@ first (``contact_source``):
 - ``model``: the poser's contact values (20 Hz, ``recon/contact_prob`` in [0, 1], a contact above
   ``inference.poser.models.CONTACT_THRESHOLD``); with both shanks worn these come from the shank contact
   detector (``inference/poser/contact_detector.py``), otherwise from the model's own contact features.
+  The poser's first ``WARMUP_S`` are not read (``model_contact_values``): its detector reads the last
+  0.45 s of the shanks and its model the last 3 s, and at the start of a reconstruction that is the
+  standing history the poser starts from, not the subject (strides that began there were off by 35 ms
+  on the synthesized walks, against 16 later; docs/report.md).
 - for a motion with its truth (synthesized walks): the heel/toe points' speed below
   ``inference.signals.synthesis.CONTACT_SPEED`` (``truth_contact_values``).
 
@@ -33,7 +37,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from inference.body.skeleton import CONTACTS
+from inference.poser.contact_detector import CONTEXT as DETECTOR_CONTEXT
 from inference.poser.models import CONTACT_THRESHOLD
+from inference.signals.resample import FPS_MODEL
 
 SIDES = ("l", "r")
 FOOT_POINTS = {"l": (CONTACTS.index("l_heel"), CONTACTS.index("l_toe")),
@@ -41,6 +47,7 @@ FOOT_POINTS = {"l": (CONTACTS.index("l_heel"), CONTACTS.index("l_toe")),
 MIN_SWING_S = 0.15  # a walking swing lasts ~0.4 s: a shorter gap in contact is a flicker, not a swing
 MIN_STANCE_S = 0.12  # a walking stance lasts ~0.6 s (running ~0.25): a shorter contact is a brush in swing
 GAP_FACTOR = 2.5  # consecutive samples further apart than this many median periods: the data has a gap
+WARMUP_S = DETECTOR_CONTEXT / FPS_MODEL  # the poser's start, whose contacts read its made-up standing history
 
 
 @dataclass(frozen=True)
@@ -140,6 +147,16 @@ def foot_events(t: np.ndarray, values: np.ndarray, source: str, threshold: float
     return out
 
 
+def model_contact_values(t: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """The poser's contact values (T, 4) at times ``t`` with its warm-up, the first ``WARMUP_S`` of the
+    reconstruction, missing (NaN): a stance running into it has no strike (module docstring)."""
+    t = np.asarray(t, dtype=np.float64)
+    out = np.array(values, dtype=np.float64, copy=True)
+    if len(t):
+        out[t < t[0] + WARMUP_S - 1e-9] = np.nan
+    return out
+
+
 def truth_contact_values(contact_points: np.ndarray, fps: float) -> np.ndarray:
     """(T, 4) contact values of a motion's heel/toe points (T, 4, 3): 1 - speed / CONTACT_SPEED, so that
     the threshold 0 sits at the labels' speed and the crossing is interpolated like the model's values.
@@ -166,4 +183,5 @@ def contact_source(recon: dict, raw: dict | None = None) -> tuple[np.ndarray, np
     prob = recon.get("contact_prob")
     if prob is None or not np.isfinite(np.asarray(prob, dtype=np.float64)).any():
         prob = recon["contacts"]
-    return np.asarray(recon["t"], dtype=np.float64), np.asarray(prob, dtype=np.float64), "model"
+    t = np.asarray(recon["t"], dtype=np.float64)
+    return t, model_contact_values(t, prob), "model"

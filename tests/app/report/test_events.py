@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.report.events import MIN_STANCE_S, MIN_SWING_S, Stance, debounce, foot_events
+from app.report.events import (MIN_STANCE_S, MIN_SWING_S, WARMUP_S, Stance, contact_source, debounce,
+                               foot_events, model_contact_values)
 from app.report.strides import strides_of, summarize, symmetry_index
 from inference.body.conventions import rot_z
 
@@ -64,6 +65,24 @@ def test_a_gap_in_the_data_cuts_a_stance_without_inventing_events():
                 assert not (t[39] < s.start < t[50])
             if s.off:
                 assert not (t[39] < s.end < t[50])
+
+
+def test_the_posers_warm_up_gives_no_event():
+    """The poser's first WARMUP_S read its made-up standing history: a strike there is not one, and a
+    stance running into the warm-up's end has no strike; the same walk's later events are kept."""
+    t = 12.5 + np.arange(0, 6.0, 1 / FPS)  # a reconstruction need not start at t = 0
+    c, ls, _ = walk_contacts(t, t0=12.6)  # the first left strike 0.1 s in
+    kept = foot_events(t, c, "model")["l"].strikes
+    assert kept[0] == pytest.approx(12.6)
+    values = model_contact_values(t, c)
+    assert np.isnan(values[t < t[0] + WARMUP_S - 1e-9]).all() and np.isfinite(values[t >= t[0] + WARMUP_S]).all()
+    ev = foot_events(t, values, "model")
+    assert np.array_equal(ev["l"].strikes, kept[1:])
+    assert not ev["l"].stances[0].strike  # the stance from 12.6 s runs on past the warm-up, cut there
+    # a recording's model contacts come with the warm-up missing; the recording's own array is untouched
+    recon = {"t": t, "contact_prob": c.copy()}
+    ct, cv, source = contact_source(recon)
+    assert source == "model" and np.isnan(cv[0]).all() and np.isfinite(recon["contact_prob"]).all()
 
 
 def straight(t, speed=1.25):
