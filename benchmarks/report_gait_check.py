@@ -53,7 +53,7 @@ import numpy as np
 
 from app.report.analysis import analyse
 from app.report.confidence import EXPECTED_FILE
-from app.report.events import MIN_SWING_S, foot_events, model_contact_values, truth_contact_values
+from app.report.events import MIN_SWING_S, WARMUP_S, foot_events, model_contact_values, truth_contact_values
 from app.report.feet import sensor_events
 from app.report.normal import dataset_of, trial_curves
 from app.report.strides import match_strides
@@ -148,12 +148,14 @@ def stride_errors(truth_an, found_an) -> dict:
     return out
 
 
-def timing_ms(truth, found) -> float | None:
-    """Mean |t_truth - nearest t_found| over the truth's events (ms)."""
+def timing_ms(truth, found, after: float = WARMUP_S) -> float | None:
+    """Mean |t_truth - nearest t_found| over the truth's events from ``after`` s on (ms): the poser's warm-up
+    gives no event (``app.report.events.model_contact_values``), so a truth event there has none to meet."""
     diffs = []
     for side in ("l", "r"):
         for kind in ("strikes", "offs"):
             a, b = getattr(truth[side], kind), getattr(found[side], kind)
+            a = a[a >= after]
             if len(a) and len(b):
                 diffs += [float(np.min(np.abs(b - x))) for x in a]
     return 1000.0 * float(np.mean(diffs)) if diffs else None

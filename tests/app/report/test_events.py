@@ -5,8 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.report.events import (MIN_STANCE_S, MIN_SWING_S, WARMUP_S, Stance, contact_source, debounce,
-                               foot_events, model_contact_values)
+from app.report.events import (
+    MIN_STANCE_S,
+    MIN_SWING_S,
+    WARMUP_S,
+    Stance,
+    contact_source,
+    debounce,
+    foot_events,
+    model_contact_values,
+)
 from app.report.strides import strides_of, summarize, symmetry_index
 from inference.body.conventions import rot_z
 
