@@ -104,8 +104,9 @@ def sensor_effects(x: Tensor, fx, gen: torch.Generator) -> Tensor:
         Rz = matrix_about_axis(torch.tensor([0.0, 0.0, 1.0]).expand(B, S, 3), ang)[:, None]  # (B, 1, S, 3, 3)
         R = Rz @ R
         a = (Rz @ a[..., None])[..., 0]
-    if fx.acc_gain > 0:
-        a = a * (1 + (2 * torch.rand(B, 1, S, 1, generator=gen) - 1) * fx.acc_gain * on[:, :, None, None])
+    if fx.acc_gain > 0 or fx.acc_scale != 1.0:
+        gain = 1 + (2 * torch.rand(B, 1, S, 1, generator=gen) - 1) * fx.acc_gain if fx.acc_gain > 0 else 1.0
+        a = a * (1 + (fx.acc_scale * gain - 1) * on[:, :, None, None])
     if fx.acc_noise > 0:
         a = a + torch.randn(a.shape, generator=gen) * fx.acc_noise * on[:, :, None, None]
     out = x.clone()

@@ -76,7 +76,9 @@ class SensorEffects:
     calibration (random axis, angle uniform in [0, mount_deg]; skin and strap move over the
     muscle). heading_deg: residual heading of the sensor's world frame, uniform in
     [-h, h] (orientation and acceleration turn together). acc_gain: acceleration scaled by
-    1 + uniform [-g, g] (a sensor higher or lower on the segment than the synthesized site).
+    1 + uniform [-g, g] (a sensor higher or lower on the segment than the synthesized site);
+    acc_scale: the centre of that gain (the model then reads real accelerations as larger:
+    it did better on the real logs with theirs scaled up, docs/real_signals.md).
     acc_noise: white noise std on the model-rate acceleration (m/s^2). lag_frames: the
     site's signals shifted in time by uniform [-l, l] model frames (clocks of separate
     sensors aligned by their timestamps).
@@ -88,11 +90,12 @@ class SensorEffects:
     acc_gain: float = 0.0
     acc_noise: float = 0.0
     lag_frames: float = 0.0
+    acc_scale: float = 1.0
 
     @property
     def active(self) -> bool:
-        return self.p > 0 and any(v > 0 for v in (self.mount_deg, self.heading_deg, self.acc_gain,
-                                                    self.acc_noise, self.lag_frames))
+        return self.p > 0 and (self.acc_scale != 1.0 or any(v > 0 for v in (
+            self.mount_deg, self.heading_deg, self.acc_gain, self.acc_noise, self.lag_frames)))
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -52,6 +52,13 @@ def test_gain_noise_and_lag_change_the_accelerations_as_drawn():
     y = sensor_effects(x, SensorEffects(p=1.0, acc_gain=0.3), g)
     ratio = (y[..., SL_ACC].norm(dim=1) / x[..., SL_ACC].norm(dim=1).clamp(min=1e-6)).numpy()
     assert ratio.min() > 0.69 and ratio.max() < 1.31 and ratio.std() > 0.05
+    # the gain's centre moves it as a whole: 0.75 x [0.7, 1.3]; alone it scales every window the same
+    y = sensor_effects(x, SensorEffects(p=1.0, acc_gain=0.3, acc_scale=0.75), g)
+    ratio = (y[..., SL_ACC].norm(dim=1) / x[..., SL_ACC].norm(dim=1).clamp(min=1e-6)).numpy()
+    assert ratio.min() > 0.75 * 0.69 and ratio.max() < 0.75 * 1.31 and ratio.mean() < 0.85
+    y = sensor_effects(x, SensorEffects(p=1.0, acc_scale=0.5), g)
+    assert torch.allclose(y[..., SL_ACC], 0.5 * x[..., SL_ACC], atol=1e-5)
+    assert torch.allclose(y[..., SL_ROT], x[..., SL_ROT], atol=1e-5)
     y = sensor_effects(x, SensorEffects(p=1.0, lag_frames=1.0), g)
     d = (y - x)[:, 5:-5, SL_ACC].abs().max().item()
     assert 0.0 < d < (x[:, 1:, SL_ACC] - x[:, :-1, SL_ACC]).abs().max().item() + 1e-4  # within one frame's step
