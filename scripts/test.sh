@@ -4,16 +4,26 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
-if ! command -v xvfb-run >/dev/null || ! command -v strace >/dev/null || ! command -v chromium >/dev/null; then
-  # Xvfb and the libraries Qt's xcb platform plugin needs; strace for the tests that watch
-  # where the simulator and a capture send (tests/socket_watch.py); chromium for the gait report's
-  # PDF and its browser test (tests/app/report/test_report.py)
+# Xvfb and the libraries Qt's xcb platform plugin needs; strace for the tests that watch
+# where the simulator and a capture send (tests/socket_watch.py); chromium for the gait report's
+# PDF and its browser test (tests/app/report/test_report.py). Checked package by package: with
+# xvfb-run, strace and chromium present but an xcb library missing, Qt aborts in every window test.
+PACKAGES="xvfb xauth libgl1-mesa-dri libegl1 libxkbcommon-x11-0 libxcb-cursor0 libxcb-icccm4 libxcb-keysyms1
+  libxcb-image0 libxcb-render-util0 libxcb-xinerama0 libxcb-randr0 libxcb-shape0 libxcb-xkb1 libdbus-1-3
+  libfontconfig1 strace chromium"
+if command -v dpkg >/dev/null; then
+  # shellcheck disable=SC2086
+  dpkg -s $PACKAGES >/dev/null 2>&1 && missing="" || missing=yes
+else
+  command -v xvfb-run >/dev/null && command -v strace >/dev/null && command -v chromium >/dev/null && missing="" \
+    || missing=yes
+fi
+if [ -n "$missing" ]; then
   export DEBIAN_FRONTEND=noninteractive
   SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
   $SUDO apt-get update -qq
-  $SUDO apt-get install -y -qq xvfb xauth libgl1-mesa-dri libegl1 libxkbcommon-x11-0 libxcb-cursor0 \
-    libxcb-icccm4 libxcb-keysyms1 libxcb-image0 libxcb-render-util0 libxcb-xinerama0 libxcb-randr0 \
-    libxcb-shape0 libxcb-xkb1 libdbus-1-3 libfontconfig1 strace chromium >/dev/null
+  # shellcheck disable=SC2086
+  $SUDO apt-get install -y -qq $PACKAGES >/dev/null
 fi
 .venv/bin/ruff check .
 # let Python keep compiled modules (in the __pycache__ folders git ignores): with
