@@ -17,6 +17,7 @@ import json
 
 import numpy as np
 
+from app.report.events import FOOT_POINTS
 from inference.body.skeleton import SEGMENT_INDEX
 from inference.evaluation.runner import SIX, clip_input, clip_poser, resolve_models
 from inference.loaders import load_motion
@@ -35,7 +36,7 @@ def flat_ankle_speed(motion) -> float:
     """Median ankle speed (m/s) over the frames where a foot's heel and toe points are both in contact."""
     k = kinematics(motion)
     speeds = []
-    for side, (heel, toe) in (("l", (0, 1)), ("r", (2, 3))):
+    for side, (heel, toe) in FOOT_POINTS.items():
         ankle = k.joints[:, SEGMENT_INDEX[f"{side}_foot"]]
         v = np.linalg.norm(np.gradient(ankle, 1.0 / k.fps, axis=0), axis=1)
         speeds.append(v[k.contacts[:, heel] & k.contacts[:, toe]])
