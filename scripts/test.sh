@@ -67,9 +67,9 @@ rest_pid=$!
 wait "$live_pid"
 # A live test (realtime or solo) that failed gets one more run once both live runs are done, beside only the rest
 # run, which yields the cores at nice 10: their figures and timing need the cores (docs/testing.md, "A second run
-# alone"). It runs while the rest finishes, so it costs the suite little time. It passes only if it passes there; the first failure stays in the log, named again at the end. A
-# failure of the rest, a live run that failed without naming its tests (a crash, its ceiling) or a second failure
-# fails the suite.
+# alone"). It runs while the rest finishes, so it costs the suite little time. It passes only if it passes there;
+# the first failure stays in the log, named again at the end. A failure of the rest, a live run that failed without
+# naming its tests (a crash, its ceiling) or a second failure fails the suite.
 again=()
 for name in realtime solo; do
   [ "$(cat "$LOGS/$name.rc" 2>/dev/null)" = 0 ] && continue

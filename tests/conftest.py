@@ -64,7 +64,7 @@ REALTIME_MODULES = {"sim_devices/test_suit.py", "drivers/test_batched.py",
 # Separate processes in real time (a simulator, `imucap capture`) whose figures (a calibration
 # from integrated accelerations, poses per second) depend on the cores: with another CPU-bound
 # test at the same priority the capture's walk calibration put a CAN wrist 10-20 deg off. One at a
-# time, in a run of their own beside the realtime one and the niced rest (scripts/test.sh). Their
+# time, in a run of their own after the realtime one, beside the niced rest (scripts/test.sh). Their
 # own replays and evaluates run niced (tests/app/capture/live_capture.py).
 SOLO_MODULES = {"app/capture/test_capture_e2e.py", "test_readme.py", "app/capture/test_replay_reproduces_capture.py",
                 "app/capture/test_capture_wireless.py", "app/capture/test_capture_vr.py"}

@@ -9,10 +9,10 @@ Re-run (``app.gui.replay_panel.rerun``, the code behind the button) read it back
 the same frames, within float noise of ONNX Runtime (live) against torch (replay).
 
 Each mode and each front is captured once, as two pairs: the centred mode in the window, the
-low-latency mode headless (``CASES``). The four pairs cost the suite's solo run 210 s of CPU
-where these two cost ~105, and what a pair checks (the file says how its poser ran; replay and
-Re-run give back its frames) does not depend on the other half of the pair: the front writes
-the recording through the same session, and the mode is in the poser the file names.
+low-latency mode headless (``CASES``). All four pairs would cost the suite's solo run ~210 s of
+CPU where these two cost ~105, and what a pair checks (the file says how its poser ran; replay
+and Re-run give back its frames) does not depend on the other half of the pair: the front
+writes the recording through the same session, and the mode is in the poser the file names.
 The headless capture ends on a condition (a calibration and ENOUGH_POSES recorded,
 HEADLESS_CEILING_S the ceiling) rather than after a fixed time, and nothing here measures how
 good the calibration is, only that there is one and that the replays give back what live made
@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import json
 import os
-from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -69,28 +68,11 @@ def capture(tmp: Path, latency: str, window: bool = False) -> Path:
     return rec
 
 
-@pytest.fixture(scope="module")
-def captures(tmp_path_factory):
-    """``captures(front, latency)``, a Future of that capture's recording (a capture that
-    failed fails the tests that use it), made when its test asks for it."""
-    made: dict[tuple[str, str], Future] = {}
-    pool = ThreadPoolExecutor(1)
-
-    def get(front: str, latency: str) -> Future:
-        if (front, latency) not in made:
-            made[front, latency] = pool.submit(capture, tmp_path_factory.mktemp(f"{front}-{latency}"), latency,
-                                               front == "window")
-        return made[front, latency]
-
-    yield get
-    pool.shutdown(wait=True)
-
-
 @pytest.mark.parametrize(("latency", "front"), CASES)
-def test_replay_with_no_options_and_the_windows_rerun_give_back_the_live_poses(captures, latency, front):
+def test_replay_with_no_options_and_the_windows_rerun_give_back_the_live_poses(tmp_path, latency, front):
     if front == "window" and not os.environ.get("DISPLAY"):
         pytest.skip("the window needs a display: scripts/test.sh runs the tests under xvfb-run")
-    path = captures(front, latency).result()
+    path = capture(tmp_path, latency, window=front == "window")
     rec = read_recording(path)
     meta = rec.metadata
     # the file says how it ran, from the poser that was built
