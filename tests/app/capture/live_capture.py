@@ -167,3 +167,64 @@ def evaluated(args: list[str]) -> subprocess.CompletedProcess:
     if isinstance(done, subprocess.Popen):
         done = _EVALUATIONS[tuple(args)] = finish(done)
     return done
+
+
+
+def sender_stalls(sends: Path, skip: tuple[str, ...] = (), min_s: float = 0.05) -> list[tuple[float, float]]:
+    """(start, end) on the monotonic clock of each span of at least ``min_s`` in which no device of the
+    simulator sent anything (``--log-sends``; ``skip``: devices it unplugs on purpose). A capture cannot
+    receive what was not sent: the presence a test asks of a capture is asked outside these spans."""
+    import numpy as np
+
+    log = np.load(sends)
+    sent = np.sort(np.concatenate([log[k] for k in log.files
+                                   if k.endswith("/t") and k.split("/")[0] not in skip] or [np.zeros(0)]))
+    gaps = np.diff(sent)
+    return [(float(a), float(a + g)) for a, g in zip(sent[:-1][gaps >= min_s], gaps[gaps >= min_s])]
+
+
+def outside(t, spans: list[tuple[float, float]], margin: float = 0.05):
+    """A mask of the times ``t`` not within ``margin`` s after the start of a span or during it."""
+    import numpy as np
+
+    keep = np.ones(len(t), dtype=bool)
+    for a, b in spans:
+        keep &= ~((t > a) & (t < b + margin))
+    return keep
+
+
+def silences(rec: Path, sends: Path, min_s: float = 0.5, skip: tuple[str, ...] = ()) -> str:
+    """Which process stopped, when a capture lost every device at once: the spans of at least ``min_s``
+    where no site of the recording was present, each with the packets the simulator sent meanwhile
+    (``--log-sends``; both on the machine's monotonic clock). Sends there mean the capture stalled; none,
+    the simulator did. ``skip``: devices the simulator unplugs on purpose. For a failing test's message."""
+    import numpy as np
+
+    from app.recording import read_recording
+
+    try:
+        r = read_recording(rec)
+        log = np.load(sends)
+    except Exception as exc:  # noqa: BLE001 - a diagnosis must not hide the failure it explains
+        return f"(no silence diagnosis: {exc})"
+    t = np.asarray(r.raw["t"], dtype=np.float64)
+    anyone = np.zeros(len(t), dtype=bool)
+    for s in r.sites:
+        anyone |= np.asarray(r.raw[s]["present"], dtype=bool)
+    sent = np.sort(np.concatenate([log[k] for k in log.files
+                                   if k.endswith("/t") and k.split("/")[0] not in skip] or [np.zeros(0)]))
+    stalls = sender_stalls(sends, skip)
+    spans, start = [], None
+    for i in range(len(t) + 1):
+        silent = i < len(t) and not anyone[i]
+        if silent and start is None:
+            start = i
+        elif not silent and start is not None:
+            a, b = t[start], t[min(i, len(t) - 1)]
+            if b - a >= min_s:
+                n = int(np.count_nonzero((sent > a + 0.1) & (sent < b - 0.1)))
+                who = "the capture stalled" if n else "the simulator stalled"
+                spans.append(f"{a - t[0]:.1f}-{b - t[0]:.1f} s: {n} packets sent ({who})")
+            start = None
+    return ("silences: " + ("; ".join(spans) if spans else "none") + "; the simulator's own stalls: "
+            + (", ".join(f"{a - t[0]:.1f} s ({1000 * (b - a):.0f} ms)" for a, b in stalls) or "none"))

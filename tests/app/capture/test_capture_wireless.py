@@ -22,7 +22,17 @@ from app.capture.twins import free_udp_port
 from app.recording import read_recording
 from sim_devices.devices.can_loopback import loopback_channel
 from sim_devices.devices.wireless_twins import dot_address
-from tests.app.capture.live_capture import cli, evaluated, finish, run_capture, session_end, start_evaluate
+from tests.app.capture.live_capture import (
+    cli,
+    evaluated,
+    finish,
+    outside,
+    run_capture,
+    sender_stalls,
+    session_end,
+    silences,
+    start_evaluate,
+)
 
 pytestmark = pytest.mark.slow
 SITES = ("pelvis", "head", "l_wrist", "r_wrist", "l_shank", "r_shank")
@@ -68,7 +78,7 @@ def captured(tmp_path_factory, walk_20s):
     cap, _ = run_capture(
         ["--setup", str(setup), "--headless", "--record", str(rec), "--json", "--countdown", "1"],
         ["--setup", str(setup), "--motion", str(motion), "--truth", str(truth), "--lead-in", str(LEAD_IN),
-         "--unplug", ":".join(map(str, UNPLUG)), "--seed", "1"],
+         "--unplug", ":".join(map(str, UNPLUG)), "--seed", "1", "--log-sends", str(tmp / "sends.npz")],
         done=lambda sim: session_end(truth, sim))
     assert cap.returncode == 0, cap.stderr[-3000:]
     result = json.loads(cap.stdout.strip().splitlines()[-1])
@@ -77,11 +87,13 @@ def captured(tmp_path_factory, walk_20s):
 
 def test_wireless_capture_calibrates_and_scores_like_the_wired_reference(captured):
     tmp, setup, motion, truth, rec, result, log = captured
-    assert result["calibrated"], log[-2000:]
+    # a failure names the whole-capture silences and which process stalled (NOTES, "Tests")
+    assert result["calibrated"], (silences(rec, tmp / "sends.npz", skip=(UNPLUG[0],)), log[-2000:])
     r = read_recording(rec)
     assert r.sites == SITES
     for s in SITES:
-        assert r.raw[s]["present"].mean() > 0.7, (s, r.raw[s]["present"].mean())
+        assert r.raw[s]["present"].mean() > 0.7, (s, r.raw[s]["present"].mean(),
+                                                   silences(rec, tmp / "sends.npz", skip=(UNPLUG[0],)))
     evaluate_args = ["--data", str(motion), "--sensors", ",".join(SITES), "--insoles", "--json"]
     start_evaluate(evaluate_args)  # beside the replay (or already done: test_capture_e2e.py's is the same)
     rep = finish(cli(["replay", str(rec), "--truth", str(truth), "--json", "--no-progress"]))
@@ -103,13 +115,17 @@ def test_a_dropped_dot_rejoins_within_2_s_and_its_gap_is_recorded(captured):
     t_out = truth.t0 + truth.activity_start + at
     t = r.raw["t"]
     present = r.raw[name]["present"]
+    # what the simulator itself did not send (its whole process held up, ~150 ms beside a busy machine) is
+    # nobody's to receive: the presence asked here is asked of the rest
+    sent = outside(t, sender_stalls(tmp / "sends.npz", skip=(name,)))
+    why = silences(rec, tmp / "sends.npz", skip=(name,))
     gap = (t > t_out + 0.5) & (t < t_out + dur - 0.5)
     assert gap.any() and not present[gap].any()  # the gap is in the recording
     first_back = t[(t > t_out + dur - 0.5) & present][0]
     assert first_back - (t_out + dur) < 2.0
-    settled = (t > first_back + 0.5) & (t < first_back + 3.0)
-    assert present[settled].mean() > 0.95
+    settled = (t > first_back + 0.5) & (t < first_back + 3.0) & sent
+    assert settled.sum() > 100 and present[settled].mean() > 0.95, (settled.sum(), present[settled].mean(), why)
     back = [e for e in r.events if e[1] == "device_back" and e[2].startswith(name)]
     assert back, r.events
     others = [s for s in SITES if s != name]
-    assert np.mean([r.raw[s]["present"][gap].mean() for s in others]) > 0.9
+    assert np.mean([r.raw[s]["present"][gap & sent].mean() for s in others]) > 0.9, why

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -75,6 +76,32 @@ def test_simulating_real_urls_says_what_to_do_and_twin_setup_does_it(tmp_path):
     for name, url in twin.urls().items():  # it served what it wrote
         assert served[name].split("?")[0] == url.split("?")[0]
 
+
+
+def test_a_terminated_simulator_stops_its_devices_and_writes_its_send_log(tmp_path):
+    """SIGTERM (a test harness, a service manager) ends a simulated session as Ctrl-C does: exit 0,
+    the statistics printed and ``--log-sends`` written, with every device's packets up to then."""
+    import numpy as np
+
+    from tests.app.capture.live_capture import start_simulator
+
+    sim_toml = tmp_path / "sim.toml"
+    subprocess.run([*CLI, "devices", "simulate", "--setup", str(REAL), "--twin-setup", str(sim_toml), "--motion",
+                    "walk", "--lead-in", "1", "--activity-seconds", "2", "--seconds", "0.1"],
+                   capture_output=True, text=True, timeout=300, check=True)
+    sends = tmp_path / "sends.npz"
+    sim = start_simulator(["--setup", str(sim_toml), "--motion", "walk", "--lead-in", "30",
+                           "--activity-seconds", "2", "--log-sends", str(sends)])
+    time.sleep(1.0)
+    sim.proc.stdin.close()
+    sim.proc.terminate()
+    assert sim.proc.wait(30) == 0, sim.proc.stderr.read()[-2000:]
+    assert '"packets"' in sim.proc.stderr.read()  # the statistics, as after Ctrl-C
+    log = np.load(sends)
+    counts = {k.split("/")[0]: len(log[k]) for k in log.files if k.endswith("/counter")}
+    served = {line.split(" ", 1)[0] for line in sim.lines[:-1]}  # "name url" per device, then "simulating"
+    assert set(counts) == served, (counts, served)
+    assert max(counts.values()) > 20, counts  # ~1 s at 100 Hz: a device that sends without a reader
 
 def test_setup_example_writes_the_simulated_suit_and_keeps_an_existing_file(tmp_path):
     target = tmp_path / "suit.toml"
