@@ -59,10 +59,15 @@ def _expected(conf: Confidence, key: str, value: float | None, relative: bool) -
 
 
 def _row(figure: str, unit: str, a_vals, b_vals, key: str, ca: Confidence, cb: Confidence,
-         relative: bool = False) -> Row:
-    """a: before (the earlier session), b: after (this one)."""
+         relative: bool = False, centres: tuple[float | None, float | None] | None = None) -> Row:
+    """a: before (the earlier session), b: after (this one). ``centres``: each session's figure where it is
+    not the mean of the per-stride values (the cadence: 120 s over the mean stride time, as page one gives it,
+    where the mean of per-stride cadences is larger); the per-stride values still give the spread."""
     ma, sa, na = _stats(a_vals)
     mb, sb, nb = _stats(b_vals)
+    if centres is not None:
+        ma = centres[0] if ma is not None else None
+        mb = centres[1] if mb is not None else None
     diff = None if ma is None or mb is None else mb - ma
     ea, eb = _expected(ca, key, ma, relative), _expected(cb, key, mb, relative)
     expected = None if ea is None or eb is None else float(np.hypot(ea, eb))
@@ -78,7 +83,8 @@ def compare(before: GaitAnalysis, ca: Confidence, after: GaitAnalysis, cb: Confi
     rows: list[Row] = []
     wa, wb = before.summary.walking(), after.summary.walking()
     cad = lambda w: [120.0 / s.time_s for s in w]  # noqa: E731  per stride, so its SD is the strides'
-    rows.append(_row("Cadence", "steps/min", cad(wa), cad(wb), "cadence_pct", ca, cb, relative=True))
+    rows.append(_row("Cadence", "steps/min", cad(wa), cad(wb), "cadence_pct", ca, cb, relative=True,
+                     centres=(before.summary.cadence_spm, after.summary.cadence_spm)))
     rows.append(_row("Walking speed", "m/s", [s.speed_mps for s in wa], [s.speed_mps for s in wb],
                      "speed_pct", ca, cb, relative=True))
     for side in SIDES:

@@ -70,10 +70,15 @@ def test_a_slower_walk_is_marked_changed(recordings, capsys):
     rows = {r["figure"]: r for r in s["compare"]["rows"]}
     speed = rows["Walking speed"]
     assert speed["difference"] == pytest.approx(0.8 - 1.3, abs=0.12)
+    assert rows["Cadence"]["after"] == pytest.approx(s["cadence_spm"], abs=0.01)
     assert speed["marked"] == (speed["expected_error"] is not None)
     same = run_report(capsys, recordings["walk"], "--compare", recordings["walk"], "--out", out)
     assert same["compare"]["marked"] == 0 and all(r["difference"] == 0 for r in same["compare"]["rows"]
                                                   if r["difference"] is not None)
+    # the comparison's cadence is the one page one gives (120 s over the mean stride time; the mean of the
+    # strides' own cadences is 0.7 steps/min more on this walk)
+    cadence = next(r for r in same["compare"]["rows"] if r["figure"] == "Cadence")
+    assert cadence["before"] == cadence["after"] == pytest.approx(same["cadence_spm"], abs=0.01)
 
 
 @pytest.mark.skipif(find_chromium() is None, reason="chromium is not installed (scripts/test.sh installs it)")
