@@ -77,12 +77,16 @@ class _AttachOnShow(QtCore.QObject):
 
     def eventFilter(self, obj: QtCore.QObject, event: QtCore.QEvent) -> bool:  # noqa: N802 (Qt's name)
         if event.type() == QtCore.QEvent.Type.Show and self.view is not None:
+            # taken before it goes in: the first GL widget in a window makes Qt create the window again
+            # for GL composition, and the panel's Show comes back from inside insertWidget. Answered
+            # again, it put the view in a second time at the layout's end (index -1), where the two
+            # items halved the panel's height between them and the live view showed the body cut off
+            view, self.view = self.view, None
+            obj.removeEventFilter(self)
             at = self.layout_.indexOf(self.placeholder)
             self.layout_.removeWidget(self.placeholder)
             self.placeholder.deleteLater()
-            self.layout_.insertWidget(at, self.view, self.stretch)
-            self.view = None
-            obj.removeEventFilter(self)
+            self.layout_.insertWidget(at, view, self.stretch)
         return False
 
 

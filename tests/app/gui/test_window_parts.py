@@ -173,6 +173,17 @@ def _standing():
     return body, R, joints
 
 
+def _in_layout(layout, widget) -> int:
+    """How many items of ``layout`` and its nested layouts hold ``widget``."""
+    n = 0
+    for i in range(layout.count()):
+        item = layout.itemAt(i)
+        n += item.widget() is widget
+        if item.layout() is not None:
+            n += _in_layout(item.layout(), widget)
+    return n
+
+
 @pytest.mark.parametrize("gl", [True, False], ids=["gl", "no-gl"])
 def test_the_skeleton_is_drawn_with_and_without_opengl(qtbot, monkeypatch, gl):
     """Without OpenGL (here: IMUCAP_NO_GL) the live view is the QPainter one; either way
@@ -189,6 +200,11 @@ def test_the_skeleton_is_drawn_with_and_without_opengl(qtbot, monkeypatch, gl):
     panel.show()
     qtbot.waitExposed(panel)
     assert panel.view.is_gl is gl
+    # in the layout once, with the panel's height: the GL view once went in twice (the window made again
+    # for GL composition showed the panel a second time) and the two items halved it, the body cut off
+    qtbot.wait(50)
+    assert _in_layout(panel.layout(), panel.view) == 1
+    assert panel.view.height() > 0.75 * panel.height(), (panel.view.height(), panel.height())
     body, R, joints = _standing()
     obs = np.ones(13, bool)
     view = panel.view
