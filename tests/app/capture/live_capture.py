@@ -170,15 +170,28 @@ def evaluated(args: list[str]) -> subprocess.CompletedProcess:
 
 
 
+def sent_times(sends: Path, skip: tuple[str, ...] = ()):
+    """Every packet's send time (monotonic clock, sorted) over the simulator's devices (``--log-sends``),
+    but those in ``skip``."""
+    import numpy as np
+
+    log = np.load(sends)
+    return np.sort(np.concatenate([log[k] for k in log.files
+                                   if k.endswith("/t") and k.split("/")[0] not in skip] or [np.zeros(0)]))
+
+
 def sender_stalls(sends: Path, skip: tuple[str, ...] = (), min_s: float = 0.05) -> list[tuple[float, float]]:
     """(start, end) on the monotonic clock of each span of at least ``min_s`` in which no device of the
     simulator sent anything (``--log-sends``; ``skip``: devices it unplugs on purpose). A capture cannot
     receive what was not sent: the presence a test asks of a capture is asked outside these spans."""
+
+    return stall_spans(sent_times(sends, skip), min_s)
+
+
+def stall_spans(sent, min_s: float = 0.05) -> list[tuple[float, float]]:
+    """(start, end) of each gap of at least ``min_s`` between consecutive send times."""
     import numpy as np
 
-    log = np.load(sends)
-    sent = np.sort(np.concatenate([log[k] for k in log.files
-                                   if k.endswith("/t") and k.split("/")[0] not in skip] or [np.zeros(0)]))
     gaps = np.diff(sent)
     return [(float(a), float(a + g)) for a, g in zip(sent[:-1][gaps >= min_s], gaps[gaps >= min_s])]
 
@@ -204,16 +217,14 @@ def silences(rec: Path, sends: Path, min_s: float = 0.5, skip: tuple[str, ...] =
 
     try:
         r = read_recording(rec)
-        log = np.load(sends)
+        sent = sent_times(sends, skip)
     except Exception as exc:  # noqa: BLE001 - a diagnosis must not hide the failure it explains
         return f"(no silence diagnosis: {exc})"
     t = np.asarray(r.raw["t"], dtype=np.float64)
     anyone = np.zeros(len(t), dtype=bool)
     for s in r.sites:
         anyone |= np.asarray(r.raw[s]["present"], dtype=bool)
-    sent = np.sort(np.concatenate([log[k] for k in log.files
-                                   if k.endswith("/t") and k.split("/")[0] not in skip] or [np.zeros(0)]))
-    stalls = sender_stalls(sends, skip)
+    stalls = stall_spans(sent)
     spans, start = [], None
     for i in range(len(t) + 1):
         silent = i < len(t) and not anyone[i]
