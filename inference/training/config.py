@@ -216,6 +216,12 @@ class TrainConfig:
     # answer keeps dg, loses the real stands); between, the student leans on the teacher
     # where the sensors leave a choice and on the truth where the teacher's chain errs
     teacher_share: float = 1.0
+    # the frame the "last" loss terms weigh, counted back from the newest: 0 for the live
+    # poser, which shows the newest frame; k for a model that answers k frames late (an
+    # import or replay, which has no need to answer at once, can show the answer for a frame
+    # with k frames of the worn sensors after it: docs/real_signals.md, "The thighs stage by
+    # stage")
+    answer_lag: int = 0
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -239,6 +245,8 @@ class TrainConfig:
         cfg = cls(**d)
         if cfg.kind not in ("diffusion", "regressor"):
             raise ValueError(f"unknown model kind {cfg.kind!r}")
+        if not 0 <= cfg.answer_lag < cfg.window:
+            raise ValueError(f"answer_lag {cfg.answer_lag}: frames back from the newest, 0 to {cfg.window - 1}")
         # a misspelt site would otherwise surface as a KeyError at the first batch
         cfg.swing_gate = parse_sites(cfg.swing_gate)
         return cfg

@@ -277,7 +277,7 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
         m = torch.as_tensor(random_observation_mask(rng, B, x.shape[1], cfg.mask))
         pred = model(torch.where(m, xm, torch.zeros(())), m, height)
     gate = sites_known_share(m, cfg.swing_gate) if cfg.swing_gate and m is not None else None
-    terms = motion_losses(pred, xn, ctx.mean, ctx.std, offsets, contact_local, gate)
+    terms = motion_losses(pred, xn, ctx.mean, ctx.std, offsets, contact_local, gate, cfg.answer_lag)
     loss = total_loss(terms, cfg.loss)
     return loss, {k: float(v.detach()) for k, v in terms.items()}
 

@@ -44,12 +44,14 @@ _LEG_JOINTS = [SEGMENT_INDEX[n] for n in ("l_shank", "r_shank", "l_foot", "r_foo
 
 
 def motion_losses(pred_n: Tensor, true_n: Tensor, mean: Tensor, std: Tensor, offsets: Tensor,
-                  contact_local: Tensor, swing_weight: Tensor | None = None) -> dict[str, Tensor]:
+                  contact_local: Tensor, swing_weight: Tensor | None = None,
+                  answer_lag: int = 0) -> dict[str, Tensor]:
     """Unweighted loss terms (scalars) for predicted vs. true normalised windows (B, N, F).
 
     offsets (B, 24, 3) rest bone offsets; contact_local (B, 4, 3) heel/toe points on their
     segments. swing_weight (B,) weighs each window's swing term (``sites_known_share``; None =
-    1 for all). See ``LossWeights`` for the units.
+    1 for all). ``answer_lag``: the "last" terms weigh the frame this many before the
+    newest (``TrainConfig.answer_lag``). See ``LossWeights`` for the units.
     """
     B, N, _ = pred_n.shape
     pred = pred_n * std + mean
@@ -69,8 +71,9 @@ def motion_losses(pred_n: Tensor, true_n: Tensor, mean: Tensor, std: Tensor, off
     jt = forward_kinematics(Rt, zero, off)
     fk_err = (jp - jt).square().sum(-1)
     terms["fk"] = fk_err.mean()
-    terms["last"] = F.mse_loss(pred_n[:, -1], true_n[:, -1])
-    terms["fk_last"] = fk_err[:, -1].mean()
+    a = -1 - answer_lag
+    terms["last"] = F.mse_loss(pred_n[:, a], true_n[:, a])
+    terms["fk_last"] = fk_err[:, a].mean()
 
     lp, lt = jp[:, :, _LEG_JOINTS], jt[:, :, _LEG_JOINTS]
     spread_p = (lp.var(dim=1, unbiased=False) + 1e-8).sqrt()  # eps: no inf gradient at rest

@@ -99,6 +99,21 @@ def test_swing_is_asked_for_only_where_pelvis_and_shanks_are_known():
     assert 0 < float(gated) < float(full)
 
 
+def test_last_terms_weigh_the_frame_answer_lag_back():
+    # an error on the frame 4 before the newest counts in the "last" terms of a model trained
+    # to answer 4 frames late (TrainConfig.answer_lag) and not in a live model's
+    xn, mean, std, off, cl = _batch(contacts=0.0)
+    pert = xn.clone()
+    pert[:, -5] += 0.5
+    live = motion_losses(pert, xn, mean, std, off, cl)
+    lagged = motion_losses(pert, xn, mean, std, off, cl, answer_lag=4)
+    assert float(live["last"]) == 0.0 and float(live["fk_last"]) == 0.0
+    assert float(lagged["last"]) > 0 and float(lagged["fk_last"]) > 0
+    assert float(lagged["simple"]) == pytest.approx(float(live["simple"]))
+    with pytest.raises(ValueError, match="answer_lag"):
+        TrainConfig.from_dict({"answer_lag": 61})
+
+
 def test_losses_differentiable():
     xn, mean, std, off, cl = _batch(contacts=1.0)
     pred = (xn + 0.1).requires_grad_(True)
