@@ -49,6 +49,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--steps", default=None, help="diffusion steps (default: the model's)")
     p.add_argument("--seed", type=int, default=None, help="inpainting noise seed (default: each session's)")
     p.add_argument("--latency", default=None, choices=("centred", "low"), help="default: as recorded")
+    p.add_argument("--answer-lag", type=int, default=None, metavar="K",
+                   help="frames each pose waits for the sensors after it (inference/poser/lag.py): 0 shows the "
+                        "newest frame's answer, as live; default: as recorded (a live session 0, an import 4)")
     p.add_argument("--export", action="append", default=[], metavar="EXT",
                    help="write each replay in this format too, by extension as imucap export: bvh, csv, h5, mot, ... "
                         "(repeatable)")
@@ -89,7 +92,8 @@ def _options(args: argparse.Namespace):
             raise ValueError(f"--sensors {s!r}: {exc}") from None
         if sites not in subsets:
             subsets.append(sites)
-    settings = ReplaySettings(model=args.model, steps=args.steps, seed=args.seed, latency=args.latency)
+    settings = ReplaySettings(model=args.model, steps=args.steps, seed=args.seed, latency=args.latency,
+                              answer_lag=args.answer_lag)
     return Options(settings=settings, subsets=tuple(subsets), exports=tuple(exports), held_out=not args.no_held_out,
                    report=args.report)
 

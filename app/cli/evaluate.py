@@ -82,7 +82,7 @@ def data_paths(data: list) -> list:
     return out
 
 
-def real_held_out(spec: str, seed: int, progress: bool) -> dict:
+def real_held_out(spec: str, seed: int, progress: bool, answer_lag: int | None = None) -> dict:
     """``held_out`` of --data @real for the model ``spec`` (app/evaluation/real.py); an error
     naming the folder when it holds no real log."""
     from app.cli.importing import import_paths
@@ -102,7 +102,7 @@ def real_held_out(spec: str, seed: int, progress: bool) -> dict:
         if progress:
             print(f"evaluate: {msg}", file=sys.stderr, flush=True)
 
-    return score_logs(logs, import_log, spec, seed, progress=say)
+    return score_logs(logs, import_log, spec, seed, progress=say, answer_lag=answer_lag)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -155,6 +155,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "scoring (inference.plausibility.repair_feet); off by default so figures stay comparable")
     p.add_argument("--limit", type=int, default=None, help="only the first N motion files (sorted)")
     p.add_argument("--seed", type=int, default=0, help="seed of sensor noise and inpainting noise")
+    p.add_argument("--answer-lag", type=int, default=None, metavar="K",
+                   help="frames each pose waits for the sensors after it, as an import or replay may "
+                        "(inference/poser/lag.py); default: the live 0 for motion files, an import's 4 for @real")
     p.add_argument("--latency", default="centred", choices=("centred", "low"),
                    help="low: accelerations through the trailing filter of the low-latency live mode, and the "
                         "default diffusion model becomes the one trained on it if installed (docs/latency.md)")
@@ -270,10 +273,10 @@ def run(args: argparse.Namespace) -> int:
         result = {"clips": 0, "frames": 0, **{k: None for k in ("ga_deg", "la_deg", "jpe_cm", "jitter_ratio",
                                                                 "re2_m", "re5_m", "re10_m")},
                   "segments": None, "model": str(args.model), "seed": args.seed,
-                  "held_out": real_held_out(args.model, args.seed, progress)}
+                  "held_out": real_held_out(args.model, args.seed, progress, args.answer_lag)}
         if args.against is not None:
             result["against"] = {"model": str(args.against),
-                                 "held_out": real_held_out(args.against, args.seed, progress)}
+                                 "held_out": real_held_out(args.against, args.seed, progress, args.answer_lag)}
         result["seconds"] = round(time.time() - t0, 2)
         _print_real(result, args.json)
         return 0
@@ -323,6 +326,7 @@ def run(args: argparse.Namespace) -> int:
                                           stride_scale=args.stride_scale,
                                           pelvis_odometry="default" if args.pelvis_odometry else None,
                                           causal=causal, confidence=confidence and kind == "diffusion",
+                                          answer_lag=args.answer_lag if kind == "diffusion" else None,
                                           lanes=lanes, given=None if reads_points else given,
                                           tracked=tracked_input if reads_points else None,
                                           reach=tracked_input if args.reach else None)
@@ -410,9 +414,9 @@ def run(args: argparse.Namespace) -> int:
         result["report"] = {"path": str(args.report), "rows": rows, "comparisons": comparisons}
 
     if real:
-        result["held_out"] = real_held_out(args.model, args.seed, progress)
+        result["held_out"] = real_held_out(args.model, args.seed, progress, args.answer_lag)
         if args.against is not None:
-            result["against"]["held_out"] = real_held_out(args.against, args.seed, progress)
+            result["against"]["held_out"] = real_held_out(args.against, args.seed, progress, args.answer_lag)
     result["seconds"] = round(time.time() - t0, 2)
     if args.json:
         print(json.dumps(result))

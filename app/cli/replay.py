@@ -75,6 +75,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--confidence", action="store_true",
                    help="the per-segment spread with every pose (inference/poser/confidence.py): in --out's CSV "
                         "and HDF5, and spread_mean_deg in the JSON")
+    p.add_argument("--answer-lag", type=int, default=None, metavar="K",
+                   help="frames each pose waits for the sensors after it (inference/poser/lag.py): 0 shows the "
+                        "newest frame's answer, as live; default: as recorded (a live session 0, an import 4)")
     p.add_argument("--latency", default=None, choices=("centred", "low"),
                    help="acceleration filter of the replay: low = the trailing one of the low-latency mode "
                         "(docs/latency.md); default: as recorded, else centred")
@@ -193,7 +196,8 @@ def run_replay(args: argparse.Namespace) -> int:
     set_torch_threads(args.threads)
     built = build_replay_poser(rec, ReplaySettings(
         model=args.model, steps=args.steps, seed=args.seed, mirror=args.mirror, stride_scale=args.stride_scale,
-        pelvis_odometry=args.pelvis_odometry, confidence=args.confidence or None, latency=args.latency), body)
+        pelvis_odometry=args.pelvis_odometry, confidence=args.confidence or None, latency=args.latency,
+        answer_lag=args.answer_lag), body)
     if built.warning:
         print(f"replay: warning: {built.warning}", file=sys.stderr)
     poser, causal, latency, label, steps = built.poser, built.causal, built.latency, built.label, built.steps

@@ -20,6 +20,7 @@ from drivers.xsens_export.mvnx import MVN_SITES, is_mvnx, read_mvnx
 from drivers.xsens_export.mvnx import TITLE as MVNX_TITLE
 from inference.body.motion import Motion
 from inference.body.skeleton import N_CONTACTS, SITES
+from inference.poser.lag import OFFLINE_ANSWER_LAG
 
 from .grid import RATE, align_clocks, check_acc, duplicates, on_grid
 from .names import Source, assign_sites, unique
@@ -141,6 +142,8 @@ def import_sources(sources: Sequence[Source], out: str | Path, fmt: str, log: st
         "calibration": label, "calibration_warnings": summary["warnings"],
         "stride_scale": True,
         "pelvis_odometry": True, "clock": clock, "log_time_origin_s": float(t0),
+        # a log never ran live: its poses may wait for the sensors after them (inference/poser/lag.py)
+        "answer_lag": OFFLINE_ANSWER_LAG,
     }
     if height is not None:
         meta["body_height_m"] = float(height)

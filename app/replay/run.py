@@ -24,7 +24,7 @@ all instead (a better reconstruction than live had time for, no longer the same 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -36,6 +36,7 @@ from app.replay.compare import SAME_FRAME_S, match_times
 from calibration import Calibration
 from drivers.hub import HubFrame
 from inference.body.skeleton import parse_sites
+from inference.poser.lag import lagged_frames
 
 if TYPE_CHECKING:
     from inference.poser.poser import Poser
@@ -138,6 +139,9 @@ class ReplaySettings:
     pelvis_odometry: bool | None = None
     confidence: bool | None = None
     latency: str | None = None
+    # frames the shown answer waits for (inference/poser/lag.py); None: as the recording says
+    # (a live session's 0, an import's OFFLINE_ANSWER_LAG)
+    answer_lag: int | None = None
 
 
 @dataclass
@@ -171,7 +175,7 @@ def poser_metadata(poser: Poser, latency: str) -> dict[str, Any]:
         "steps": len(poser.steps) if poser.kind == "diffusion" else (1 if poser.kind == "regressor" else 0),
         "step_list": [int(k) for k in poser.steps], "seed": int(poser.seed), "mirror": bool(poser.mirror),
         "stride_scale": poser.stride is not None, "pelvis_odometry": poser.pelvis_odometry is not None,
-        "confidence": conf is not None, "latency": latency,
+        "confidence": conf is not None, "latency": latency, "answer_lag": int(poser.answer_lag),
     }
 
 
@@ -195,8 +199,11 @@ def build_replay_poser(rec: Recording, settings: ReplaySettings, body: Any, mode
     steps = settings.steps if settings.steps is not None else (meta.get("step_list") or None if same_model else None)
     seed = settings.seed if settings.seed is not None else int(meta.get("seed") or 0)
     confidence = settings.confidence if settings.confidence is not None else bool(meta.get("confidence", False))
+    lag = settings.answer_lag if settings.answer_lag is not None else int(meta.get("answer_lag") or 0)
+    if loaded is None or loaded.kind != "diffusion":
+        lag = 0  # one pass or none: no window answers the frames before its newest
     setting = dict(steps=steps, seed=seed, mirror=mirror, stride_scale=stride,
-                   pelvis_odometry="default" if odometry else None, confidence=confidence or None)
+                   pelvis_odometry="default" if odometry else None, confidence=confidence or None, answer_lag=lag)
     poser = Poser(loaded, body=body, **setting)
     steps = len(poser.steps) if poser.kind == "diffusion" else (1 if poser.kind == "regressor" else 0)
     return ReplayPoser(poser, loaded, causal, latency, label, steps, warning,
@@ -276,6 +283,11 @@ def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] 
     for ev in events[e:]:
         pipe.event(*ev)
     pipe.close()
+    if getattr(poser, "answer_lag", 0):
+        # each frame as the window answer_lag frames later answered it (inference/poser/lag.py);
+        # the sinks saw the live answers as they came
+        lagged = lagged_frames([p.pose for p in poses], poser.body)
+        poses = [replace(p, pose=f) for p, f in zip(poses, lagged)]
     return ReplayResult(poses=poses, sensors=use, insoles=ins, hub_frames=n, calibrations_used=used,
                         stats=pipe.stats.summary())
 

@@ -34,6 +34,7 @@ from torch import Tensor
 
 from inference.features.layout import N_FEATURES
 from inference.model.diffusion import inpaint
+from inference.poser.lag import lagged_frames
 from inference.poser.poser import Observation, Poser, Reconstruction, reconstruct_offline
 
 DEFAULT_CHUNK = 8  # frames per batch: 16 windows with mirror averaging, the fastest per window on 1-2 threads
@@ -56,6 +57,7 @@ def reconstruct_batched(poser: Poser, features: np.ndarray, mask: np.ndarray, ch
     T = features.shape[0]
     mask = np.ascontiguousarray(np.broadcast_to(np.asarray(mask, dtype=bool), (T, N_FEATURES)))
     rec = Reconstruction.empty(T)
+    frames = []
     with torch.inference_mode():
         obs = [poser.observe(features[t], mask[t]) for t in range(T)]
         for s in range(0, T, chunk):
@@ -72,10 +74,19 @@ def reconstruct_batched(poser: Poser, features: np.ndarray, mask: np.ndarray, ch
                 if due[j]:
                     n = poser.confidence.draws
                     d, k = draws[k: k + n, -1], k + n
-                rec.put(s + j, poser.finish(out[j, -1], win, o, d))
+                frames.append(poser.finish(out[j, -1], win, o, d, poser.earlier_rows(out[j])))
                 if progress is not None:
                     progress(1)
+    _put_all(rec, frames, poser)
     return rec
+
+
+def _put_all(rec: Reconstruction, frames: list, poser: Poser) -> None:
+    """A clip's frames into its reconstruction, as the poser's ``answer_lag`` shows them."""
+    if poser.answer_lag:
+        frames = lagged_frames(frames, poser.body)
+    for t, frame in enumerate(frames):
+        rec.put(t, frame)
 
 
 def reconstruct_many(posers: Sequence[Poser], clips: Sequence[tuple[np.ndarray, np.ndarray]], lanes: int = 8,
@@ -99,6 +110,7 @@ def reconstruct_many(posers: Sequence[Poser], clips: Sequence[tuple[np.ndarray, 
     masks = [np.ascontiguousarray(np.broadcast_to(np.asarray(m, dtype=bool), (len(f), N_FEATURES)))
              for f, (_, m) in zip(feats, clips)]
     out = [Reconstruction.empty(len(f)) for f in feats]
+    frames: list[list] = [[] for _ in feats]
     queue = [i for i in range(len(clips)) if len(feats[i])]
     lanes = min(lanes, len(queue))
     active: list[list[int]] = []  # [clip, next frame]
@@ -123,16 +135,20 @@ def reconstruct_many(posers: Sequence[Poser], clips: Sequence[tuple[np.ndarray, 
                 noise = [posers[i].draw_noise() for (i, _), d in zip(active, due) if d]
                 draws = _draws_of(lead, y, W, M, H, due, noise, lanes)
             k = 0
-            for j, (i, t) in enumerate(active):
+            for j, (i, _t) in enumerate(active):
                 d = None
                 if due[j]:
                     n = posers[i].confidence.draws
                     d, k = draws[k: k + n, -1], k + n
-                out[i].put(t, posers[i].finish(y[j, -1], wins[j], obs[j], d))
+                frames[i].append(posers[i].finish(y[j, -1], wins[j], obs[j], d, posers[i].earlier_rows(y[j])))
                 if progress is not None:
                     progress(1)
             for lane in active:
                 lane[1] += 1
+            done = [lane[0] for lane in active if lane[1] >= len(feats[lane[0]])]
+            for i in done:
+                _put_all(out[i], frames[i], posers[i])
+                frames[i] = []
             active = [lane for lane in active if lane[1] < len(feats[lane[0]])]
     return out
 

@@ -134,6 +134,9 @@ class PoseFrame:
     observed: np.ndarray
     spread_deg: np.ndarray | None = None
     root_spread_m: float | None = None
+    # (k, 24, 3, 3) with ``Poser(answer_lag=k)``: this step's window's answers for the k frames
+    # before it (index - k .. index - 1, oldest first), cleaned as the frame's own; None without
+    earlier_rot: np.ndarray | None = None
 
 
 def standing_features(body: Body, pose: str = "npose") -> np.ndarray:
@@ -208,6 +211,7 @@ class Poser:
         confidence: ConfidenceSettings | bool | None = None,
         runtime: str = "torch",
         mirror_chains: bool | None = None,
+        answer_lag: int | None = None,
     ) -> None:
         self.model = model
         # the frame-by-frame call through ONNX Runtime where that is faster (live sessions ask
@@ -221,6 +225,13 @@ class Poser:
         if self.kind != "diffusion":
             self.steps = [] if self.kind == "floor" else [0]  # one pass; reported as such
         self.window = model.config.window if model is not None else WINDOW
+        # frames after a frame whose sensors its shown answer may use (``lagged_frames``): 0
+        # live; a model trained to answer late says how late in its file (TrainConfig.answer_lag)
+        lag = answer_lag if answer_lag is not None else int(((model.meta or {}) if model is not None else {})
+                                                             .get("answer_lag", 0))
+        if not 0 <= lag < self.window or (lag and self.kind != "diffusion"):
+            raise ValueError(f"answer_lag {lag}: 0 to {self.window - 1} frames, and only for a diffusion model")
+        self.answer_lag = int(lag)
         self.root_correction = root_correction and self.kind != "floor"
         self.stride = StrideScale(self.body, FPS_MODEL) if stride_scale and self.root_correction else None
         self.start_pose = start_pose
@@ -465,7 +476,12 @@ class Poser:
             draws = None
             if self.confidence_due():
                 draws = self.draw(out, win, mask, self.draw_noise())[:, -1]
-            return self.finish(out[0, -1], win, obs, draws)
+            return self.finish(out[0, -1], win, obs, draws, self.earlier_rows(out[0]))
+
+    def earlier_rows(self, out: Tensor) -> Tensor | None:
+        """(k, F) a window's answers (N, F) for the ``answer_lag`` frames before its newest."""
+        k = self.answer_lag
+        return out[-1 - k:-1] if k else None
 
     # The step in stages, so that an offline run can batch the model calls of many frames
     # (``batched.reconstruct_batched``) and still pass each frame through the same code.
@@ -529,13 +545,30 @@ class Poser:
                       self.schedule, mask_input=self.model.config.mask_input, points=pts)
 
     def finish(self, y_n: Tensor | np.ndarray, win: Tensor, obs: Observation,
-               draws: Tensor | None = None) -> PoseFrame:
+               draws: Tensor | None = None, earlier: Tensor | np.ndarray | None = None) -> PoseFrame:
         """Clean the model's answer ``y_n`` (F,) for the window's last frame (normalised),
         correct and integrate the root, write the frame into the history and return it;
-        ``draws`` (k, F): other inpaintings of the frame for the spread, or None."""
+        ``draws`` (k, F): other inpaintings of the frame for the spread, or None;
+        ``earlier`` (k, F): the window's answers for the frames before it (``earlier_rows``)."""
         # a degenerate answer (a zero 6D) gives NaN quietly, as torch did
         with np.errstate(divide="ignore", invalid="ignore"):
-            return self._finish(y_n, win, obs, draws)
+            frame = self._finish(y_n, win, obs, draws)
+            if earlier is not None:
+                frame.earlier_rot = self._clean_earlier(earlier, frame.observed)
+            return frame
+
+    def _clean_earlier(self, rows: Tensor | np.ndarray, m: np.ndarray) -> np.ndarray:
+        """(k, 24, 3, 3) the earlier frames' answers cleaned as a frame's own (valid
+        rotations, the knee hinge, the stand prior's settling so far), their measured
+        segments as measured (the window keeps them exact)."""
+        y = _numpy(rows) * self._std_np + self._mean_np
+        R = rot6d_to_matrix_np(y[:, SL_ROT].reshape(-1, N_SEGMENTS, 6))
+        if self.knee_hinge:
+            measured = m[SL_ROT].reshape(N_SEGMENTS, 6).all(axis=-1)
+            R = constrain_knees(R, measured)
+            if self._stand_prior is not None:
+                R = np.stack([self._stand_prior.settle(r, measured) for r in R])
+        return R
 
     def _finish(self, y_n: Tensor | np.ndarray, win: Tensor, obs: Observation, draws: Tensor | None) -> PoseFrame:
         f_in, m, f32, fn = obs
@@ -758,16 +791,25 @@ def reconstruct_offline(poser: Poser, features: np.ndarray, mask: np.ndarray, pr
     points (T, 16) tracked points' input or None.
 
     Exactly the per-frame ``step`` a live session runs (no look-ahead, no batching), so
-    evaluation measures what a user gets. ``progress`` is called with 1 after each frame
+    evaluation measures what a user gets; a poser with an ``answer_lag`` then shows each
+    frame as the window that many frames later answered it (``lag.lagged_frames``), as an
+    import or replay does. ``progress`` is called with 1 after each frame
     (e.g. a tqdm ``update``)."""
     features = np.asarray(features)
     T = features.shape[0]
     mask = np.ascontiguousarray(np.broadcast_to(np.asarray(mask, dtype=bool), (T, N_FEATURES)))
     rec = Reconstruction.empty(T)
+    frames = []
     for t in range(T):
-        rec.put(t, poser.step(features[t], mask[t], None if points is None else points[t]))
+        frames.append(poser.step(features[t], mask[t], None if points is None else points[t]))
         if progress is not None:
             progress(1)
+    if poser.answer_lag:
+        from inference.poser.lag import lagged_frames
+
+        frames = lagged_frames(frames, poser.body)
+    for t, frame in enumerate(frames):
+        rec.put(t, frame)
     return rec
 
 

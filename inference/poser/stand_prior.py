@@ -71,6 +71,12 @@ class StandPrior:
         """``R`` (24, 3, 3) global orientations after the knee hinge, ``measured`` (24,)
         bool. Returns ``R`` with the settled knees straightened (a copy when changed)."""
         self._update(R, measured)
+        return self.settle(R, measured)
+
+    def settle(self, R: np.ndarray, measured: np.ndarray) -> np.ndarray:
+        """``R`` with the knees straightened as far as the stillness counted so far says,
+        without counting ``R`` as a frame: for the answers a lagged poser gives for frames
+        just before the newest (``Poser(answer_lag=k)``)."""
         w = self.weight()
         if w <= 0.0:
             return R
