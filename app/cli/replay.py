@@ -242,7 +242,7 @@ def run_replay(args: argparse.Namespace) -> int:
         "steps": steps, "step_list": list(poser.steps) if poser.kind == "diffusion" else None, "seed": poser.seed,
         "latency_mode": latency, "acc_filter": "causal" if causal else "centred",
         "mirror": poser.mirror, "stride_scale": poser.stride is not None,
-        "pelvis_odometry": poser.pelvis_odometry is not None,
+        "pelvis_odometry": poser.pelvis_odometry is not None, "answer_lag": poser.answer_lag,
         "recorded_sensors": list(rec.sites), "recorded_model": rec.metadata.get("model"),
         "calibrations": res.calibrations_used, "hub_frames": res.hub_frames,
         "frames_filled": res.stats.get("frames_filled"), "poses_skipped": res.stats.get("poses_skipped"),

@@ -77,6 +77,17 @@ def test_an_imported_log_is_calibrated_and_replays(logged, tmp_path, capsys):
     assert main(["replay", str(tmp_path / "s.h5"), "--json", "--no-progress", "--steps", "1"]) == 0
     rep = json.loads(capsys.readouterr().out)
     assert rep["frames"] > 100 and rep["sensors"] == out["sites"] and rep["stride_scale"] is True
+    # a log never ran live: its poses wait 4 frames for the sensors after them (inference/poser/lag.py),
+    # and a replay of it does the same unless told to show the newest frame's answer
+    assert rec.metadata["answer_lag"] == 4 and rep["answer_lag"] == 4
+    held_out = {}
+    for lag in ("4", "0"):
+        assert main(["replay", str(tmp_path / "s.h5"), "--json", "--no-progress", "--steps", "1", "--sensors",
+                     "pelvis,l_shank,r_shank", "--held-out", "--answer-lag", lag]) == 0
+        rep = json.loads(capsys.readouterr().out)
+        assert rep["answer_lag"] == int(lag)
+        held_out[lag] = rep["held_out"]
+    assert held_out["4"] != held_out["0"]
 
 
 def test_unknown_device_names_are_skipped_with_the_way_out(logged, tmp_path, capsys):
