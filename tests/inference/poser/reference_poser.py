@@ -147,10 +147,13 @@ class ReferencePoser(Poser):
         self._mask[0, -1] = obs.m
         return win, self._mask
 
-    def finish(self, y_n: Tensor, win: Tensor, obs: Observation, draws: Tensor | None = None) -> PoseFrame:
+    def finish(self, y_n: Tensor, win: Tensor, obs: Observation, draws: Tensor | None = None,
+               earlier: Tensor | None = None) -> PoseFrame:
         """Clean the model's answer ``y_n`` (F,) for the window's last frame (normalised),
         correct and integrate the root, write the frame into the history and return it;
-        ``draws`` (k, F): other inpaintings of the frame for the spread, or None."""
+        ``draws`` (k, F): other inpaintings of the frame for the spread, or None. The reference
+        is the live step's: it answers the newest frame only (``earlier`` is None)."""
+        assert earlier is None, "the reference poser has no answer lag"
         f_in, m, f32, fn = obs
         y = y_n * self._std + self._mean  # physical units, fresh tensor
 
