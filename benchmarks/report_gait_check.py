@@ -255,17 +255,20 @@ _DETECTOR = None
 
 
 def reconstructions(motions, model_spec: str, label: str, keep: Path | None,
-                    smoothing: bool = True) -> list[tuple[str, dict]]:
+                    smoothing: bool = True, answer_lag: int | None = None) -> list[tuple[str, dict]]:
     """(clip name, {t, rot, root, contact_prob}) per motion for one set, from ``keep`` where stored there
     (only the clips not stored are reconstructed). ``smoothing=False``: the poser's answer before its
-    display filter (the 1-Euro filters of the root and the unmeasured segments)."""
-    folder = None if keep is None else keep / (label.replace(" ", "_") + ("" if smoothing else "_unsmoothed"))
+    display filter (the 1-Euro filters of the root and the unmeasured segments). ``answer_lag``: each frame
+    as the window that many frames later answered it, as an import poses it (inference/poser/lag.py)."""
+    folder = None if keep is None else keep / (label.replace(" ", "_") + ("" if smoothing else "_unsmoothed")
+                                               + (f"_lag{answer_lag}" if answer_lag else ""))
     stored = {} if folder is None else {m.name: dict(np.load(folder / f"{m.name}.npz")) for m in motions
                                         if (folder / f"{m.name}.npz").is_file()}
     todo = [m for m in motions if m.name not in stored]
     if todo:
         model = resolve_models([model_spec])[model_spec]
-        _, results = evaluate_motions(todo, model, SETS[label], keep=True, desc=label, smoothing=smoothing)
+        _, results = evaluate_motions(todo, model, SETS[label], keep=True, desc=label, smoothing=smoothing,
+                                      answer_lag=answer_lag)
         assert abs(1.0 / FPS_MODEL - STEP / FPS_SIGNAL) < 1e-9
         for r in results:
             rec = r.recon
@@ -280,7 +283,8 @@ def reconstructions(motions, model_spec: str, label: str, keep: Path | None,
 
 
 def run(motions, sets: list[str], model_spec: str = "diffusion", done=None, keep: Path | None = None,
-        threshold: float = CONTACT_THRESHOLD, min_swing_s: float = MIN_SWING_S, smoothing: bool = True) -> dict:
+        threshold: float = CONTACT_THRESHOLD, min_swing_s: float = MIN_SWING_S, smoothing: bool = True,
+        answer_lag: int | None = None) -> dict:
     """Every set over every motion; ``done(result so far)`` after each set. ``threshold`` / ``min_swing_s``:
     the model contacts' event detection (``app.report.events.foot_events``), to try others."""
     truths = {m.name: truth_analysis(m) for m in motions}
@@ -297,7 +301,7 @@ def run(motions, sets: list[str], model_spec: str = "diffusion", done=None, keep
             found = [(name, analyse(d["t"], d["rot"], d["root"], None, None, "model", events=foot_events(
                 d["t"], model_contact_values(d["t"], d["contact_prob"]), "model", threshold=threshold,
                 min_swing_s=min_swing_s)))
-                     for name, d in reconstructions(motions, model_spec, label, keep, smoothing)]
+                     for name, d in reconstructions(motions, model_spec, label, keep, smoothing, answer_lag)]
         for name, an in found:
             tr = truths[name]
             ft, ff = clip_figures(tr), clip_figures(an)
@@ -350,6 +354,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--min-swing", type=float, default=MIN_SWING_S,
                     help="gaps in contact shorter than this are closed (s; to try others)")
     ap.add_argument("--keep", default=None, help="store / reuse the reconstructions here (module docstring)")
+    ap.add_argument("--answer-lag", type=int, default=None,
+                    help="frames each pose waits for the sensors after it, as an import poses it")
     ap.add_argument("--no-smoothing", action="store_true",
                     help="analyse the poser's answer before its display filter (1-Euro), as the report does")
     args = ap.parse_args(argv)
@@ -361,7 +367,7 @@ def main(argv: list[str] | None = None) -> int:
             Path(args.out).write_text(json.dumps(res, indent=1))
 
     res = run(motions, args.sets, args.model, done, None if args.keep is None else Path(args.keep),
-              args.contact_threshold, args.min_swing, smoothing=not args.no_smoothing)
+              args.contact_threshold, args.min_swing, smoothing=not args.no_smoothing, answer_lag=args.answer_lag)
     if args.write_expected:
         write_expected(res, args.model, len(motions))
     if args.json:

@@ -27,23 +27,29 @@ from inference.body.body import Body
 from inference.body.rotations import matrix_to_rot6d_np
 from inference.body.skeleton import N_SEGMENTS
 from inference.features.layout import SL_ROT
+from inference.signals.resample import FPS_MODEL
 
 # frames an import or a replay of one waits before showing a frame: 200 ms at 20 Hz. Four
 # frames back the shipped model's thighs and pelvis on the real logs are 1-2.5 deg nearer their
 # own sensors than the newest frame's, dg and the CMU subjects no worse (docs/real_signals.md,
 # "Answering late")
 OFFLINE_ANSWER_LAG = 4
+# the late poses' low-pass (Hz, zero phase): the cut-off gait kinematics are commonly filtered at
+# (Winter, Biomechanics and Motor Control of Human Movement); not tuned on the checks here
+SMOOTH_HZ = 6.0
 
 
-def lagged_frames(frames: Sequence, body: Body) -> list:
+def lagged_frames(frames: Sequence, body: Body, smooth_hz: float | None = SMOOTH_HZ) -> list:
     """``frames`` (``PoseFrame``, in order) with each frame's inferred segments taken from the
     latest later step, at most k frames on, whose window held it (the same history: index
-    counting on without a reset). Frames without ``earlier_rot`` come back as they are."""
-    out = list(frames)
-    if not out:
-        return out
-    kin = fk.Kinematics(body.offsets)
-    n = len(out)
+    counting on without a reset), then low-passed without phase lag at ``smooth_hz`` over each
+    run of frames of one history (``zero_phase``; None: not). Frames without ``earlier_rot``
+    come back as they are."""
+    frames = list(frames)
+    if not frames or all(f.earlier_rot is None for f in frames):
+        return frames
+    n = len(frames)
+    rots = []
     for j, f in enumerate(frames):
         best = None
         for p in range(j + 1, n):
@@ -52,16 +58,45 @@ def lagged_frames(frames: Sequence, body: Body) -> list:
             if g.earlier_rot is None or g.index != f.index + d or d > len(g.earlier_rot):
                 break
             best = (g, d)
-        if best is None:
-            continue
-        g, d = best
+        rots.append(f.rot if best is None else best[0].earlier_rot[len(best[0].earlier_rot) - best[1]])
+    R_all = np.array(rots, dtype=np.float64)
+    if smooth_hz is not None:
+        start = 0
+        for j in range(1, n + 1):  # each run of one history (the index counts on by one)
+            if j == n or frames[j].index != frames[j - 1].index + 1:
+                R_all[start:j] = zero_phase(R_all[start:j], smooth_hz)
+                start = j
+    kin = fk.Kinematics(body.offsets)
+    out = []
+    for f, R in zip(frames, R_all):
         measured = f.observed[SL_ROT].reshape(N_SEGMENTS, 6).all(axis=-1)
-        R = np.where(measured[:, None, None], f.rot, g.earlier_rot[len(g.earlier_rot) - d]).astype(f.rot.dtype)
+        R = np.where(measured[:, None, None], f.rot, R).astype(f.rot.dtype)
         feats = f.features.copy()
         rot6 = feats[SL_ROT].reshape(N_SEGMENTS, 6)
         rot6[~measured] = matrix_to_rot6d_np(R[~measured])
-        out[j] = replace(f, rot=R, joints=(kin.joints(R) + f.root).astype(f.joints.dtype), features=feats)
+        out.append(replace(f, rot=R, joints=(kin.joints(R) + f.root).astype(f.joints.dtype), features=feats))
     return out
 
 
-__all__ = ["OFFLINE_ANSWER_LAG", "lagged_frames"]
+def zero_phase(R: np.ndarray, cutoff_hz: float, fps: float = FPS_MODEL) -> np.ndarray:
+    """(T, S, 3, 3) orientations low-passed forward and backward (a 2nd-order Butterworth, so no
+    lag and 4th-order roll-off) on their quaternions, kept in one hemisphere frame to frame. A
+    late answer has its future, so it needs no causal filter's lag; the live 1-Euro filters
+    would flatten the knee's swing peak (docs/report.md). Runs too short for the filter's
+    padding come back as they are."""
+    from scipy.signal import butter, filtfilt
+    from scipy.spatial.transform import Rotation
+
+    T, S = R.shape[:2]
+    b, a = butter(2, cutoff_hz / (fps / 2.0))
+    if T <= 3 * max(len(a), len(b)):
+        return R
+    q = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_quat().reshape(T, S, 4)
+    flip = np.cumprod(np.where(np.sum(q[1:] * q[:-1], axis=-1) < 0, -1.0, 1.0), axis=0)
+    q[1:] *= flip[..., None]
+    q = filtfilt(b, a, q, axis=0)
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    return Rotation.from_quat(q.reshape(-1, 4)).as_matrix().reshape(T, S, 3, 3)
+
+
+__all__ = ["OFFLINE_ANSWER_LAG", "SMOOTH_HZ", "lagged_frames", "zero_phase"]

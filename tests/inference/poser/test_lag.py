@@ -17,7 +17,7 @@ from inference.features.layout import N_FEATURES, SL_ROT
 from inference.model.config import ModelConfig
 from inference.model.files import LoadedModel, build_model
 from inference.poser.batched import reconstruct_many
-from inference.poser.lag import lagged_frames
+from inference.poser.lag import lagged_frames, zero_phase
 from inference.poser.poser import Poser, reconstruct_offline
 from tests.conftest import F32_PATHS
 
@@ -61,7 +61,7 @@ def test_each_frame_is_the_answer_of_the_window_k_frames_later(model, clip):
     poser._predict = keep
     frames = [poser.step(clip.features[t], clip.mask[t]) for t in range(len(clip.features))]
     assert all(f.earlier_rot.shape == (k, N_SEGMENTS, 3, 3) for f in frames)
-    lagged = lagged_frames(frames, poser.body)
+    lagged = lagged_frames(frames, poser.body, smooth_hz=None)
     measured = _measured(clip.mask[0])
     hips = [i for i in range(N_SEGMENTS) if not measured[i]]
     T = len(frames)
@@ -89,7 +89,7 @@ def test_no_answer_is_taken_across_a_reset(model, clip):
     frames = [poser.step(clip.features[t], clip.mask[t]) for t in range(10)]
     poser.reset()
     frames += [poser.step(clip.features[t], clip.mask[t]) for t in range(10, 20)]
-    lagged = lagged_frames(frames, poser.body)
+    lagged = lagged_frames(frames, poser.body, smooth_hz=None)
     # the last frame before the reset has no later window of its own history: it stays live
     assert np.array_equal(lagged[9].rot, frames[9].rot)
     assert not np.allclose(lagged[5].rot, frames[5].rot)
@@ -107,6 +107,21 @@ def test_lock_step_clips_give_each_clip_its_frame_by_frame_lagged_answer(model):
     for a, b in zip(one, many):
         assert np.allclose(a.rot, b.rot, **F32_PATHS)
         assert np.allclose(a.joints, b.joints, **F32_PATHS)
+
+
+def test_the_late_poses_are_low_passed_without_lag():
+    # a 1 Hz swing with 8 Hz jitter: the jitter goes, the swing keeps its phase and size
+    t = np.arange(80) / 20.0
+    angle = 0.6 * np.sin(2 * np.pi * 1.0 * t)
+    jitter = 0.05 * np.sin(2 * np.pi * 8.0 * t)
+    from scipy.spatial.transform import Rotation
+
+    R = Rotation.from_rotvec(np.stack([np.zeros_like(t), angle + jitter, np.zeros_like(t)], -1)).as_matrix()
+    out = Rotation.from_matrix(zero_phase(R[:, None], 6.0)[:, 0]).as_rotvec()[:, 1]
+    inner = slice(10, -10)
+    assert np.abs(out - angle)[inner].max() < 0.02 < np.abs(jitter).max()
+    assert np.argmax(out[:20]) == np.argmax(angle[:20])  # no phase lag
+    assert np.allclose(zero_phase(R[:5, None], 6.0), R[:5, None])  # too short to filter: as it was
 
 
 def test_answer_lag_is_checked(model):
