@@ -7,17 +7,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 
 from inference.evaluation.runner import SIX, clip_input, synthetic_motion
-from inference.features.layout import N_FEATURES
-from inference.model.config import ModelConfig
-from inference.model.files import LoadedModel, build_model
 from inference.poser.batched import batchable, reconstruct_batched, reconstruct_many
 from inference.poser.confidence import ConfidenceSettings
 from inference.poser.models import DEFAULT_WEIGHTS, resolve_model
 from inference.poser.poser import Poser, reconstruct_offline
 from tests.conftest import F32_PATHS
+from tests.inference.poser.tiny import tiny_diffusion
 
 SHIPPED = dict(history="measured", noise="mean", inpaint_mode="replace-ddim")
 FIELDS = ("rot", "root", "joints", "contact_prob", "features", "spread_deg", "root_spread_m")
@@ -28,13 +25,6 @@ FIELDS = ("rot", "root", "joints", "contact_prob", "features", "spread_deg", "ro
 F32_RTOL, F32_ATOL = F32_PATHS["rtol"], F32_PATHS["atol"]
 SLACK = {"spread_deg": 200.0}
 
-
-def _tiny(mask_input: bool = True) -> LoadedModel:
-    torch.manual_seed(0)
-    cfg = ModelConfig.tiny()
-    cfg.mask_input = mask_input
-    return LoadedModel(model=build_model("diffusion", cfg).eval(), kind="diffusion", config=cfg,
-                       norm_mean=np.zeros(N_FEATURES, np.float32), norm_std=np.ones(N_FEATURES, np.float32))
 
 
 @pytest.fixture(scope="module")
@@ -58,7 +48,7 @@ def _close(a, b, atol=F32_ATOL, rtol=F32_RTOL):
 
 @pytest.mark.parametrize("confidence", [None, ConfidenceSettings(draws=2)])
 def test_clips_in_lock_step_are_each_their_frame_by_frame_reconstruction(clips, confidence):
-    model = _tiny()
+    model = tiny_diffusion()
 
     def posers():
         return [Poser(model, body=m.body, steps=3, confidence=confidence, **SHIPPED) for m, _ in clips]
@@ -80,7 +70,7 @@ def test_shipped_poser_in_lock_step_matches_the_live_loop(clips):
 
 
 def test_a_clip_cut_in_chunks_stays_within_the_history_weight_of_frame_by_frame(clips):
-    model = _tiny()
+    model = tiny_diffusion()
     m, inp = clips[0]
     seq = reconstruct_offline(Poser(model, body=m.body, steps=3, **SHIPPED), inp.features, inp.mask)
     chunked = reconstruct_batched(Poser(model, body=m.body, steps=3, **SHIPPED), inp.features, inp.mask, chunk=5)
@@ -90,10 +80,10 @@ def test_a_clip_cut_in_chunks_stays_within_the_history_weight_of_frame_by_frame(
 
 def test_posers_whose_answer_follows_their_history_run_frame_by_frame(clips):
     m, inp = clips[1]
-    for poser in (Poser(_tiny(), body=m.body, steps=2), Poser(None, body=m.body),
-                  Poser(_tiny(), body=m.body, steps=2, history="reconstructed", noise="mean",
+    for poser in (Poser(tiny_diffusion(), body=m.body, steps=2), Poser(None, body=m.body),
+                  Poser(tiny_diffusion(), body=m.body, steps=2, history="reconstructed", noise="mean",
                         inpaint_mode="replace-ddim")):
         assert not batchable(poser)
-    a = reconstruct_offline(Poser(_tiny(), body=m.body, steps=2, seed=4), inp.features, inp.mask)
-    b = reconstruct_many([Poser(_tiny(), body=m.body, steps=2, seed=4)], [(inp.features, inp.mask)])[0]
+    a = reconstruct_offline(Poser(tiny_diffusion(), body=m.body, steps=2, seed=4), inp.features, inp.mask)
+    b = reconstruct_many([Poser(tiny_diffusion(), body=m.body, steps=2, seed=4)], [(inp.features, inp.mask)])[0]
     assert np.array_equal(a.rot, b.rot) and np.array_equal(a.root, b.root)

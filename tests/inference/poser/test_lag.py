@@ -14,28 +14,20 @@ from inference.body.rotations import rot6d_to_matrix
 from inference.body.skeleton import N_SEGMENTS, SEGMENT_INDEX
 from inference.evaluation.runner import SIX, clip_input, synthetic_motion
 from inference.features.layout import N_FEATURES, SL_ROT
-from inference.model.config import ModelConfig
-from inference.model.files import LoadedModel, build_model
 from inference.poser.batched import reconstruct_many
 from inference.poser.lag import lagged_frames, zero_phase
 from inference.poser.poser import Poser, reconstruct_offline
 from tests.conftest import F32_PATHS
+from tests.inference.poser.tiny import tiny_diffusion
 
 SHIPPED = dict(history="measured", noise="mean", inpaint_mode="replace-ddim")
 SHANKS = ("pelvis", "l_shank", "r_shank")
 
 
-def _tiny() -> LoadedModel:
-    torch.manual_seed(0)
-    cfg = ModelConfig.tiny()
-    cfg.mask_input = True
-    return LoadedModel(model=build_model("diffusion", cfg).eval(), kind="diffusion", config=cfg,
-                       norm_mean=np.zeros(N_FEATURES, np.float32), norm_std=np.ones(N_FEATURES, np.float32))
-
 
 @pytest.fixture(scope="module")
 def model():
-    return _tiny()
+    return tiny_diffusion()
 
 
 @pytest.fixture(scope="module")
