@@ -21,8 +21,9 @@ validation subjects), read from $IMUCAP_DATA; a report's reproduce line keeps th
 
 @real scores real recordings instead (app/evaluation/real.py): every real log under
 $IMUCAP_DATA (x-IMU3 log folders under ximu3/, the OpenSense Xsens MTw trial under
-opensense/ with its sensor map) is imported as ``imucap import`` does, replayed with each
-standard sensor set (pelvis+shanks, shanks, pelvis+shanks+feet, pelvis+thighs) and with every
+opensense/ with its sensor map) is imported as ``imucap import`` does, replayed as a replay of
+the import poses (each frame four frames late: inference/poser/lag.py; --answer-lag 0 for the
+live answer) with each standard sensor set (pelvis+shanks, shanks, pelvis+shanks+feet, pelvis+thighs) and with every
 sensor, and each left-out segment is compared with what its own sensor measured: key
 ``held_out`` (log -> set -> ``deg`` per left-out site, ``mean_deg``, ``frames``; ``phases``:
 walking / turning / standing / other -> ``seconds`` and ``deg``; ``constant_deg`` and
