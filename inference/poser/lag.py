@@ -10,8 +10,9 @@ The poser does the live work as always (the newest frame's answer goes into the 
 root and the contacts follow it) and, with ``Poser(answer_lag=k)``, also hands each frame the
 window's answers for the k frames before it (``PoseFrame.earlier_rot``). ``lagged_frames``
 then swaps each frame's inferred segments for the answer of the step k frames later, or of the
-latest step that has it where the poses end or the history was reset. Measured segments stay
-as measured; the root path stays the live one. A model trained to be best k frames back
+latest step that has it where the poses end or the history was reset, and low-passes them
+forward and backward (a pose that has its future needs no causal filter and its lag). Measured
+segments stay as measured; the root path stays the live one. A model trained to be best k frames back
 (``TrainConfig.answer_lag``) says so in its file (meta ``answer_lag``).
 """
 
@@ -30,7 +31,7 @@ from inference.features.layout import SL_ROT
 from inference.signals.resample import FPS_MODEL
 
 # frames an import or a replay of one waits before showing a frame: 200 ms at 20 Hz. Four
-# frames back the shipped model's thighs and pelvis on the real logs are 1-2.5 deg nearer their
+# frames back the shipped model's thighs and pelvis on the real logs are 1-3 deg nearer their
 # own sensors than the newest frame's, dg and the CMU subjects no worse (docs/real_signals.md,
 # "Answering late")
 OFFLINE_ANSWER_LAG = 4
