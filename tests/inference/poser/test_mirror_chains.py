@@ -13,7 +13,8 @@ from inference.poser.batched import reconstruct_many
 from inference.poser.models import DEFAULT_WEIGHTS, resolve_model
 from inference.poser.poser import Poser, reconstruct_offline
 
-from .test_batched import SHIPPED, _close, _tiny
+from .test_batched import SHIPPED, _close
+from .tiny import tiny_diffusion
 
 pytestmark = pytest.mark.skipif(not DEFAULT_WEIGHTS["diffusion"].exists(), reason="shipped weights not installed")
 
@@ -51,7 +52,7 @@ def test_a_symmetric_stand_gets_symmetric_thighs():
 def test_chains_in_lock_step_are_each_their_frame_by_frame_reconstruction():
     from inference.evaluation.runner import clip_input, synthetic_motion
 
-    model = _tiny()
+    model = tiny_diffusion()
     clips = [clip_input(synthetic_motion(seconds=1.5, seed=k), ("pelvis", "l_shank", "r_shank")) for k in range(2)]
 
     def posers():
