@@ -30,6 +30,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from app.cli.replay import ANSWER_LAG_HELP
+
 
 def export_choices() -> tuple[str, ...]:
     """Every format `imucap export` writes, by extension without the dot (new exporters join by themselves)."""
@@ -50,8 +52,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=None, help="inpainting noise seed (default: each session's)")
     p.add_argument("--latency", default=None, choices=("centred", "low"), help="default: as recorded")
     p.add_argument("--answer-lag", type=int, default=None, metavar="K",
-                   help="frames each pose waits for the sensors after it (inference/poser/lag.py): 0 shows the "
-                        "newest frame's answer, as live; default: as recorded (a live session 0, an import 4)")
+                   help=ANSWER_LAG_HELP)
     p.add_argument("--export", action="append", default=[], metavar="EXT",
                    help="write each replay in this format too, by extension as imucap export: bvh, csv, h5, mot, ... "
                         "(repeatable)")

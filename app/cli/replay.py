@@ -44,6 +44,10 @@ import numpy as np
 from app.streams import add_stream_arguments, parse_stream_spec, sinks_from_args, stream_summary
 from app.streams.pacing import Pacer
 
+# --answer-lag of the commands that replay recordings (replay, batch)
+ANSWER_LAG_HELP = ("frames each pose waits for the sensors after it (inference/poser/lag.py): 0 shows the newest "
+                   "frame's answer, as live; default: as recorded (0 for a live capture, 4 for an imported log)")
+
 OUT_HELP = ("write the poses to FILE; format by extension: .bvh, .csv, .h5/.hdf5, .mot, .c3d, .trc, "
             "NAME_orientations.sto (OpenSense) (repeatable)")
 
@@ -76,8 +80,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="the per-segment spread with every pose (inference/poser/confidence.py): in --out's CSV "
                         "and HDF5, and spread_mean_deg in the JSON")
     p.add_argument("--answer-lag", type=int, default=None, metavar="K",
-                   help="frames each pose waits for the sensors after it (inference/poser/lag.py): 0 shows the "
-                        "newest frame's answer, as live; default: as recorded (a live session 0, an import 4)")
+                   help=ANSWER_LAG_HELP)
     p.add_argument("--latency", default=None, choices=("centred", "low"),
                    help="acceleration filter of the replay: low = the trailing one of the low-latency mode "
                         "(docs/latency.md); default: as recorded, else centred")

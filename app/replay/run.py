@@ -140,7 +140,7 @@ class ReplaySettings:
     confidence: bool | None = None
     latency: str | None = None
     # frames the shown answer waits for (inference/poser/lag.py); None: as the recording says
-    # (a live session's 0, an import's OFFLINE_ANSWER_LAG)
+    # (a live capture's 0, an imported log's OFFLINE_ANSWER_LAG)
     answer_lag: int | None = None
 
 
