@@ -283,7 +283,7 @@ def replay_recording(rec: Recording, poser: Poser, sensors: str | Sequence[str] 
     for ev in events[e:]:
         pipe.event(*ev)
     pipe.close()
-    if getattr(poser, "answer_lag", 0):
+    if poser.answer_lag:
         # each frame as the window answer_lag frames later answered it (inference/poser/lag.py);
         # the sinks saw the live answers as they came
         lagged = lagged_frames([p.pose for p in poses], poser.body)

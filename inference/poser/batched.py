@@ -34,7 +34,6 @@ from torch import Tensor
 
 from inference.features.layout import N_FEATURES
 from inference.model.diffusion import inpaint
-from inference.poser.lag import lagged_frames
 from inference.poser.poser import Observation, Poser, Reconstruction, reconstruct_offline
 
 DEFAULT_CHUNK = 8  # frames per batch: 16 windows with mirror averaging, the fastest per window on 1-2 threads
@@ -56,7 +55,6 @@ def reconstruct_batched(poser: Poser, features: np.ndarray, mask: np.ndarray, ch
     features = np.asarray(features)
     T = features.shape[0]
     mask = np.ascontiguousarray(np.broadcast_to(np.asarray(mask, dtype=bool), (T, N_FEATURES)))
-    rec = Reconstruction.empty(T)
     frames = []
     with torch.inference_mode():
         obs = [poser.observe(features[t], mask[t]) for t in range(T)]
@@ -77,16 +75,7 @@ def reconstruct_batched(poser: Poser, features: np.ndarray, mask: np.ndarray, ch
                 frames.append(poser.finish(out[j, -1], win, o, d, poser.earlier_rows(out[j])))
                 if progress is not None:
                     progress(1)
-    _put_all(rec, frames, poser)
-    return rec
-
-
-def _put_all(rec: Reconstruction, frames: list, poser: Poser) -> None:
-    """A clip's frames into its reconstruction, as the poser's ``answer_lag`` shows them."""
-    if poser.answer_lag:
-        frames = lagged_frames(frames, poser.body)
-    for t, frame in enumerate(frames):
-        rec.put(t, frame)
+    return Reconstruction.of_frames(frames, poser)
 
 
 def reconstruct_many(posers: Sequence[Poser], clips: Sequence[tuple[np.ndarray, np.ndarray]], lanes: int = 8,
@@ -147,7 +136,7 @@ def reconstruct_many(posers: Sequence[Poser], clips: Sequence[tuple[np.ndarray, 
                 lane[1] += 1
             done = [lane[0] for lane in active if lane[1] >= len(feats[lane[0]])]
             for i in done:
-                _put_all(out[i], frames[i], posers[i])
+                out[i] = Reconstruction.of_frames(frames[i], posers[i])
                 frames[i] = []
             active = [lane for lane in active if lane[1] < len(feats[lane[0]])]
     return out

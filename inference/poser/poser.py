@@ -83,6 +83,7 @@ from inference.poser.confidence import (
 )
 from inference.poser.contact_detector import DETECTOR_THRESHOLD, SHANK_INDEX, ContactDetector, DetectorKernel
 from inference.poser.joint_constraints import constrain_knees
+from inference.poser.lag import lagged_frames
 from inference.poser.models import (
     CONTACT_THRESHOLD,
     DEFAULT_WEIGHTS,
@@ -773,6 +774,17 @@ class Reconstruction:
                    features=np.empty((T, N_FEATURES)), spread_deg=np.full((T, N_SEGMENTS), np.nan),
                    root_spread_m=np.full(T, np.nan))
 
+    @classmethod
+    def of_frames(cls, frames: Sequence[PoseFrame], poser: Poser) -> Reconstruction:
+        """A clip's frames, in order, as ``poser`` shows them: with its ``answer_lag``, each
+        frame as the window that many frames later answered it (``lag.lagged_frames``)."""
+        if poser.answer_lag:
+            frames = lagged_frames(frames, poser.body)
+        rec = cls.empty(len(frames))
+        for t, frame in enumerate(frames):
+            rec.put(t, frame)
+        return rec
+
     def put(self, t: int, fr: PoseFrame) -> None:
         self.rot[t], self.root[t], self.joints[t] = fr.rot, fr.root, fr.joints
         self.contacts[t], self.contact_prob[t], self.features[t] = fr.contacts, fr.contact_prob, fr.features
@@ -798,19 +810,12 @@ def reconstruct_offline(poser: Poser, features: np.ndarray, mask: np.ndarray, pr
     features = np.asarray(features)
     T = features.shape[0]
     mask = np.ascontiguousarray(np.broadcast_to(np.asarray(mask, dtype=bool), (T, N_FEATURES)))
-    rec = Reconstruction.empty(T)
     frames = []
     for t in range(T):
         frames.append(poser.step(features[t], mask[t], None if points is None else points[t]))
         if progress is not None:
             progress(1)
-    if poser.answer_lag:
-        from inference.poser.lag import lagged_frames
-
-        frames = lagged_frames(frames, poser.body)
-    for t, frame in enumerate(frames):
-        rec.put(t, frame)
-    return rec
+    return Reconstruction.of_frames(frames, poser)
 
 
 def make_poser(spec: str | os.PathLike | LoadedModel | None, body: Body | float = 1.75,
