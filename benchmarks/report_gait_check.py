@@ -53,7 +53,14 @@ import numpy as np
 
 from app.report.analysis import analyse
 from app.report.confidence import EXPECTED_FILE
-from app.report.events import MIN_SWING_S, WARMUP_S, foot_events, model_contact_values, truth_contact_values
+from app.report.events import (
+    MIN_SWING_S,
+    WARMUP_S,
+    coordinate_events,
+    foot_events,
+    model_contact_values,
+    truth_contact_values,
+)
 from app.report.feet import sensor_events
 from app.report.normal import dataset_of, trial_curves
 from app.report.strides import match_strides
@@ -176,10 +183,23 @@ def stride_shares(clips: list[dict]) -> dict:
             "off_median_ms": 1000.0 * float(np.median(off)) if off else None}
 
 
-def truth_analysis(motion):
+TRUTHS = ("speed", "coordinates")
+
+
+def truth_analysis(motion, truth: str = "speed"):
+    """The truth's analysis: its own body with events by ``truth``: "speed", the heel and toe points' speed
+    under the contact labels' threshold (``truth_contact_values``, the rule the contact detector learned);
+    "coordinates", the heel furthest ahead of the pelvis and the toe furthest behind it (Zeni et al. 2008,
+    ``app.report.events.coordinate_events``), a second definition to tell the report's error from the
+    definitions' spread (docs/report.md, "Which truth")."""
     m = face_forward(motion)
     kin = kinematics(m, FPS_SIGNAL)
     t = np.arange(len(kin.rot)) / kin.fps
+    if truth == "coordinates":
+        return analyse(t, kin.rot, kin.root, None, None, "truth",
+                       events=coordinate_events(t, kin.contact_pos, kin.root, "truth"))
+    if truth != "speed":
+        raise ValueError(f"unknown truth events {truth!r} ({', '.join(TRUTHS)})")
     return analyse(t, kin.rot, kin.root, t, truth_contact_values(kin.contact_pos, kin.fps), "truth", threshold=0.0)
 
 
@@ -284,10 +304,10 @@ def reconstructions(motions, model_spec: str, label: str, keep: Path | None,
 
 def run(motions, sets: list[str], model_spec: str = "diffusion", done=None, keep: Path | None = None,
         threshold: float = CONTACT_THRESHOLD, min_swing_s: float = MIN_SWING_S, smoothing: bool = True,
-        answer_lag: int | None = None) -> dict:
+        answer_lag: int | None = None, truth: str = "speed") -> dict:
     """Every set over every motion; ``done(result so far)`` after each set. ``threshold`` / ``min_swing_s``:
     the model contacts' event detection (``app.report.events.foot_events``), to try others."""
-    truths = {m.name: truth_analysis(m) for m in motions}
+    truths = {m.name: truth_analysis(m, truth) for m in motions}
     out = {}
     for label in sets:
         clips = []
@@ -356,6 +376,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--keep", default=None, help="store / reuse the reconstructions here (module docstring)")
     ap.add_argument("--answer-lag", type=int, default=None,
                     help="frames each pose waits for the sensors after it, as an import poses it")
+    ap.add_argument("--truth", choices=TRUTHS, default="speed",
+                    help="the truth's events: the heel and toe points' speed (default, the contact labels' rule) "
+                         "or their place against the pelvis (Zeni et al. 2008)")
     ap.add_argument("--no-smoothing", action="store_true",
                     help="analyse the poser's answer before its display filter (1-Euro), as the report does")
     args = ap.parse_args(argv)
@@ -367,7 +390,8 @@ def main(argv: list[str] | None = None) -> int:
             Path(args.out).write_text(json.dumps(res, indent=1))
 
     res = run(motions, args.sets, args.model, done, None if args.keep is None else Path(args.keep),
-              args.contact_threshold, args.min_swing, smoothing=not args.no_smoothing, answer_lag=args.answer_lag)
+              args.contact_threshold, args.min_swing, smoothing=not args.no_smoothing, answer_lag=args.answer_lag,
+              truth=args.truth)
     if args.write_expected:
         write_expected(res, args.model, len(motions))
     if args.json:

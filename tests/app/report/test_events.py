@@ -11,6 +11,7 @@ from app.report.events import (
     WARMUP_S,
     Stance,
     contact_source,
+    coordinate_events,
     debounce,
     foot_events,
     model_contact_values,
@@ -167,3 +168,54 @@ def test_a_joint_range_between_frames_is_refined_by_a_parabola():
     # an angle still rising into the next stride: its largest frame is no peak and is not extrapolated
     ramp = 10.0 * t
     assert stride_ranges([s], t, ramp)[0] == pytest.approx(10.0 * (s.end - s.start), abs=1e-9)
+
+
+def _walk_points(fps: float = 60.0, seconds: float = 6.0, stride: float = 1.1, stance: float = 0.62,
+                 speed: float = 1.2, heading_deg: float = 30.0):
+    """Heel/toe points of two feet walking along a heading: each foot still through its stance, then
+    swinging forward at a constant speed (faster than the pelvis) until it strikes; the right foot half a
+    stride after the left. Returns t, points (T, 4, 3), pelvis (T, 3) and each foot's true (strike, off)."""
+    t = np.arange(int(seconds * fps)) / fps
+    d = np.array([np.cos(np.radians(heading_deg)), np.sin(np.radians(heading_deg)), 0.0])
+    pel = np.outer(speed * t, d) + [0.0, 0.0, 0.95]
+    step = speed * stride  # a foot moves a stride's length in its swing
+    swing = (1.0 - stance) * stride
+    pts = np.zeros((len(t), 4, 3))
+    truth = {}
+    for k, (side, phase) in enumerate((("l", 0.0), ("r", 0.5))):
+        strike0 = phase * stride
+        n = np.floor((t - strike0) / stride)  # the stride each sample is in
+        into = t - strike0 - n * stride
+        base = n * step  # where the foot stood in stride n
+        along = np.where(into < stance * stride, base, base + step * (into - stance * stride) / swing)
+        heel = np.outer(along + speed * strike0 + 0.1, d)  # strikes 10 cm ahead of the pelvis
+        pts[:, 2 * k] = heel
+        pts[:, 2 * k + 1] = heel + 0.2 * d
+        strikes = strike0 + stride * np.arange(-1, 7)
+        truth[side] = (strikes, strikes + stance * stride)
+    return t, pts, pel, truth
+
+
+def test_coordinate_events_find_strikes_and_offs_of_a_walk():
+    t, pts, pel, truth = _walk_points()
+    ev = coordinate_events(t, pts, pel)
+    for side in ("l", "r"):
+        strikes, offs = truth[side]
+        found = ev[side]
+        assert len(found.strikes) >= 4 and len(found.offs) >= 4
+        for s in found.strikes:
+            assert np.min(np.abs(strikes - s)) < 1.0 / 60.0
+        for o in found.offs:
+            assert np.min(np.abs(offs - o)) < 1.0 / 60.0
+        whole = [s for s in found.stances if s.strike and s.off]
+        assert np.mean([s.end - s.start for s in whole]) == pytest.approx(0.62 * 1.1, abs=1.0 / 60.0)
+
+
+def test_coordinate_events_cut_stances_at_the_data_ends_and_refuse_bad_shapes():
+    t, pts, pel, _ = _walk_points(seconds=3.0)
+    ev = coordinate_events(t[70:], pts[70:], pel[70:])
+    first = ev["l"].stances[0]
+    # the left foot is in stance at 70 / 60 = 1.17 s (its second stance runs 1.1 to 1.78 s): cut, no strike
+    assert not first.strike and first.off and first.start == pytest.approx(t[70])
+    with pytest.raises(ValueError, match="pelvis"):
+        coordinate_events(t, pts, pel[:, :2])
