@@ -12,8 +12,12 @@ window's answers for the k frames before it (``PoseFrame.earlier_rot``). ``lagge
 then swaps each frame's inferred segments for the answer of the step k frames later, or of the
 latest step that has it where the poses end or the history was reset, and low-passes them
 forward and backward (a pose that has its future needs no causal filter and its lag). Measured
-segments stay as measured; the root path stays the live one. A model trained to be best k frames back
-(``TrainConfig.answer_lag``) says so in its file (meta ``answer_lag``).
+segments stay as measured; the root path stays the live one. The leg segments below a leg's lowest
+worn sensor (the feet below worn shanks) keep the live answer: later frames of the sensors above them
+say little of them, and their late answers swing less than the truth (the gait check's ankle range
+off by 15.8 deg late against 9.6 live with pelvis + shanks; docs/real_signals.md, "Answering late").
+A model trained to be best k frames back (``TrainConfig.answer_lag``) says so in its file (meta
+``answer_lag``).
 """
 
 from __future__ import annotations
@@ -26,7 +30,7 @@ import numpy as np
 from inference.body import frame_kernels as fk
 from inference.body.body import Body
 from inference.body.rotations import matrix_to_rot6d_np
-from inference.body.skeleton import N_SEGMENTS
+from inference.body.skeleton import N_SEGMENTS, SEGMENT_INDEX
 from inference.features.layout import SL_ROT
 from inference.signals.resample import FPS_MODEL
 
@@ -40,12 +44,14 @@ OFFLINE_ANSWER_LAG = 4
 SMOOTH_HZ = 6.0
 
 
-def lagged_frames(frames: Sequence, body: Body, smooth_hz: float | None = SMOOTH_HZ) -> list:
+def lagged_frames(frames: Sequence, body: Body, smooth_hz: float | None = SMOOTH_HZ,
+                  live_below: bool = True) -> list:
     """``frames`` (``PoseFrame``, in order) with each frame's inferred segments taken from the
     latest later step, at most k frames on, whose window held it (the same history: index
     counting on without a reset), then low-passed without phase lag at ``smooth_hz`` over each
-    run of frames of one history (``zero_phase``; None: not). Frames without ``earlier_rot``
-    come back as they are."""
+    run of frames of one history (``zero_phase``; None: not); with ``live_below`` the segments
+    ``below_worn`` keep the frame's live answer. Frames without ``earlier_rot`` come back as
+    they are."""
     frames = list(frames)
     if not frames or all(f.earlier_rot is None for f in frames):
         return frames
@@ -71,11 +77,26 @@ def lagged_frames(frames: Sequence, body: Body, smooth_hz: float | None = SMOOTH
     out = []
     for f, R in zip(frames, R_all):
         measured = f.observed[SL_ROT].reshape(N_SEGMENTS, 6).all(axis=-1)
-        R = np.where(measured[:, None, None], f.rot, R).astype(f.rot.dtype)
+        keep = measured | below_worn(measured) if live_below else measured
+        R = np.where(keep[:, None, None], f.rot, R).astype(f.rot.dtype)
         feats = f.features.copy()
         rot6 = feats[SL_ROT].reshape(N_SEGMENTS, 6)
         rot6[~measured] = matrix_to_rot6d_np(R[~measured])
         out.append(replace(f, rot=R, joints=(kin.joints(R) + f.root).astype(f.joints.dtype), features=feats))
+    return out
+
+
+_LEGS = tuple(tuple(SEGMENT_INDEX[f"{side}_{s}"] for s in ("thigh", "shank", "foot", "toes")) for side in "lr")
+
+
+def below_worn(measured: np.ndarray) -> np.ndarray:
+    """(S,) bool: the leg segments below a leg's lowest worn sensor (the feet below worn shanks,
+    the shanks and feet below worn thighs)."""
+    out = np.zeros(N_SEGMENTS, dtype=bool)
+    for chain in _LEGS:
+        worn = [i for i, s in enumerate(chain) if measured[s]]
+        if worn:
+            out[list(chain[worn[-1] + 1:])] = True
     return out
 
 

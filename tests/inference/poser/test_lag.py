@@ -15,7 +15,7 @@ from inference.body.skeleton import N_SEGMENTS, SEGMENT_INDEX
 from inference.evaluation.runner import SIX, clip_input, synthetic_motion
 from inference.features.layout import N_FEATURES, SL_ROT
 from inference.poser.batched import reconstruct_many
-from inference.poser.lag import lagged_frames, zero_phase
+from inference.poser.lag import below_worn, lagged_frames, zero_phase
 from inference.poser.poser import Poser, reconstruct_offline
 from tests.conftest import F32_PATHS
 from tests.inference.poser.tiny import tiny_diffusion
@@ -55,12 +55,15 @@ def test_each_frame_is_the_answer_of_the_window_k_frames_later(model, clip):
     assert all(f.earlier_rot.shape == (k, N_SEGMENTS, 3, 3) for f in frames)
     lagged = lagged_frames(frames, poser.body, smooth_hz=None)
     measured = _measured(clip.mask[0])
-    hips = [i for i in range(N_SEGMENTS) if not measured[i]]
+    live = below_worn(measured)  # the feet, below the worn shanks: the live answer
+    assert {i for i in np.flatnonzero(live)} == {SEGMENT_INDEX[s] for s in ("l_foot", "r_foot", "l_toes", "r_toes")}
+    hips = [i for i in range(N_SEGMENTS) if not measured[i] and not live[i]]
     T = len(frames)
     for t in range(T):
         m = min(t + k, T - 1)  # the step whose window answered frame t last
         R = lagged[t].rot
         assert np.array_equal(R[measured], frames[t].rot[measured])  # measured: as measured
+        assert np.array_equal(R[live], frames[t].rot[live])
         if m == t:
             assert np.array_equal(R, frames[t].rot)
             continue
@@ -74,6 +77,19 @@ def test_each_frame_is_the_answer_of_the_window_k_frames_later(model, clip):
         assert np.allclose(joints, poser._kin.joints(R), atol=1e-5)
     # the live answers differ: a later window answered the frame again
     assert not np.allclose(np.array([f.rot for f in lagged]), np.array([f.rot for f in frames]))
+
+
+def test_segments_below_a_legs_lowest_worn_sensor_keep_the_live_answer():
+    def seg(*names):
+        m = np.zeros(N_SEGMENTS, dtype=bool)
+        m[[SEGMENT_INDEX[n] for n in names]] = True
+        return m
+
+    assert np.array_equal(below_worn(seg("pelvis", "l_thigh", "r_thigh")),
+                          seg("l_shank", "r_shank", "l_foot", "r_foot", "l_toes", "r_toes"))
+    assert np.array_equal(below_worn(seg("pelvis", "l_forearm", "r_forearm")), seg())  # no leg worn: all late
+    # the lowest worn sensor counts: a thigh over a worn foot keeps only the toes live
+    assert np.array_equal(below_worn(seg("l_thigh", "l_foot", "r_shank")), seg("l_toes", "r_foot", "r_toes"))
 
 
 def test_no_answer_is_taken_across_a_reset(model, clip):
