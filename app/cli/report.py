@@ -47,11 +47,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run_report(args: argparse.Namespace) -> int:
     from app.report import make_report
+    from app.report.build import posed_again
 
     rec, earlier = args.recording, args.compare
     if args.answer_lag is not None:
-        rec = posed_late(rec, args.answer_lag)
-        earlier = None if earlier is None else posed_late(earlier, args.answer_lag)
+        said = lambda m: print(f"report: {m}", file=sys.stderr)  # noqa: E731
+        rec = posed_again(rec, args.answer_lag, said)
+        earlier = None if earlier is None else posed_again(earlier, args.answer_lag, said)
     rep = make_report(rec, args.out, compare_with=earlier, pdf=args.pdf)
     s = rep.summary
     if args.json:
@@ -68,21 +70,3 @@ def run_report(args: argparse.Namespace) -> int:
         print(f"report: warning: {w}", file=sys.stderr)
     return 0
 
-
-def posed_late(path: str, lag: int):
-    """The recording at ``path`` with a replay's poses, each ``lag`` frames late, as its reconstruction."""
-    from app.export.formats import body_for_recording
-    from app.recording import read_recording
-    from app.replay.run import ReplaySettings, build_replay_poser, replay_recording
-    from app.report.build import with_poses
-
-    if lag < 0:
-        raise ValueError(f"--answer-lag {lag}: a number of frames, 0 or more")
-    rec = read_recording(path)
-    body, _ = body_for_recording(rec.metadata, None)
-    built = build_replay_poser(rec, ReplaySettings(answer_lag=lag), body)
-    print(f"report: posing {path} again, {built.poser.answer_lag} frames late ({built.label})", file=sys.stderr)
-    res = replay_recording(rec, built.poser, causal=built.causal)
-    return with_poses(rec, res.poses, model=f"{built.label} (posed again {built.poser.answer_lag} frames late)",
-                      steps=built.steps, sensors=list(res.sensors), insoles=bool(res.insoles),
-                      answer_lag=built.poser.answer_lag)

@@ -5,7 +5,7 @@ the recording's own reconstruction (``imucap batch --report`` reports on the bat
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -50,6 +50,26 @@ def with_poses(rec: Recording, poses: Sequence, **meta: Any) -> Recording:
         if n else np.zeros((0, 24)),
     }
     return replace(rec, recon=recon, metadata={**rec.metadata, **meta})
+
+
+def posed_again(path: str | Path | Recording, lag: int, say: Callable[[str], None] | None = None) -> Recording:
+    """The recording with a replay's poses as its reconstruction, each pose shown ``lag`` frames late
+    (``inference/poser/lag.py``): a live capture's poses had to be the newest frame's, a report's need not
+    (the knee range of docs/report.md's walks 13.1 -> 5.9 deg off with pelvis + shanks at 4)."""
+    from app.export.formats import body_for_recording
+    from app.replay.run import ReplaySettings, build_replay_poser, replay_recording
+
+    if lag < 0:
+        raise ValueError(f"answer lag {lag}: a number of frames, 0 or more")
+    rec = path if isinstance(path, Recording) else read_recording(path)
+    body, _ = body_for_recording(rec.metadata, None)
+    built = build_replay_poser(rec, ReplaySettings(answer_lag=lag), body)
+    k = built.poser.answer_lag
+    if say is not None:
+        say(f"posing {rec.path} again, {k} frames late ({built.label})")
+    res = replay_recording(rec, built.poser, causal=built.causal)
+    return with_poses(rec, res.poses, model=f"{built.label} (posed again {k} frames late)", steps=built.steps,
+                      sensors=list(res.sensors), insoles=bool(res.insoles), answer_lag=k)
 
 
 def report_input(path: str | Path | Recording) -> ReportInput:

@@ -378,9 +378,26 @@ def test_a_gait_report_from_the_recordings_tab(window, qtbot, tmp_path, capsys):
     assert m and (int(m.group(1)), int(m.group(2))) == (cli["strides"]["l"], cli["strides"]["r"])
     assert cli["strides"]["l"] >= 3 and out.resolve().as_uri() in text
     assert window.messages.level == "ok"
+    # "pose again 200 ms late" is on, but this recording holds no raw stream to replay: its own poses, said
+    assert panel.late_box.isChecked() and "its own poses (" in text and "no calibration" in text
 
     pick("raw_only.h5")
     qtbot.mouseClick(panel.report_button, QtCore.Qt.MouseButton.LeftButton)
     qtbot.waitUntil(lambda: window.messages.level == "error", timeout=60_000)
     assert "no reconstruction" in window.messages.label.text()
     assert not report_path(folder / "raw_only.h5").exists() and panel.report_button.isEnabled()
+
+
+def test_the_window_report_poses_a_live_recording_again_late(tmp_path):
+    """The Recordings tab's report with "pose again 200 ms late": a replayable live recording is posed again
+    four frames late (``app.report.build.posed_again``) and its report says so."""
+    from app.gui.recordings_panel import report_path, write_report
+    from tests.app.report.walks import walk_recording
+
+    walk = walk_recording(tmp_path / "walk.h5", speed=1.2, seconds=8.0, sites=("pelvis", "l_shank", "r_shank"),
+                          raw=True, seed=4)
+    late = write_report(walk, late=True)
+    assert late["posed"] == "posed again 4 frames late" and "posed again 4 frames late" in late["session"]["model"]
+    assert "posed again 4 frames late" in report_path(walk).read_text()
+    own = write_report(walk, late=False)
+    assert own["posed"] == "its own poses" and own["session"]["model"] == "truth (test)"
