@@ -110,17 +110,14 @@ def test_no_walk_in_the_browser(recordings, capsys, tmp_path):
 
 def test_a_recording_posed_again_late(tmp_path, capsys):
     """``--answer-lag``: the report reads a replay's poses, each the window four frames later's, and says so;
-    the live replay (0) and the late one pose the inferred knees differently, the truth's own poses are not read."""
+    the recording's own poses (here the truth's) are not read. That the lag moves the inferred segments is
+    tests/inference/poser/test_lag.py's."""
     rec = walk_recording(tmp_path / "walk.h5", speed=1.2, seconds=8.0, sites=("pelvis", "l_shank", "r_shank"),
                          raw=True, seed=4)
     truth = run_report(capsys, rec, "--out", tmp_path / "truth.html")
     late = run_report(capsys, rec, "--out", tmp_path / "late.html", "--answer-lag", "4")
-    live = run_report(capsys, rec, "--out", tmp_path / "live.html", "--answer-lag", "0")
-    assert "posed again 4 frames late" in late["session"]["model"]
-    assert "posed again 0 frames late" in live["session"]["model"]
+    assert "posed again 4 frames late" in late["session"]["model"] and truth["session"]["model"] == "truth (test)"
     assert "posed again 4 frames late" in (tmp_path / "late.html").read_text()
-    for s in (late, live):
-        assert s["strides"]["l"] >= 2 and s["strides"]["r"] >= 2
-    knees = [[s["knee_range_deg"][side] for side in "lr"] for s in (truth, late, live)]
-    assert all(k is not None and 20 < k < 90 for ks in knees for k in ks)
-    assert knees[1] != knees[2] and knees[1] != knees[0]
+    assert late["strides"]["l"] >= 2 and late["strides"]["r"] >= 2
+    knees = [[s["knee_range_deg"][side] for side in "lr"] for s in (truth, late)]
+    assert all(k is not None and 20 < k < 90 for ks in knees for k in ks) and knees[0] != knees[1]
