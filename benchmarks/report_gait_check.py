@@ -345,13 +345,18 @@ def run(motions, sets: list[str], model_spec: str = "diffusion", done=None, keep
     return out
 
 
-def write_expected(result: dict, model: str, n_clips: int, path: Path = EXPECTED_FILE) -> None:
+def write_expected(result: dict, model: str, n_clips: int, path: Path = EXPECTED_FILE,
+                   answer_lag: int | None = None) -> None:
+    """The means per set as the report's expected errors: ``synthesized`` for live poses, ``synthesized_late``
+    for poses answered late (``answer_lag``), which a report of late poses reads."""
     d = json.loads(path.read_text())
-    d["synthesized"] = {
+    late = bool(answer_lag)
+    d["synthesized_late" if late else "synthesized"] = {
         "about": (f"Mean over {n_clips} synthesized walks (half CMU, half Bandai) of the absolute difference "
                   "between the report's figure from the reconstruction and from the truth (stride time and stance "
                   "stride by stride over the strides both found, take_*: the take means); "
-                  f"benchmarks/report_gait_check.py, model {model}. *_pct of cadence and speed are relative (%)."),
+                  f"benchmarks/report_gait_check.py{f' --answer-lag {answer_lag}' if late else ''}, model {model}, "
+                  f"{'posed late' if late else 'the live answer'}. *_pct of cadence and speed are relative (%)."),
         "sets": {k: {"sites": v["sites"], "errors": {e: (None if x is None else round(x, 4))
                                                      for e, x in v["errors"].items()}} for k, v in result.items()
                  if k not in (FEET, DETECTOR, SHANK_GYRO)}}
@@ -393,7 +398,7 @@ def main(argv: list[str] | None = None) -> int:
               args.contact_threshold, args.min_swing, smoothing=not args.no_smoothing, answer_lag=args.answer_lag,
               truth=args.truth)
     if args.write_expected:
-        write_expected(res, args.model, len(motions))
+        write_expected(res, args.model, len(motions), answer_lag=args.answer_lag)
     if args.json:
         print(json.dumps({k: {"errors": v["errors"], "passed": v["passed"]} for k, v in res.items()}))
     else:

@@ -78,7 +78,7 @@ def report_input(path: str | Path | Recording) -> ReportInput:
     an: GaitAnalysis = analyse_recording(rec)
     info = session_info(rec)
     sites = worn_sites(rec.recon.get("observed_sites"), tuple(info.sensors))
-    conf = confidence_of(sites, rec.recon.get("spread_deg"))
+    conf = confidence_of(sites, rec.recon.get("spread_deg"), late=int(rec.metadata.get("answer_lag") or 0) > 0)
     fig = figures(an)
     fig["feet_check"] = feet_check(rec, an.events)
     return ReportInput(info, an, fig, conf, load_band())

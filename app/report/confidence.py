@@ -38,18 +38,25 @@ def load_expected(path: str | Path = EXPECTED_FILE) -> dict[str, Any]:
     return json.loads(p.read_text()) if p.exists() else {"real": {"sets": {}}, "synthesized": {"sets": {}}}
 
 
-def set_label(sites) -> str | None:
+def expected_section(name: str, late: bool = False) -> dict[str, Any]:
+    """``name`` ("real" or "synthesized") of the expected errors for poses answered live, or with ``late``
+    for poses answered late (an import's, a report posed again: ``<name>_late``, when the file has it)."""
+    exp = load_expected()
+    return (exp.get(f"{name}_late") if late else None) or exp.get(name) or {"sets": {}}
+
+
+def set_label(sites, late: bool = False) -> str | None:
     """The standard set whose lower-body sites are the recording's (None when no standard set is)."""
     lower = sorted(s for s in sites if s in LOWER_BODY)
-    for label, entry in load_expected()["real"]["sets"].items():
+    for label, entry in expected_section("real", late)["sets"].items():
         if sorted(entry["sites"]) == lower:
             return label
     return None
 
 
-def synthesized_label(sites) -> str | None:
+def synthesized_label(sites, late: bool = False) -> str | None:
     """The set of the synthesized check with exactly these sites, else one with the same lower body."""
-    sets = load_expected().get("synthesized", {}).get("sets", {})
+    sets = expected_section("synthesized", late).get("sets", {})
     for label, entry in sets.items():
         if sorted(entry["sites"]) == sorted(sites):
             return label
@@ -102,13 +109,14 @@ def worn_sites(observed: np.ndarray | None, recorded: tuple[str, ...]) -> tuple[
     return tuple(s for k, s in enumerate(SITES) if share[k] >= MEASURED_SHARE)
 
 
-def confidence_of(sites, spread: np.ndarray | None = None) -> Confidence:
+def confidence_of(sites, spread: np.ndarray | None = None, late: bool = False) -> Confidence:
     """The confidence of a reconstruction from ``sites`` (worn), with the poser's per-segment spread
-    (T, 24) when it was computed (NaN rows where not)."""
+    (T, 24) when it was computed (NaN rows where not); ``late``: its poses were answered late
+    (``inference/poser/lag.py``), whose expected errors are smaller (``expected_section``)."""
     sites = tuple(s for s in SITES if s in set(sites))
     measured = tuple(dict.fromkeys(SITE_SEGMENT[s] for s in sites))
-    exp = load_expected()
-    real = set_label(sites)
+    real_sets = expected_section("real", late)["sets"]
+    real = set_label(sites, late)
     expected: dict[str, float | None] = {}
     for seg in LEG_SEGMENTS:
         if seg in measured:
@@ -116,13 +124,13 @@ def confidence_of(sites, spread: np.ndarray | None = None) -> Confidence:
             continue
         vals = []
         if real is not None:
-            vals = [v for v in exp["real"]["sets"][real]["segments"].get(seg, []) if v is not None]
+            vals = [v for v in real_sets[real]["segments"].get(seg, []) if v is not None]
         expected[seg] = float(np.mean(vals)) if vals else None
     spreads: dict[str, float | None] = {s: None for s in LEG_SEGMENTS}
     if spread is not None and np.isfinite(spread).any():
         for seg in LEG_SEGMENTS:
             col = np.asarray(spread, dtype=np.float64)[:, SEGMENT_INDEX[seg]]
             spreads[seg] = float(np.nanmean(col)) if np.isfinite(col).any() else None
-    syn = synthesized_label(sites)
-    syn_fig = load_expected().get("synthesized", {}).get("sets", {}).get(syn, {}).get("errors", {}) if syn else {}
+    syn = synthesized_label(sites, late)
+    syn_fig = expected_section("synthesized", late).get("sets", {}).get(syn, {}).get("errors", {}) if syn else {}
     return Confidence(sites, measured, spreads, expected, real, syn, dict(syn_fig))

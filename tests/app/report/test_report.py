@@ -121,3 +121,6 @@ def test_a_recording_posed_again_late(tmp_path, capsys):
     assert late["strides"]["l"] >= 2 and late["strides"]["r"] >= 2
     knees = [[s["knee_range_deg"][side] for side in "lr"] for s in (truth, late)]
     assert all(k is not None and 20 < k < 90 for ks in knees for k in ks) and knees[0] != knees[1]
+    # late poses are expected nearer the truth: the expected errors of the late sections (expected_error.json)
+    knee = [s["confidence"]["joints"]["l_knee_flexion"]["expected_deg"] for s in (truth, late)]
+    assert knee[1] < knee[0]
