@@ -69,4 +69,3 @@ def run_report(args: argparse.Namespace) -> int:
     for w in s["session"]["warnings"]:
         print(f"report: warning: {w}", file=sys.stderr)
     return 0
-

@@ -227,32 +227,27 @@ def coordinate_events(t: np.ndarray, contact_points: np.ndarray, pelvis: np.ndar
     distance = max(1, int(round(ZENI_MIN_STEP_S / dt)))
 
     def extremes(x: np.ndarray) -> np.ndarray:
-        idx, _ = find_peaks(x, distance=distance)
-        idx = idx[(idx > 0) & (idx < len(x) - 1)]
+        idx, _ = find_peaks(x, distance=distance)  # never the first or last sample
         a, b, c = x[idx - 1], x[idx], x[idx + 1]
         den = a - 2.0 * b + c
         shift = np.divide(0.5 * (a - c), den, out=np.zeros_like(b), where=np.abs(den) > 1e-12)
         return np.interp(idx + np.clip(shift, -0.5, 0.5), np.arange(len(t)), t)
 
+    ahead = np.einsum("tkj,tj->tk", p[:, :, :2] - pel[:, None, :2], direction)  # (T, 4) along the walk
     for side in SIDES:
         heel, toe = FOOT_POINTS[side]
-        ahead = lambda k: np.einsum("ij,ij->i", p[:, k, :2] - pel[:, :2], direction)  # noqa: E731
-        strikes = extremes(ahead(heel))
-        offs = extremes(-ahead(toe))
-        events = sorted([(s, "strike") for s in strikes] + [(o, "off") for o in offs])
+        events = sorted([(s, "strike") for s in extremes(ahead[:, heel])]
+                        + [(o, "off") for o in extremes(-ahead[:, toe])])
         stances: list[Stance] = []
         start: float | None = None
-        first = True
-        for time, kind in events:
+        for i, (time, kind) in enumerate(events):
             if kind == "strike":
                 start = time
-            else:
-                if start is not None:
-                    stances.append(Stance(start, time))
-                elif first:  # the data starts in this stance
-                    stances.append(Stance(float(t[0]), time, strike=False))
+            elif start is not None:
+                stances.append(Stance(start, time))
                 start = None
-            first = False
+            elif i == 0:  # the data starts in this stance
+                stances.append(Stance(float(t[0]), time, strike=False))
         if start is not None:
             stances.append(Stance(start, float(t[-1]), off=False))
         out[side] = FootEvents(side, stances, source)

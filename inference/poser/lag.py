@@ -121,4 +121,4 @@ def zero_phase(R: np.ndarray, cutoff_hz: float, fps: float = FPS_MODEL) -> np.nd
     return Rotation.from_quat(q.reshape(-1, 4)).as_matrix().reshape(T, S, 3, 3)
 
 
-__all__ = ["OFFLINE_ANSWER_LAG", "SMOOTH_HZ", "lagged_frames", "zero_phase"]
+__all__ = ["OFFLINE_ANSWER_LAG", "SMOOTH_HZ", "below_worn", "lagged_frames", "zero_phase"]
