@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from app.cli.replay import ANSWER_LAG_HELP
+from app.cli.replay import ANSWER_LAG_HELP, KNEE_TWIST_HELP
 
 
 def export_choices() -> tuple[str, ...]:
@@ -53,6 +53,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--latency", default=None, choices=("centred", "low"), help="default: as recorded")
     p.add_argument("--answer-lag", type=int, default=None, metavar="K",
                    help=ANSWER_LAG_HELP)
+    p.add_argument("--knee-twist", type=float, default=None, metavar="S", help=KNEE_TWIST_HELP)
     p.add_argument("--export", action="append", default=[], metavar="EXT",
                    help="write each replay in this format too, by extension as imucap export: bvh, csv, h5, mot, ... "
                         "(repeatable)")
@@ -94,7 +95,7 @@ def _options(args: argparse.Namespace):
         if sites not in subsets:
             subsets.append(sites)
     settings = ReplaySettings(model=args.model, steps=args.steps, seed=args.seed, latency=args.latency,
-                              answer_lag=args.answer_lag)
+                              answer_lag=args.answer_lag, knee_twist=args.knee_twist)
     return Options(settings=settings, subsets=tuple(subsets), exports=tuple(exports), held_out=not args.no_held_out,
                    report=args.report)
 

@@ -62,6 +62,7 @@ import sys
 import time
 from pathlib import Path
 
+from app.cli.replay import KNEE_TWIST_HELP
 from app.cli.train import NOISE_MODES
 
 REAL = "@real"
@@ -83,7 +84,8 @@ def data_paths(data: list) -> list:
     return out
 
 
-def real_held_out(spec: str, seed: int, progress: bool, answer_lag: int | None = None) -> dict:
+def real_held_out(spec: str, seed: int, progress: bool, answer_lag: int | None = None,
+                  knee_twist: float | None = None) -> dict:
     """``held_out`` of --data @real for the model ``spec`` (app/evaluation/real.py); an error
     naming the folder when it holds no real log."""
     from app.cli.importing import import_paths
@@ -103,7 +105,7 @@ def real_held_out(spec: str, seed: int, progress: bool, answer_lag: int | None =
         if progress:
             print(f"evaluate: {msg}", file=sys.stderr, flush=True)
 
-    return score_logs(logs, import_log, spec, seed, progress=say, answer_lag=answer_lag)
+    return score_logs(logs, import_log, spec, seed, progress=say, answer_lag=answer_lag, knee_twist=knee_twist)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -159,6 +161,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--answer-lag", type=int, default=None, metavar="K",
                    help="frames each pose waits for the sensors after it, as an import or replay may "
                         "(inference/poser/lag.py); default: the live 0 for motion files, an import's 4 for @real")
+    p.add_argument("--knee-twist", type=float, default=None, metavar="S", help=KNEE_TWIST_HELP)
     p.add_argument("--latency", default="centred", choices=("centred", "low"),
                    help="low: accelerations through the trailing filter of the low-latency live mode, and the "
                         "default diffusion model becomes the one trained on it if installed (docs/latency.md)")
@@ -274,10 +277,12 @@ def run(args: argparse.Namespace) -> int:
         result = {"clips": 0, "frames": 0, **{k: None for k in ("ga_deg", "la_deg", "jpe_cm", "jitter_ratio",
                                                                 "re2_m", "re5_m", "re10_m")},
                   "segments": None, "model": str(args.model), "seed": args.seed,
-                  "held_out": real_held_out(args.model, args.seed, progress, args.answer_lag)}
+                  "held_out": real_held_out(args.model, args.seed, progress, args.answer_lag,
+                                 args.knee_twist)}
         if args.against is not None:
             result["against"] = {"model": str(args.against),
-                                 "held_out": real_held_out(args.against, args.seed, progress, args.answer_lag)}
+                                 "held_out": real_held_out(args.against, args.seed, progress, args.answer_lag,
+                                 args.knee_twist)}
         result["seconds"] = round(time.time() - t0, 2)
         _print_real(result, args.json)
         return 0
@@ -328,6 +333,7 @@ def run(args: argparse.Namespace) -> int:
                                           pelvis_odometry="default" if args.pelvis_odometry else None,
                                           causal=causal, confidence=confidence and kind == "diffusion",
                                           answer_lag=args.answer_lag if kind == "diffusion" else None,
+                                          knee_twist=args.knee_twist,
                                           lanes=lanes, given=None if reads_points else given,
                                           tracked=tracked_input if reads_points else None,
                                           reach=tracked_input if args.reach else None)
@@ -415,9 +421,11 @@ def run(args: argparse.Namespace) -> int:
         result["report"] = {"path": str(args.report), "rows": rows, "comparisons": comparisons}
 
     if real:
-        result["held_out"] = real_held_out(args.model, args.seed, progress, args.answer_lag)
+        result["held_out"] = real_held_out(args.model, args.seed, progress, args.answer_lag,
+                                 args.knee_twist)
         if args.against is not None:
-            result["against"]["held_out"] = real_held_out(args.against, args.seed, progress, args.answer_lag)
+            result["against"]["held_out"] = real_held_out(args.against, args.seed, progress, args.answer_lag,
+                                 args.knee_twist)
     result["seconds"] = round(time.time() - t0, 2)
     if args.json:
         print(json.dumps(result))

@@ -48,6 +48,11 @@ from app.streams.pacing import Pacer
 ANSWER_LAG_HELP = ("frames each pose waits for the sensors after it (inference/poser/lag.py): 0 shows the newest "
                    "frame's answer, as live; default: as recorded (0 for a live capture, 4 for an imported log)")
 
+# --knee-twist of the commands that pose (replay, batch, evaluate)
+KNEE_TWIST_HELP = ("the most of the model's own thigh twist a thigh rebuilt from its shank keeps while the body turns "
+                   "(inference/poser/knee_twist.py): 0 is the strict knee hinge; default: as recorded, else the "
+                   "model file's (0.5)")
+
 OUT_HELP = ("write the poses to FILE; format by extension: .bvh, .csv, .h5/.hdf5, .mot, .c3d, .trc, "
             "NAME_orientations.sto (OpenSense) (repeatable)")
 
@@ -81,6 +86,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "and HDF5, and spread_mean_deg in the JSON")
     p.add_argument("--answer-lag", type=int, default=None, metavar="K",
                    help=ANSWER_LAG_HELP)
+    p.add_argument("--knee-twist", type=float, default=None, metavar="S", help=KNEE_TWIST_HELP)
     p.add_argument("--latency", default=None, choices=("centred", "low"),
                    help="acceleration filter of the replay: low = the trailing one of the low-latency mode "
                         "(docs/latency.md); default: as recorded, else centred")
@@ -200,7 +206,7 @@ def run_replay(args: argparse.Namespace) -> int:
     built = build_replay_poser(rec, ReplaySettings(
         model=args.model, steps=args.steps, seed=args.seed, mirror=args.mirror, stride_scale=args.stride_scale,
         pelvis_odometry=args.pelvis_odometry, confidence=args.confidence or None, latency=args.latency,
-        answer_lag=args.answer_lag), body)
+        answer_lag=args.answer_lag, knee_twist=args.knee_twist), body)
     if built.warning:
         print(f"replay: warning: {built.warning}", file=sys.stderr)
     poser, causal, latency, label, steps = built.poser, built.causal, built.latency, built.label, built.steps
@@ -246,7 +252,8 @@ def run_replay(args: argparse.Namespace) -> int:
         "latency_mode": latency, "acc_filter": "causal" if causal else "centred",
         "mirror": poser.mirror, "stride_scale": poser.stride is not None,
         "pelvis_odometry": poser.pelvis_odometry is not None, "answer_lag": poser.answer_lag,
-        "recorded_sensors": list(rec.sites), "recorded_model": rec.metadata.get("model"),
+        "knee_twist": poser.knee_twist, "recorded_sensors": list(rec.sites),
+        "recorded_model": rec.metadata.get("model"),
         "calibrations": res.calibrations_used, "hub_frames": res.hub_frames,
         "frames_filled": res.stats.get("frames_filled"), "poses_skipped": res.stats.get("poses_skipped"),
         "resampler_restarts": res.stats.get("resampler_restarts"),

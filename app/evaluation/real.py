@@ -157,16 +157,19 @@ def split_errors(poses: Sequence[Any], measured: Sequence[Any], sites: Sequence[
 
 def score_recording(rec: Recording, model: str = "diffusion", seed: int = 0,
                     sets: Sequence[tuple[str, Sequence[str]]] = REAL_SETS,
-                    loaded: Any = "resolve", answer_lag: int | None = None) -> dict[str, Any]:
+                    loaded: Any = "resolve", answer_lag: int | None = None,
+                    knee_twist: float | None = None) -> dict[str, Any]:
     """Per standard set the recording can score: the held-out sites' errors (deg) against
     the replay with every sensor, as ``imucap replay --held-out`` reports them, split by
     phase and into constant and dynamic parts (``split_errors``).
     ``loaded``: the model for ``model`` already loaded (scoring several logs loads it once);
-    ``answer_lag``: frames each pose waits (None: as the recording says; an import's 4)."""
+    ``answer_lag``: frames each pose waits (None: as the recording says; an import's 4);
+    ``knee_twist``: the poser's twist share (None: as the recording says, else the model's)."""
     from app.export.formats import body_for_recording
 
     body, _ = body_for_recording(rec.metadata)
-    built = build_replay_poser(rec, ReplaySettings(model=model, seed=seed, answer_lag=answer_lag), body, loaded)
+    built = build_replay_poser(rec, ReplaySettings(model=model, seed=seed, answer_lag=answer_lag,
+                                                         knee_twist=knee_twist), body, loaded)
     full = replay_recording(rec, built.fresh(), sensors=rec.sites, causal=built.causal).poses
     t_raw, labels = recording_phases(rec)
     out: dict[str, Any] = {}
@@ -183,7 +186,8 @@ ImportFn = Callable[[RealLog, Path], Any]
 
 def score_logs(logs: Sequence[RealLog], import_log: ImportFn, model: str = "diffusion", seed: int = 0,
                sets: Sequence[tuple[str, Sequence[str]]] = REAL_SETS, loaded: Any = "resolve",
-               progress: Callable[[str], None] | None = None, answer_lag: int | None = None) -> dict[str, Any]:
+               progress: Callable[[str], None] | None = None, answer_lag: int | None = None,
+               knee_twist: float | None = None) -> dict[str, Any]:
     """``held_out`` for ``imucap evaluate``: log name -> set label -> the set's scoring
     (``score_recording``). ``import_log(log, out_h5)`` writes the session recording of
     ``log`` with its map (the CLI passes ``imucap import``'s function: the app layer does
@@ -195,7 +199,7 @@ def score_logs(logs: Sequence[RealLog], import_log: ImportFn, model: str = "diff
             import_log(log, h5)
             if progress is not None:
                 progress(f"{log.name}: imported, scoring {model}")
-            out[log.name] = score_recording(read_recording(h5), model, seed, sets, loaded, answer_lag)
+            out[log.name] = score_recording(read_recording(h5), model, seed, sets, loaded, answer_lag, knee_twist)
     return out
 
 

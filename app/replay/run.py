@@ -142,6 +142,9 @@ class ReplaySettings:
     # frames the shown answer waits for (inference/poser/lag.py); None: as the recording says
     # (a live capture's 0, an imported log's OFFLINE_ANSWER_LAG)
     answer_lag: int | None = None
+    # the most of the model's thigh twist a thigh rebuilt from its shank keeps while the body turns
+    # (inference/poser/knee_twist.py); None: as the recording says, else the model file's
+    knee_twist: float | None = None
 
 
 @dataclass
@@ -176,6 +179,7 @@ def poser_metadata(poser: Poser, latency: str) -> dict[str, Any]:
         "step_list": [int(k) for k in poser.steps], "seed": int(poser.seed), "mirror": bool(poser.mirror),
         "stride_scale": poser.stride is not None, "pelvis_odometry": poser.pelvis_odometry is not None,
         "confidence": conf is not None, "latency": latency, "answer_lag": int(poser.answer_lag),
+        "knee_twist": float(poser.knee_twist),
     }
 
 
@@ -202,8 +206,12 @@ def build_replay_poser(rec: Recording, settings: ReplaySettings, body: Any, mode
     lag = settings.answer_lag if settings.answer_lag is not None else int(meta.get("answer_lag") or 0)
     if loaded is None or loaded.kind != "diffusion":
         lag = 0  # one pass or none: no window answers the frames before its newest
+    twist = settings.knee_twist if settings.knee_twist is not None else meta.get("knee_twist")
+    if twist is None and "step_list" in meta:
+        twist = 0.0  # posed before the knee's twist existed: the strict hinge it ran with
     setting = dict(steps=steps, seed=seed, mirror=mirror, stride_scale=stride,
-                   pelvis_odometry="default" if odometry else None, confidence=confidence or None, answer_lag=lag)
+                   pelvis_odometry="default" if odometry else None, confidence=confidence or None, answer_lag=lag,
+                   knee_twist=twist)
     poser = Poser(loaded, body=body, **setting)
     steps = len(poser.steps) if poser.kind == "diffusion" else (1 if poser.kind == "regressor" else 0)
     return ReplayPoser(poser, loaded, causal, latency, label, steps, warning,

@@ -181,20 +181,23 @@ class ClipResult:
 def clip_poser(model: LoadedModel | None, inp: ClipInput, steps=None, seed: int = 0, smoothing: bool = True,
                contact_detector="default", inpaint_noise: str | None = None, mirror: bool | None = None,
                stride_scale: bool = True, pelvis_odometry="default",
-               confidence: ConfidenceSettings | bool | None = None, answer_lag: int | None = None) -> Poser:
+               confidence: ConfidenceSettings | bool | None = None, answer_lag: int | None = None,
+               knee_twist: float | None = None) -> Poser:
     """The live poser for one clip, starting from a standing history at the clip's
     first root position (only for nicer exports: every metric is translation-free).
     ``inpaint_noise``: the poser's noise mode, ``mirror`` its mirror averaging (None: the
     model file's own), ``stride_scale`` its shank stride scaling of the root,
     ``pelvis_odometry`` its root walk without shanks (None: the model's own),
     ``confidence`` its spread (drawn with the clip's seed), ``answer_lag`` the frames each pose
-    waits (``inference.poser.lag``; None: the model file's, 0 for the shipped ones)."""
+    waits (``inference.poser.lag``; None: the model file's, 0 for the shipped ones), ``knee_twist``
+    its knees' twist share (``inference.poser.knee_twist``; None: the model file's)."""
     conf = confidence_settings(confidence)
     if conf is not None:
         conf = replace(conf, seed=seed)
     return Poser(model, body=inp.body, steps=steps, seed=seed, root_xy0=(inp.root[0, 0], inp.root[0, 1]),
                  smoothing=smoothing, contact_detector=contact_detector, noise=inpaint_noise, mirror=mirror,
-                 stride_scale=stride_scale, pelvis_odometry=pelvis_odometry, confidence=conf, answer_lag=answer_lag)
+                 stride_scale=stride_scale, pelvis_odometry=pelvis_odometry, confidence=conf, answer_lag=answer_lag,
+                 knee_twist=knee_twist)
 
 
 def reconstruct_clip(model: LoadedModel | None, inp: ClipInput, steps=None, seed: int = 0,
@@ -232,6 +235,7 @@ def evaluate_motions(
     tracked: TrackedInput | None = None,
     reach: TrackedInput | None = None,
     answer_lag: int | None = None,
+    knee_twist: float | None = None,
 ) -> tuple[dict, list[ClipResult]]:
     """Evaluate one model and sensor set over motions; returns (pooled summary, per-clip
     results). ``keep`` retains reconstructions (for exports) instead of only metrics;
@@ -244,14 +248,16 @@ def evaluate_motions(
     acceleration filter (docs/latency.md); ``given``, ``tracked``: sites whose signals come
     from elsewhere, tracked points for a model with a position input (``clip_input``);
     ``reach``: tracked controllers the answer's arms reach for before it is scored
-    (``inference.body.reach``); ``answer_lag``: frames each pose waits (``clip_poser``)."""
+    (``inference.body.reach``); ``answer_lag``: frames each pose waits, ``knee_twist`` the knees'
+    twist share (``clip_poser``)."""
     from tqdm import tqdm
 
     inputs = [clip_input(m, sites, insoles, noise, clip_seed(seed, m.name), causal=causal, given=given,
                          tracked=tracked, reach=reach) for m in motions]
     total = sum(i.features.shape[0] for i in inputs)
     posers = [clip_poser(model, inp, steps, clip_seed(seed, inp.name), smoothing, contact_detector, inpaint_noise,
-                         mirror, stride_scale, pelvis_odometry, confidence, answer_lag) for inp in inputs]
+                         mirror, stride_scale, pelvis_odometry, confidence, answer_lag, knee_twist)
+              for inp in inputs]
     with tqdm(total=total, desc=desc, unit="frame", file=sys.stderr, disable=not progress,
               dynamic_ncols=True) as bar:
         recs = reconstruct_many(posers, [(i.features, i.mask) for i in inputs], lanes=lanes, progress=bar.update,

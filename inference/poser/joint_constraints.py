@@ -9,6 +9,13 @@ So when one side of a knee is measured, the other side is the measured one turne
 about that axis, and only the flexion angle is left to the model: the
 reconstruction keeps the model's flexion and takes everything else from the sensor.
 
+A living knee is not quite a hinge: the shin turns about its long axis against the thigh
+(5-15 deg through a stride, more when the body pivots on a planted foot in a turn), and the
+motion capture skeletons the model learned from cannot show it. Where the thigh is rebuilt
+from a measured shank, ``twist`` keeps that share of the model's own turn of the thigh about
+its long axis (z) away from the hinge's: 0 is the strict hinge, 1 the model's twist whole.
+The poser chooses the share frame by frame, by how fast the body turns (``knee_twist``).
+
 Elbows are not treated this way: a forearm sensor turns with pronation, a twist about
 the forearm the elbow's hinge does not constrain. Both datasets' forearms carry it
 (HDM05's from its wrist bone, see joint_maps.ASF; Bandai's in its forearm bone).
@@ -24,6 +31,7 @@ from inference.body.rotations import matrix_about_axis, matrix_about_axis_np
 from inference.body.skeleton import SEGMENT_INDEX
 
 KNEE_AXIS = (0.0, 1.0, 0.0)  # in the thigh's frame (our T-pose: lateral)
+BONE_AXIS = (0.0, 0.0, 1.0)  # the thigh's long axis in its frame, what the shin turns about
 KNEES: tuple[tuple[int, int], ...] = tuple(
     (SEGMENT_INDEX[f"{s}_thigh"], SEGMENT_INDEX[f"{s}_shank"]) for s in ("l", "r")
 )
@@ -53,25 +61,41 @@ _THIGHS = [t for t, _ in KNEES]
 _SHANKS = [s for _, s in KNEES]
 
 
-def constrain_knees(R: Tensor | np.ndarray, measured: Tensor | np.ndarray) -> Tensor | np.ndarray:
+def twist_angle(D: Tensor | np.ndarray) -> Tensor | np.ndarray:
+    """Angle (rad) of the twist about z in the swing-twist split of rotations ``D`` (..., 3, 3):
+    the twist quaternion is (w, 0, 0, z) normalised, and z / w = (D10 - D01) / (1 + trace)."""
+    if isinstance(D, np.ndarray):
+        return 2.0 * np.arctan2(D[..., 1, 0] - D[..., 0, 1], 1.0 + np.trace(D, axis1=-2, axis2=-1))
+    return 2.0 * torch.atan2(D[..., 1, 0] - D[..., 0, 1], 1.0 + D.diagonal(dim1=-2, dim2=-1).sum(-1))
+
+
+def constrain_knees(R: Tensor | np.ndarray, measured: Tensor | np.ndarray,
+                    twist: float = 0.0) -> Tensor | np.ndarray:
     """Global orientations (..., 24, 3, 3) with each knee made a hinge about KNEE_AXIS.
 
     measured (..., 24) bool: segments whose orientation is a measurement, never changed.
     Shank measured, thigh not: the thigh is rebuilt from the shank and the predicted
-    flexion. Thigh measured, shank not, or neither: the shank is rebuilt from the thigh
-    (with neither measured the model's thigh is kept; it carries the hip's three
-    degrees of freedom, the shank only adds flexion). Both measured: unchanged.
+    flexion, then turned about its long axis by ``twist`` times the model thigh's own twist
+    away from that hinge (0: the strict hinge; module docstring). Thigh measured, shank not,
+    or neither: the shank is rebuilt from the thigh (with neither measured the model's thigh
+    is kept; it carries the hip's three degrees of freedom, the shank only adds flexion).
+    Both measured: unchanged.
     Numpy arrays in (the live poser's per-frame path): numpy out, the same formulas.
     """
     if isinstance(R, np.ndarray):
-        return _constrain_knees_np(R, measured)
+        return _constrain_knees_np(R, measured, twist)
     axis = torch.tensor(KNEE_AXIS, dtype=R.dtype)
     Rt, Rs = R[..., _THIGHS, :, :], R[..., _SHANKS, :, :]  # (..., 2, 3, 3), both knees at once
     theta = hinge_angle(Rt.transpose(-1, -2) @ Rs, axis)
     hinge = matrix_about_axis(axis.expand(*theta.shape, 3), theta)
     mt, ms = measured[..., _THIGHS], measured[..., _SHANKS]
     out = R.clone()
-    out[..., _THIGHS, :, :] = torch.where((ms & ~mt)[..., None, None], Rs @ hinge.transpose(-1, -2), Rt)
+    thigh = Rs @ hinge.transpose(-1, -2)
+    if twist:
+        bone = torch.tensor(BONE_AXIS, dtype=R.dtype)
+        psi = twist * twist_angle(thigh.transpose(-1, -2) @ Rt)
+        thigh = thigh @ matrix_about_axis(bone.expand(*psi.shape, 3), psi)
+    out[..., _THIGHS, :, :] = torch.where((ms & ~mt)[..., None, None], thigh, Rt)
     out[..., _SHANKS, :, :] = torch.where((~ms)[..., None, None], Rt @ hinge, Rs)
     return out
 
@@ -79,7 +103,7 @@ def constrain_knees(R: Tensor | np.ndarray, measured: Tensor | np.ndarray) -> Te
 _THIGH_IDX, _SHANK_IDX = np.array(_THIGHS), np.array(_SHANKS)
 
 
-def _constrain_knees_np(R: np.ndarray, measured: np.ndarray) -> np.ndarray:
+def _constrain_knees_np(R: np.ndarray, measured: np.ndarray, twist: float) -> np.ndarray:
     mt, ms = measured.take(_THIGH_IDX, -1), measured.take(_SHANK_IDX, -1)
     fix_thigh, fix_shank = ms & ~mt, ~ms  # exclusive: the thigh is rebuilt only from a measured shank
     out = R.copy()
@@ -88,13 +112,17 @@ def _constrain_knees_np(R: np.ndarray, measured: np.ndarray) -> np.ndarray:
     axis = np.asarray(KNEE_AXIS, dtype=R.dtype)
     Rt, Rs = R.take(_THIGH_IDX, -3), R.take(_SHANK_IDX, -3)
     hinge = matrix_about_axis_np(axis, hinge_angle(np.swapaxes(Rt, -1, -2) @ Rs, axis))
+    thigh = Rs @ np.swapaxes(hinge, -1, -2)
+    if twist and fix_thigh.any():
+        psi = twist * twist_angle(np.swapaxes(thigh, -1, -2) @ Rt)
+        thigh = thigh @ matrix_about_axis_np(np.asarray(BONE_AXIS, dtype=R.dtype), psi)
     if R.ndim == 3:  # one frame: each knee on its own
         for k, (t, s) in enumerate(KNEES):
             if fix_thigh[k]:
-                out[t] = Rs[k] @ hinge[k].T
+                out[t] = thigh[k]
             elif fix_shank[k]:
                 out[s] = Rt[k] @ hinge[k]
         return out
-    out[..., _THIGH_IDX, :, :] = np.where(fix_thigh[..., None, None], Rs @ np.swapaxes(hinge, -1, -2), Rt)
+    out[..., _THIGH_IDX, :, :] = np.where(fix_thigh[..., None, None], thigh, Rt)
     out[..., _SHANK_IDX, :, :] = np.where(fix_shank[..., None, None], Rt @ hinge, Rs)
     return out

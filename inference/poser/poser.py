@@ -83,6 +83,7 @@ from inference.poser.confidence import (
 )
 from inference.poser.contact_detector import DETECTOR_THRESHOLD, SHANK_INDEX, ContactDetector, DetectorKernel
 from inference.poser.joint_constraints import constrain_knees
+from inference.poser.knee_twist import KNEE_TWIST, TurnShare
 from inference.poser.lag import lagged_frames
 from inference.poser.models import (
     CONTACT_THRESHOLD,
@@ -213,6 +214,7 @@ class Poser:
         runtime: str = "torch",
         mirror_chains: bool | None = None,
         answer_lag: int | None = None,
+        knee_twist: float | None = None,
     ) -> None:
         self.model = model
         # the frame-by-frame call through ONNX Runtime where that is faster (live sessions ask
@@ -262,6 +264,10 @@ class Poser:
         self._odometry = OdometryKernel(self.pelvis_odometry) if self.pelvis_odometry is not None else None
         # the floor is by definition the standing pose wherever nothing is measured
         self.knee_hinge = knee_hinge and self.kind != "floor"
+        # the most of the model's own thigh twist a thigh rebuilt from its shank keeps, while the body
+        # turns (knee_twist.py: a living knee lets the shin turn under the thigh; 0 = the strict hinge)
+        self.knee_twist = float(knee_twist if knee_twist is not None else meta.get("knee_twist", KNEE_TWIST))
+        self._turn_share = TurnShare(self.knee_twist)
         # a still, upright stand straightens the knees the hinge leaves to the model (stand_prior.py)
         self._stand_prior = StandPrior() if stand_prior and self.knee_hinge else None
         # output only: the integrated root path (and so every later frame) is unfiltered
@@ -345,6 +351,7 @@ class Poser:
         """Back to a standing history (e.g. after recalibration or a long dropout)."""
         if self._stand_prior is not None:
             self._stand_prior.reset()
+        self._turn_share.reset()
         if root_xy0 is not None:
             self.root_xy0 = (float(root_xy0[0]), float(root_xy0[1]))
         N, K = self.window, self._keep
@@ -566,7 +573,7 @@ class Poser:
         R = rot6d_to_matrix_np(y[:, SL_ROT].reshape(-1, N_SEGMENTS, 6))
         if self.knee_hinge:
             measured = m[SL_ROT].reshape(N_SEGMENTS, 6).all(axis=-1)
-            R = constrain_knees(R, measured)
+            R = constrain_knees(R, measured, self._turn_share.now)
             if self._stand_prior is not None:
                 R = np.stack([self._stand_prior.settle(r, measured) for r in R])
         return R
@@ -580,7 +587,7 @@ class Poser:
         R = rot6d_to_matrix_np(y[SL_ROT].reshape(N_SEGMENTS, 6))
         seg_measured = m[SL_ROT].reshape(N_SEGMENTS, 6).all(axis=-1)
         if self.knee_hinge:
-            R = constrain_knees(R, seg_measured)
+            R = constrain_knees(R, seg_measured, self._turn_share(R[_PELVIS]))
             if self._stand_prior is not None:
                 R = self._stand_prior(R, seg_measured)
         y[SL_ROT] = np.where(m[SL_ROT], y[SL_ROT], matrix_to_rot6d_np(R).reshape(-1))
@@ -664,7 +671,7 @@ class Poser:
         # the answer's own kernels: a measured segment's draw is then exactly the answer's
         Rd = rot6d_to_matrix_np(yd[:, SL_ROT].numpy().reshape(k, N_SEGMENTS, 6))
         if self.knee_hinge:
-            Rd = constrain_knees(Rd, seg_measured.numpy())
+            Rd = constrain_knees(Rd, seg_measured.numpy(), self._turn_share.now)
         Rd = torch.from_numpy(Rd)
         seg_dev = segment_deviation_deg(Rd, R)
         pz_d = torch.where(m[SL_PZ], y[SL_PZ], yd[:, SL_PZ])
@@ -705,6 +712,7 @@ class Poser:
 
 
 _SHANK_SEGMENTS = tuple(SEGMENT_INDEX[s] for s in SHANK_SITES)
+_PELVIS = SEGMENT_INDEX["pelvis"]
 _FOOT_JOINTS = np.array([SEGMENT_INDEX[s] for s in FOOT_SEGMENTS])
 _SHANK_ROT = np.array([SL_ROT.start + 6 * k + i for k in _SHANK_SEGMENTS for i in range(6)])
 _SHANK_ACC = np.array([SL_ACC.start + 3 * SITE_INDEX[s] + i for s in SHANK_SITES for i in range(3)])

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from inference.body.rotations import matrix_about_axis_np, matrix_angle_between
-from inference.poser.joint_constraints import KNEE_AXIS, KNEES, hinge_angle
+from inference.poser.joint_constraints import BONE_AXIS, KNEE_AXIS, KNEES, hinge_angle, twist_angle
 from inference.signals.resample import FPS_MODEL
 
 
@@ -51,6 +51,7 @@ class StandPrior:
 
     def __post_init__(self) -> None:
         self._axis = np.asarray(KNEE_AXIS)
+        self._bone = np.asarray(BONE_AXIS)
         self._span = max(1, round(self.span_s * self.fps))
         self._still_rad = np.radians(self.still_deg_s * self._span / self.fps)
         self._cos_upright = np.cos(np.radians(self.upright_deg))
@@ -89,7 +90,12 @@ class StandPrior:
                 continue
             if out is R:
                 out = R.copy()
-            out[t] = R[s] @ matrix_about_axis_np(self._axis, (1.0 - w) * theta).T
+            # the thigh's twist the hinge kept (``knee_twist``) goes with the flexion: a straight
+            # knee locks the shin's turn, and fading both together leaves no jump at the onset
+            hinged = R[s] @ matrix_about_axis_np(self._axis, theta).T
+            psi = twist_angle(hinged.T @ R[t])
+            out[t] = (R[s] @ matrix_about_axis_np(self._axis, (1.0 - w) * theta).T
+                      @ matrix_about_axis_np(self._bone, (1.0 - w) * psi))
         return out
 
     def _update(self, R: np.ndarray, measured: np.ndarray) -> None:

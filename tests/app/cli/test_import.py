@@ -20,6 +20,7 @@ from calibration.standing import forward_from_knees, forward_from_shanks, still_
 from inference.body.motion import Motion
 from inference.body.rotations import matrix_about_axis, matrix_angle_between
 from inference.body.skeleton import SEGMENT_INDEX, SITE_INDEX, SITE_SEGMENT_INDEX
+from inference.poser.knee_twist import KNEE_TWIST
 from inference.poser.models import resolve_model
 from inference.poser.poser import Poser
 from inference.signals.synthesis import NoiseModel, synthesize
@@ -80,6 +81,8 @@ def test_an_imported_log_is_calibrated_and_replays(logged, tmp_path, capsys):
     # a log never ran live: its poses wait 4 frames for the sensors after them (inference/poser/lag.py),
     # and a replay of it does the same unless told to show the newest frame's answer
     assert rec.metadata["answer_lag"] == 4 and rep["answer_lag"] == 4
+    # its poses were made with the knees' twist share of today's poser, and a replay keeps it unless told
+    assert rec.metadata["knee_twist"] == rep["knee_twist"] == KNEE_TWIST > 0
     held_out = {}
     for lag in ("4", "0"):
         assert main(["replay", str(tmp_path / "s.h5"), "--json", "--no-progress", "--steps", "1", "--sensors",
@@ -88,6 +91,8 @@ def test_an_imported_log_is_calibrated_and_replays(logged, tmp_path, capsys):
         assert rep["answer_lag"] == int(lag)
         held_out[lag] = rep["held_out"]
     assert held_out["4"] != held_out["0"]
+    assert main(["replay", str(tmp_path / "s.h5"), "--json", "--no-progress", "--steps", "1", "--knee-twist", "0"]) == 0
+    assert json.loads(capsys.readouterr().out)["knee_twist"] == 0.0
 
 
 def test_unknown_device_names_are_skipped_with_the_way_out(logged, tmp_path, capsys):

@@ -182,3 +182,25 @@ def test_frames_live_had_no_time_for_are_left_out_again_so_the_replay_gives_back
     # the poser remembers: posing the skipped frames changes the frames after them
     cmp = compare_to_recorded(r, every.poses)
     assert cmp["vs_recorded_frames"] == len(live) and cmp["vs_recorded_ga_deg"] > 1e-3, cmp
+
+
+def test_a_replay_keeps_the_knee_twist_the_recording_was_posed_with(recorded):
+    """A recording says the knees' twist share its poses were made with; one posed before the share
+    existed (a step list, no share) ran the strict hinge and replays so; a log never posed takes the
+    model file's; asking overrides all three."""
+    from app.replay import ReplaySettings, build_replay_poser, poser_metadata
+    from inference.poser.knee_twist import KNEE_TWIST
+
+    rec = read_recording(recorded.path)
+    # what a live session or an import writes of its poser
+    assert poser_metadata(make_poser("diffusion", body=recorded.body), "centred")["knee_twist"] == KNEE_TWIST
+
+    def twist(meta, asked=None):
+        return build_replay_poser(replace(rec, metadata=meta), ReplaySettings(knee_twist=asked),
+                                  recorded.body).poser.knee_twist
+
+    base = {k: v for k, v in rec.metadata.items() if k not in ("knee_twist", "step_list")}
+    assert twist({**base, "knee_twist": 0.25}) == 0.25
+    assert twist({**base, "step_list": [1000, 400, 0]}) == 0.0
+    assert twist(base) == KNEE_TWIST
+    assert twist({**base, "knee_twist": 0.25}, asked=0.0) == 0.0

@@ -161,7 +161,7 @@ class ReferencePoser(Poser):
         R = rot6d_to_matrix(y[SL_ROT].reshape(N_SEGMENTS, 6))
         seg_measured = m[SL_ROT].view(N_SEGMENTS, 6).all(dim=-1)
         if self.knee_hinge:
-            R = constrain_knees(R, seg_measured)
+            R = constrain_knees(R, seg_measured, self._turn_share(R[SEGMENT_INDEX["pelvis"]].numpy()))
         y[SL_ROT] = torch.where(m[SL_ROT], y[SL_ROT], matrix_to_rot6d(R).reshape(-1))
         prob = y[SL_CONTACT].clamp(0.0, 1.0)
         threshold = self.contact_threshold
@@ -229,7 +229,7 @@ class ReferencePoser(Poser):
         k = yd.shape[0]
         Rd = rot6d_to_matrix(yd[:, SL_ROT].reshape(k, N_SEGMENTS, 6))
         if self.knee_hinge:
-            Rd = constrain_knees(Rd, seg_measured)
+            Rd = constrain_knees(Rd, seg_measured, self._turn_share.now)
         seg_dev = segment_deviation_deg(Rd, R)
         pz_d = torch.where(m[SL_PZ], y[SL_PZ], yd[:, SL_PZ])
         if root_step in ("odometry", "measured"):

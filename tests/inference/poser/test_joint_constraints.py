@@ -5,7 +5,7 @@ import torch
 
 from inference.body.rotations import matrix_about_axis, so3_exp
 from inference.body.skeleton import N_SEGMENTS
-from inference.poser.joint_constraints import KNEE_AXIS, KNEES, constrain_knees, hinge_angle
+from inference.poser.joint_constraints import BONE_AXIS, KNEE_AXIS, KNEES, constrain_knees, hinge_angle, twist_angle
 
 
 def _random_rotations(rng, n):
@@ -79,3 +79,47 @@ def test_unmeasured_shank_is_rebuilt_from_the_thigh_and_batches_work():
     assert torch.equal(out[:, t], pred[:, t])
     err_after = torch.linalg.matrix_norm(out[:, s] - truth[:, s])
     assert (err_after < torch.linalg.matrix_norm(pred[:, s] - truth[:, s])).all()
+
+
+def test_the_twist_share_keeps_that_much_of_the_models_turn_about_the_thigh():
+    """A thigh rebuilt from its shank with ``twist`` keeps that share of the model's own turn
+    about the bone, on top of the hinge's answer; its flexion stays the hinge's (within a degree),
+    and the numpy path (the live poser's) gives the torch path's answer."""
+    rng = np.random.default_rng(3)
+    truth = _pose(rng, [0.7, 1.1])
+    t, s = KNEES[0]
+    turn, abduct = np.radians(24.0), np.radians(8.0)
+    pred = truth.clone()
+    pred[t] = truth[t] @ so3_exp(torch.tensor([0.0, 0.0, turn], dtype=torch.float64)) @ so3_exp(
+        torch.tensor([abduct, 0.0, 0.0], dtype=torch.float64))
+    m = torch.zeros(N_SEGMENTS, dtype=torch.bool)
+    m[s] = True
+    hinged = constrain_knees(pred, m)
+    bone = torch.tensor(BONE_AXIS, dtype=torch.float64)
+    axis = torch.tensor(KNEE_AXIS, dtype=torch.float64)
+    for share in (0.0, 0.5, 1.0):
+        out = constrain_knees(pred, m, share)
+        assert torch.equal(out[s], pred[s])
+        # the hinge's thigh turned about the bone by the share of the model's twist from it
+        kept = float(twist_angle(hinged[t].T @ out[t]))
+        model_twist = float(twist_angle(hinged[t].T @ pred[t]))
+        assert abs(model_twist - turn) < np.radians(3.0)  # the abduction leaks a little into the split
+        assert abs(kept - share * model_twist) < 1e-9
+        torch.testing.assert_close(hinged[t].T @ out[t], rotation_about(bone, torch.tensor(kept, dtype=torch.float64)))
+        # the flexion about the knee's axis is the hinge's
+        flex = hinge_angle(out[t].T @ out[s], axis)
+        torch.testing.assert_close(flex, hinge_angle(hinged[t].T @ hinged[s], axis), atol=0.02, rtol=0)
+        # the other knee, whose thigh and shank are both the model's, is untouched
+        torch.testing.assert_close(out[KNEES[1][0]], pred[KNEES[1][0]])
+        out_np = constrain_knees(pred.numpy(), m.numpy(), share)
+        np.testing.assert_allclose(out_np, out.numpy(), atol=1e-12)
+        batched = constrain_knees(np.stack([pred.numpy()] * 2), np.stack([m.numpy()] * 2), share)
+        np.testing.assert_allclose(batched[1], out.numpy(), atol=1e-12)
+
+
+def test_twist_angle_reads_a_pure_turn_about_z():
+    bone = torch.tensor(BONE_AXIS, dtype=torch.float64)
+    for a in (-2.0, -0.3, 0.0, 0.4, 1.9):
+        R = rotation_about(bone, torch.tensor(a, dtype=torch.float64))
+        assert abs(float(twist_angle(R)) - a) < 1e-12
+        assert abs(float(twist_angle(R.numpy())) - a) < 1e-12
