@@ -194,6 +194,11 @@ class SimulatedSetup:
         return self
 
     def stop(self) -> None:
+        # every loop told first: on a starved machine each join may take its whole 2 s, and seven in
+        # turn outlasted a harness's 10 s terminate, which killed the simulator before it wrote its
+        # send log (the wireless capture test's "again" run)
+        for d in self.devices.values():
+            d.request_stop()
         for d in self.devices.values():
             d.stop()
 

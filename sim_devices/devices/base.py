@@ -197,6 +197,11 @@ class SimDevice(ABC):
         self._thread.start()
         return self
 
+    def request_stop(self) -> None:
+        """Ask the loop to end without waiting for it: a setup of many devices asks them all first,
+        then waits for each (``stop``), so their waits overlap instead of adding up."""
+        self._stop.set()
+
     def stop(self) -> None:
         self._stop.set()
         if self._thread is not None:

@@ -38,6 +38,9 @@ class Simulator:
         """The session's length (s): lead-in, calibration protocol, activity."""
         return float(self.lines[-1].split()[1])
 
+    stderr: str = ""  # the tail of what it wrote there, once stopped
+    killed: bool = False  # it outlasted the terminate's 10 s
+
     def stop(self) -> None:
         if self.proc.stdin is not None:
             self.proc.stdin.close()
@@ -45,8 +48,16 @@ class Simulator:
         try:
             self.proc.wait(10)
         except subprocess.TimeoutExpired:
+            self.killed = True
             self.proc.kill()
             self.proc.wait(10)
+        if self.proc.stderr is not None:
+            self.stderr = self.proc.stderr.read()[-3000:]
+
+    def why_no_log(self, path: Path) -> str:
+        """For a test that needs the simulator's --log-sends file: why it is not there."""
+        return (f"no {path.name}: the simulator {'was killed after' if self.killed else 'left'} its terminate "
+                f"(exit {self.proc.returncode}); its stderr: {self.stderr}")
 
 
 def start_simulator(args: list[str]) -> Simulator:
@@ -237,5 +248,12 @@ def silences(rec: Path, sends: Path, min_s: float = 0.5, skip: tuple[str, ...] =
                 who = "the capture stalled" if n else "the simulator stalled"
                 spans.append(f"{a - t[0]:.1f}-{b - t[0]:.1f} s: {n} packets sent ({who})")
             start = None
+    # no hub frame at all for a while: the capture's hub made none (a recorded frame is made even when
+    # every device is silent), so sends there mean the capture process stalled
+    for i in np.flatnonzero(np.diff(t) >= min_s):
+        a, b = t[i], t[i + 1]
+        n = int(np.count_nonzero((sent > a + 0.1) & (sent < b - 0.1)))
+        spans.append(f"{a - t[0]:.1f}-{b - t[0]:.1f} s: no hub frame, {n} packets sent "
+                     f"({'the capture stalled' if n else 'both stalled'})")
     return ("silences: " + ("; ".join(spans) if spans else "none") + "; the simulator's own stalls: "
             + (", ".join(f"{a - t[0]:.1f} s ({1000 * (b - a):.0f} ms)" for a, b in stalls) or "none"))

@@ -75,12 +75,13 @@ def captured(tmp_path_factory, walk_20s):
     motion = walk_20s
     truth = tmp / "truth.npz"
     rec = tmp / "rec.h5"
-    cap, _ = run_capture(
+    cap, sim = run_capture(
         ["--setup", str(setup), "--headless", "--record", str(rec), "--json", "--countdown", "1"],
         ["--setup", str(setup), "--motion", str(motion), "--truth", str(truth), "--lead-in", str(LEAD_IN),
          "--unplug", ":".join(map(str, UNPLUG)), "--seed", "1", "--log-sends", str(tmp / "sends.npz")],
         done=lambda sim: session_end(truth, sim))
     assert cap.returncode == 0, cap.stderr[-3000:]
+    assert (tmp / "sends.npz").exists(), sim.why_no_log(tmp / "sends.npz")
     result = json.loads(cap.stdout.strip().splitlines()[-1])
     return tmp, setup, motion, truth, rec, result, cap.stderr
 
