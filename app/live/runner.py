@@ -5,6 +5,8 @@ inference thread drains it through the Pipeline; the GUI only reads ``latest()``
 
 from __future__ import annotations
 
+import faulthandler
+import os
 import threading
 import time
 import traceback
@@ -15,6 +17,12 @@ from typing import Any
 from app.live.pipeline import LivePose, Pipeline, Sink, run_due
 from app.live.sources import FrameSource
 from drivers.hub import HubFrame
+
+# a file to which every thread's stack is written when the hub gives no frame for STALL_TRACE_S:
+# faulthandler's watchdog is a C thread, so it writes even while a thread holds the interpreter
+# (the wireless capture's seconds without a hub frame, NOTES.md "Tests")
+STALL_TRACE_ENV = "IMUCAP_STALL_TRACE"
+STALL_TRACE_S = 1.5
 
 # Python's switch interval stays at its default (5 ms). Raised to 20 ms, the window's poses came
 # sooner beside busy processes, but the hub's one selector thread, which hands the interpreter
@@ -133,8 +141,24 @@ class LivePipeline:
         # a source that knows when its next frame is due (the hub) is polled right then: a
         # fixed timer adds half its period to every frame's latency on average
         due_in = getattr(self.source, "due_in", None)
+        trace = open(os.environ[STALL_TRACE_ENV], "a") if os.environ.get(STALL_TRACE_ENV) else None  # noqa: SIM115
+        try:
+            self._ingest_loop(due_in, trace)
+        finally:
+            if trace is not None:
+                faulthandler.cancel_dump_traceback_later()
+                trace.close()
+
+    def _ingest_loop(self, due_in: Callable[[], float] | None, trace: Any) -> None:
+        said = 0.0
         while not self._stop.is_set():
             frames = self.source.poll()
+            if frames and trace is not None:  # re-armed at every frame: it fires only after a stall
+                now = time.monotonic()
+                if now - said >= 1.0:  # where the dumps fall in time (the monotonic clock)
+                    print(f"hub frames at {now:.3f}", file=trace, flush=True)
+                    said = now
+                faulthandler.dump_traceback_later(STALL_TRACE_S, file=trace)
             if frames:
                 with self._cv:
                     for f in frames:
