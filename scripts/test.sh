@@ -53,7 +53,7 @@ export QT_SCALE_FACTOR=${QT_SCALE_FACTOR:-0.5}
 run() {  # run NAME NICE DISPLAY WORKERS MARKERS [pytest args]
   local name=$1 prio=$2 display=$3 workers=$4 markers=$5; shift 5
   local rc=0
-  IMUCAP_TEST_RUN=$name nice -n "$prio" timeout -k 30 1500 xvfb-run -a -n "$display" -s "-screen 0 1280x1024x24" \
+  IMUCAP_TEST_RUN=$name IMUCAP_STALL_TRACE="$LOGS/$name.stall" nice -n "$prio" timeout -k 30 1500 xvfb-run -a -n "$display" -s "-screen 0 1280x1024x24" \
     .venv/bin/python -m pytest -n "$workers" --dist loadgroup -q -p no:cacheprovider --basetemp "$LOGS/$name" \
     -m "$markers" "$@" >"$LOGS/$name.log" 2>&1 || rc=$?
   [ "$rc" = 5 ] && rc=0
@@ -86,6 +86,12 @@ for name in realtime rest solo again; do
   [ -f "$LOGS/$name.rc" ] || continue
   echo "=== $name ($(cat "$LOGS/$name.rc" 2>/dev/null || echo none))"
   [ -f "$LOGS/$name.log" ] && cat "$LOGS/$name.log"
+  # a failed run's live pipelines that went 1.5 s without a hub frame: every thread's stack then
+  # (IMUCAP_STALL_TRACE, app/live/runner.py; what held a capture that stalled, NOTES.md "Tests")
+  if [ "$(cat "$LOGS/$name.rc" 2>/dev/null)" != 0 ] && grep -q Timeout "$LOGS/$name.stall" 2>/dev/null; then
+    echo "=== $name: stalls (each thread's stack once a hub gave no frame for 1.5 s; the last 200 lines)"
+    grep -v '^hub frames at' "$LOGS/$name.stall" | tail -n 200
+  fi
 done
 [ "$(cat "$LOGS/rest.rc")" = 0 ] || ok=1
 for name in realtime solo; do

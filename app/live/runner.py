@@ -150,15 +150,17 @@ class LivePipeline:
                 trace.close()
 
     def _ingest_loop(self, due_in: Callable[[], float] | None, trace: Any) -> None:
-        said = 0.0
+        said = armed = 0.0
         while not self._stop.is_set():
             frames = self.source.poll()
-            if frames and trace is not None:  # re-armed at every frame: it fires only after a stall
+            if frames and trace is not None:
                 now = time.monotonic()
                 if now - said >= 1.0:  # where the dumps fall in time (the monotonic clock)
                     print(f"hub frames at {now:.3f}", file=trace, flush=True)
                     said = now
-                faulthandler.dump_traceback_later(STALL_TRACE_S, file=trace)
+                if now - armed >= 0.25:  # re-armed while frames come (each arming starts a C thread)
+                    faulthandler.dump_traceback_later(STALL_TRACE_S, file=trace)
+                    armed = now
             if frames:
                 with self._cv:
                     for f in frames:
