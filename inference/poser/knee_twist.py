@@ -11,9 +11,9 @@ with the strict hinge, 11.0 / 11.5 with this share; docs/real_signals.md, "The k
 
 So the share grows with how fast the pelvis turns about the vertical, measured over
 ``span_s`` (about a stride, so the pelvis's swing in each step cancels, as the evaluation's
-phases measure a turn): none standing, the full ``share`` at ``full_deg_s`` and above. Standing
-and walking straight keep (nearly) the strict hinge the motion capture rewards; a turn gets the
-twist.
+phases measure a turn): none standing, the full ``share`` at ``full_deg_s`` and above. A stand
+keeps the strict hinge the motion capture rewards; a walk gets a little from its pelvis's swing
+and its path's curves (0.15 on average over the gait check's 20 walks), a turn the most.
 """
 
 from __future__ import annotations
