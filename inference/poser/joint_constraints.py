@@ -27,6 +27,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from inference.body.conventions import yaw_of
 from inference.body.rotations import matrix_about_axis, matrix_about_axis_np
 from inference.body.skeleton import SEGMENT_INDEX
 
@@ -61,14 +62,6 @@ _THIGHS = [t for t, _ in KNEES]
 _SHANKS = [s for _, s in KNEES]
 
 
-def twist_angle(D: Tensor | np.ndarray) -> Tensor | np.ndarray:
-    """Angle (rad) of the twist about z in the swing-twist split of rotations ``D`` (..., 3, 3):
-    the twist quaternion is (w, 0, 0, z) normalised, and z / w = (D10 - D01) / (1 + trace)."""
-    if isinstance(D, np.ndarray):
-        return 2.0 * np.arctan2(D[..., 1, 0] - D[..., 0, 1], 1.0 + np.trace(D, axis1=-2, axis2=-1))
-    return 2.0 * torch.atan2(D[..., 1, 0] - D[..., 0, 1], 1.0 + D.diagonal(dim1=-2, dim2=-1).sum(-1))
-
-
 def constrain_knees(R: Tensor | np.ndarray, measured: Tensor | np.ndarray,
                     twist: float = 0.0) -> Tensor | np.ndarray:
     """Global orientations (..., 24, 3, 3) with each knee made a hinge about KNEE_AXIS.
@@ -93,7 +86,8 @@ def constrain_knees(R: Tensor | np.ndarray, measured: Tensor | np.ndarray,
     thigh = Rs @ hinge.transpose(-1, -2)
     if twist:
         bone = torch.tensor(BONE_AXIS, dtype=R.dtype)
-        psi = twist * twist_angle(thigh.transpose(-1, -2) @ Rt)
+        # the turn about the bone (z) of the model thigh against the hinge's: the twist of their swing-twist split
+        psi = twist * torch.as_tensor(yaw_of((thigh.transpose(-1, -2) @ Rt).detach().numpy()), dtype=R.dtype)
         thigh = thigh @ matrix_about_axis(bone.expand(*psi.shape, 3), psi)
     out[..., _THIGHS, :, :] = torch.where((ms & ~mt)[..., None, None], thigh, Rt)
     out[..., _SHANKS, :, :] = torch.where((~ms)[..., None, None], Rt @ hinge, Rs)
@@ -114,7 +108,7 @@ def _constrain_knees_np(R: np.ndarray, measured: np.ndarray, twist: float) -> np
     hinge = matrix_about_axis_np(axis, hinge_angle(np.swapaxes(Rt, -1, -2) @ Rs, axis))
     thigh = Rs @ np.swapaxes(hinge, -1, -2)
     if twist and fix_thigh.any():
-        psi = twist * twist_angle(np.swapaxes(thigh, -1, -2) @ Rt)
+        psi = twist * yaw_of(np.swapaxes(thigh, -1, -2) @ Rt)  # the twist about the bone (z) of their swing-twist split
         thigh = thigh @ matrix_about_axis_np(np.asarray(BONE_AXIS, dtype=R.dtype), psi)
     if R.ndim == 3:  # one frame: each knee on its own
         for k, (t, s) in enumerate(KNEES):

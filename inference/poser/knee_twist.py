@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from inference.body.conventions import wrap_angle, yaw_of
 from inference.signals.resample import FPS_MODEL
 
 # the largest share of the model's own thigh twist kept (while turning at FULL_TURN_DEG_S or faster);
@@ -47,7 +48,7 @@ class TurnShare:
         self.reset()
 
     def reset(self) -> None:
-        self._headings: deque[float] = deque(maxlen=self._n)
+        self._headings: deque[float] = deque(maxlen=self._n)  # unwrapped: turned through, not wrapped
         self.now = 0.0
 
     def __call__(self, pelvis: np.ndarray) -> float:
@@ -55,12 +56,14 @@ class TurnShare:
         for the frames a late answer cleans before the next one (``Poser._clean_earlier``)."""
         if self.share == 0.0:
             return 0.0
-        self._headings.append(float(np.arctan2(pelvis[1, 0], pelvis[0, 0])))
+        h = float(yaw_of(pelvis))
+        if self._headings:  # on from the last heading by the shortest way round
+            h = self._headings[-1] + float(wrap_angle(h - self._headings[-1]))
+        self._headings.append(h)
         if len(self._headings) < 2:
             self.now = 0.0
             return 0.0
-        h = np.unwrap(np.fromiter(self._headings, dtype=float))
-        rate = abs(np.degrees(h[-1] - h[0])) * self.fps / (len(h) - 1)
+        rate = abs(np.degrees(h - self._headings[0])) * self.fps / (len(self._headings) - 1)
         self.now = self.share * min(1.0, rate / self.full_deg_s)
         return self.now
 

@@ -24,8 +24,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from inference.body.conventions import yaw_of
 from inference.body.rotations import matrix_about_axis_np, matrix_angle_between
-from inference.poser.joint_constraints import BONE_AXIS, KNEE_AXIS, KNEES, hinge_angle, twist_angle
+from inference.poser.joint_constraints import BONE_AXIS, KNEE_AXIS, KNEES, hinge_angle
 from inference.signals.resample import FPS_MODEL
 
 
@@ -93,7 +94,7 @@ class StandPrior:
             # the thigh's twist the hinge kept (``knee_twist``) goes with the flexion: a straight
             # knee locks the shin's turn, and fading both together leaves no jump at the onset
             hinged = R[s] @ matrix_about_axis_np(self._axis, theta).T
-            psi = twist_angle(hinged.T @ R[t])
+            psi = yaw_of(hinged.T @ R[t])  # the twist about the bone the hinge kept
             out[t] = (R[s] @ matrix_about_axis_np(self._axis, (1.0 - w) * theta).T
                       @ matrix_about_axis_np(self._bone, (1.0 - w) * psi))
         return out

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from inference.body.conventions import rot_z
+from inference.body.conventions import rot_z, yaw_of
 from inference.body.skeleton import SEGMENT_INDEX
 from inference.features.layout import N_FEATURES
 from inference.poser.knee_twist import FULL_TURN_DEG_S, TurnShare
@@ -48,7 +48,7 @@ def test_the_poser_turns_the_thighs_only_while_the_pelvis_turns():
     are the strict hinge's until the pelvis turns, and ``knee_twist=0`` is the hinge throughout."""
     from inference.body.rotations import matrix_to_rot6d
     from inference.features.layout import SL_ROT, observation_mask
-    from inference.poser.joint_constraints import KNEES, twist_angle
+    from inference.poser.joint_constraints import KNEES
     from inference.poser.poser import Poser, reconstruct_offline
 
     from .tiny import tiny_diffusion
@@ -70,9 +70,9 @@ def test_the_poser_turns_the_thighs_only_while_the_pelvis_turns():
     for t, s in KNEES:
         for rot in (twisted, strict):  # the shank is the measurement
             np.testing.assert_allclose(rot[:, s], np.broadcast_to(np.eye(3), (T, 3, 3)), atol=1e-5)
-        hinge_twist = np.abs(twist_angle(np.swapaxes(strict[:, t], -1, -2) @ twisted[:, t]))
+        hinge_twist = np.abs(yaw_of(np.swapaxes(strict[:, t], -1, -2) @ twisted[:, t]))
         assert hinge_twist[:turn_from].max() < 1e-6  # standing still: the strict hinge
     # turning at 90 deg/s, once the gauge has seen it: the thighs keep some of the model's twist
-    late = [np.abs(twist_angle(strict[turn_from + 12:, t].transpose(0, 2, 1) @ twisted[turn_from + 12:, t])).max()
+    late = [np.abs(yaw_of(strict[turn_from + 12:, t].transpose(0, 2, 1) @ twisted[turn_from + 12:, t])).max()
             for t, _ in KNEES]
     assert max(late) > np.radians(0.05)
