@@ -60,6 +60,10 @@ run() {  # run NAME NICE DISPLAY WORKERS MARKERS [pytest args]
   echo "$rc" >"$LOGS/$name.rc"
 }
 DISPLAY_BASE=$((100 + RANDOM % 300))
+# what the kernel says each thread of a stalled capture is doing (scripts/stall_watch.py; NOTES.md "Tests")
+.venv/bin/python scripts/stall_watch.py "$LOGS/realtime.stall" "$LOGS/solo.stall" "$LOGS/rest.stall" \
+  "$LOGS/again.stall" >/dev/null 2>&1 &
+watch_pid=$!
 { run realtime 0 "$DISPLAY_BASE" 1 "realtime" "$@"; run solo 0 $((DISPLAY_BASE + 600)) 1 "solo" "$@"; } &
 live_pid=$!
 run rest 10 $((DISPLAY_BASE + 300)) 2 "not solo and not realtime" "$@" &
@@ -81,16 +85,21 @@ if [ "${#again[@]}" -gt 0 ] && [ ! -f "$LOGS/again.rc" ]; then
   run again 0 $((DISPLAY_BASE + 900)) 1 "realtime or solo" "${again[@]}"
 fi
 wait "$rest_pid"
+kill "$watch_pid" 2>/dev/null || true
 ok=0
 for name in realtime rest solo again; do
   [ -f "$LOGS/$name.rc" ] || continue
   echo "=== $name ($(cat "$LOGS/$name.rc" 2>/dev/null || echo none))"
   [ -f "$LOGS/$name.log" ] && cat "$LOGS/$name.log"
   # a failed run's live pipelines that went 1.5 s without a hub frame: every thread's stack then
-  # (IMUCAP_STALL_TRACE, app/live/runner.py; what held a capture that stalled, NOTES.md "Tests")
-  if [ "$(cat "$LOGS/$name.rc" 2>/dev/null)" != 0 ] && grep -q Timeout "$LOGS/$name.stall" 2>/dev/null; then
-    echo "=== $name: stalls (each thread's stack once a hub gave no frame for 1.5 s; the last 200 lines)"
-    grep -v '^hub frames at' "$LOGS/$name.stall" | tail -n 200
+  # (IMUCAP_STALL_TRACE, app/live/runner.py, one file per process), and the kernel's view of its threads
+  # then (scripts/stall_watch.py; what held a capture that stalled, NOTES.md "Tests")
+  if [ "$(cat "$LOGS/$name.rc" 2>/dev/null)" != 0 ]; then
+    for f in $(grep -l Timeout "$LOGS/$name".stall.* 2>/dev/null | grep -v '\.proc$'); do
+      echo "=== $name: stalls of ${f##*.stall.} (each thread's stack once a hub gave no frame for 1.5 s; the last 200 lines)"
+      grep -v '^hub frames at' "$f" | tail -n 200
+      if [ -f "$f.proc" ]; then cat "$f.proc"; fi
+    done
   fi
 done
 [ "$(cat "$LOGS/rest.rc")" = 0 ] || ok=1

@@ -135,10 +135,16 @@ def cmd_simulate_setup(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         pass
     finally:
-        sim.stop()
-        if args.log_sends:
-            sim.write_send_logs(args.log_sends)
-        signal.signal(signal.SIGTERM, previous)
+        # a terminate that comes while the devices stop (a harness closes standard input, then
+        # terminates) must not cut the stop short and lose the send logs: it is ignored until
+        # they are written; a stop that hangs is still ended by a kill
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        try:
+            sim.stop()
+        finally:
+            if args.log_sends:
+                sim.write_send_logs(args.log_sends)
+            signal.signal(signal.SIGTERM, previous)
     print(json.dumps(sim.stats()), file=sys.stderr)
     return 0
 

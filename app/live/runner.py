@@ -20,7 +20,10 @@ from drivers.hub import HubFrame
 
 # a file to which every thread's stack is written when the hub gives no frame for STALL_TRACE_S:
 # faulthandler's watchdog is a C thread, so it writes even while a thread holds the interpreter
-# (the wireless capture's seconds without a hub frame, NOTES.md "Tests")
+# (the wireless capture's seconds without a hub frame, NOTES.md "Tests"). Each process writes
+# ``<FILE>.<pid>``, with its threads' kernel ids beside their Python idents, so that a watcher
+# outside the process (scripts/stall_watch.py) can read what the kernel says each thread is doing
+# through a stall: which one holds the interpreter, and whether it waits on the disk or a core
 STALL_TRACE_ENV = "IMUCAP_STALL_TRACE"
 STALL_TRACE_S = 1.5
 
@@ -31,6 +34,25 @@ STALL_TRACE_S = 1.5
 # for 0.5-5 s (6-10 % of their samples lost, calibrations failed) while the CAN ones, on threads
 # of their own, lost 0.2 %. A reader loop beside two busy Python threads: worst gap 98 ms at
 # 5 ms, 826 ms at 20 ms (benchmarks/selector_gil.py; docs/window.md).
+
+
+def stall_trace_file() -> Any:
+    """This process's stall trace (``<IMUCAP_STALL_TRACE>.<pid>``), opened to append, or None."""
+    path = os.environ.get(STALL_TRACE_ENV)
+    if not path:
+        return None
+    trace = open(f"{path}.{os.getpid()}", "a")  # noqa: SIM115 - closed by the ingest thread
+    print(f"pid {os.getpid()}", file=trace, flush=True)
+    return trace
+
+
+def _name_threads(trace: Any, named: set[tuple[int, int]]) -> set[tuple[int, int]]:
+    """Write each thread not named yet as ``thread 0x<ident> tid <kernel id> <name>``: faulthandler's
+    dumps name threads by ident, the kernel's ``/proc/<pid>/task/<tid>`` by kernel id."""
+    now = {(t.ident, t.native_id): t.name for t in threading.enumerate() if t.ident and t.native_id}
+    for ident, tid in now.keys() - named:
+        print(f"thread 0x{ident:016x} tid {tid} {now[ident, tid]}", file=trace)
+    return set(now)
 
 
 class LivePipeline:
@@ -141,7 +163,7 @@ class LivePipeline:
         # a source that knows when its next frame is due (the hub) is polled right then: a
         # fixed timer adds half its period to every frame's latency on average
         due_in = getattr(self.source, "due_in", None)
-        trace = open(os.environ[STALL_TRACE_ENV], "a") if os.environ.get(STALL_TRACE_ENV) else None  # noqa: SIM115
+        trace = stall_trace_file()
         try:
             self._ingest_loop(due_in, trace)
         finally:
@@ -151,13 +173,23 @@ class LivePipeline:
 
     def _ingest_loop(self, due_in: Callable[[], float] | None, trace: Any) -> None:
         said = armed = 0.0
+        named: set[tuple[int, int]] = set()
+        longest_poll = longest_gap = 0.0  # over the second before each "hub frames at" line
+        last_frames = time.monotonic()
         while not self._stop.is_set():
+            began = time.monotonic()
             frames = self.source.poll()
             if frames and trace is not None:
                 now = time.monotonic()
+                longest_poll = max(longest_poll, now - began)
+                longest_gap = max(longest_gap, now - last_frames)
+                last_frames = now
                 if now - said >= 1.0:  # where the dumps fall in time (the monotonic clock)
-                    print(f"hub frames at {now:.3f}", file=trace, flush=True)
-                    said = now
+                    named = _name_threads(trace, named)
+                    print(f"hub frames at {now:.3f}; longest poll {longest_poll * 1e3:.0f} ms, longest between "
+                          f"frames {longest_gap * 1e3:.0f} ms, {len(frames)} now, grid {frames[-1].t:.3f}",
+                          file=trace, flush=True)
+                    said, longest_poll, longest_gap = now, 0.0, 0.0
                 if now - armed >= 0.25:  # re-armed while frames come (each arming starts a C thread)
                     faulthandler.dump_traceback_later(STALL_TRACE_S, file=trace)
                     armed = now

@@ -2,12 +2,13 @@
 
 Why each piece exists:
 
-- Readers: one selector thread serves every device with a file descriptor
-  (serial ports, UDP): it wakes once per ``read_interval``, not once per packet,
-  and drains each ready device with ``read_many``, so 13 sensors at 100 Hz cost
-  ~100 wake-ups a second instead of 1300. Queue-backed transports (python-can's
-  virtual bus, the HID seam) keep a thread of their own, and a selectable device
-  gets one while it reconnects, so a slow handshake never delays the others.
+- Readers: one selector thread serves every device with a socket (UDP): it
+  wakes once per ``read_interval``, not once per packet, and drains each ready
+  device with ``read_many``, so 13 sensors at 100 Hz cost ~100 wake-ups a second
+  instead of 1300. Queue-backed transports (python-can's virtual bus, the HID
+  seam) and serial ports keep a thread of their own (a terminal's ``select`` can
+  wait in the kernel for seconds: ``readers``), and a socket device gets one
+  while it reconnects, so a slow handshake never delays the others.
 - Bounded queues between readers and the consumer: if the consumer (inference,
   GUI) falls behind, the oldest samples are dropped and counted, and grid frames
   older than ``max_backlog`` are skipped and counted, so the output always

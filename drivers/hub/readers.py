@@ -1,15 +1,25 @@
 """The threads that read the devices (``Readers``) and each device's state in the hub (``Track``).
 
-One selector thread serves every device with a file descriptor (serial ports, UDP): it wakes
+One selector thread serves every device with a socket (UDP, a BLE bridge's socket): it wakes
 once per ``read_interval``, not once per packet, and drains each ready device with
 ``read_many``, so 13 sensors at 100 Hz cost ~100 wake-ups a second instead of 1300.
 Queue-backed transports (python-can's virtual bus, the HID seam) keep a thread of their own,
 and a selectable device gets one while it reconnects, so a slow handshake never delays the
 others. Every batch read goes to ``deliver`` (the hub's ``push_many``), which queues it.
+
+A serial port (a terminal: a USB serial adapter, a pseudo-terminal) keeps a thread of its own
+too. Linux's ``select`` and ``read`` on a terminal with no input ready wait for the kernel's
+work that moves the port's received bytes into the line discipline (``n_tty_poll`` ->
+``tty_buffer_flush_work``), and on a loaded machine that work waited for a core for seconds:
+the selector and the hub's ``poll`` (``catch_up``) sat in that wait together, in
+uninterruptible sleep, and a capture put out no frame at all for 1.5-5 s while its devices kept
+sending (scripts/stall_watch.py caught it; docs/testing.md). On a thread of its own a terminal's
+wait holds up its own samples only.
 """
 
 from __future__ import annotations
 
+import os
 import select
 import threading
 import time
@@ -60,6 +70,7 @@ class Track:
             self.site_rings = {n: Ring(history) for n in self.site_of.values()}
             self.site_gaps = {n: deque(maxlen=64) for n in self.site_of.values()}
         self.thread: threading.Thread | None = None
+        self.descriptor: tuple[int, bool] | None = None  # (fd, a terminal) as last asked (``Readers.is_terminal``)
         self.last_event: DeviceEvent | None = device.events[-1] if device.events else None
 
 
@@ -83,14 +94,29 @@ class Readers:
         # is not to be read from two threads
         self._read_lock = threading.Lock()
 
+    @staticmethod
+    def is_terminal(tr: Track, fd: int) -> bool:
+        """Whether the device's descriptor ``fd`` is a terminal, which the selector must not
+        wait on (module docstring); asked once per descriptor the device has."""
+        if tr.descriptor is None or tr.descriptor[0] != fd:
+            try:
+                terminal = os.isatty(fd)
+            except OSError:
+                terminal = False
+            tr.descriptor = (fd, terminal)
+        return tr.descriptor[1]
+
     def start(self) -> None:
         selectable: list[Track] = []
         for tr in self.tracks.values():
             if not tr.device.is_open:
                 tr.device.open()
+            fd = tr.device.fileno()
             # a selectable device without a descriptor yet (opened while not ready) goes to the
             # selector too: its scan gives it a thread until it reconnects and takes it back then
-            if self.selector and (tr.device.fileno() is not None or tr.device.selectable):
+            # (or keeps it there for good, a terminal)
+            if self.selector and (fd is not None and not self.is_terminal(tr, fd)
+                                  or fd is None and tr.device.selectable):
                 selectable.append(tr)
             else:
                 tr.thread = self._spawn(tr, until_selectable=False)
@@ -118,16 +144,20 @@ class Readers:
 
     def _read(self, tr: Track, until_selectable: bool) -> None:
         """A device's own thread: for queue-backed transports (no descriptor to select
-        on) for the whole session, and for a selectable device while it is
-        disconnected, so its reconnect (an Xbus handshake takes up to seconds) never
-        stalls the selector that serves the others."""
+        on) and terminals for the whole session, and for a socket device while it is
+        disconnected, so its reconnect never stalls the selector that serves the others."""
         dev = tr.device
         while not self._stop.is_set():
             batch = dev.read_many(0.1)
             self.forward_events(tr)
             if batch:
                 self.deliver(tr.name, batch)
-            if until_selectable and dev.connected and dev.fileno() is not None:
+            fd = dev.fileno() if dev.connected else None
+            if fd is not None and self.is_terminal(tr, fd):
+                until_selectable = False  # a terminal keeps this thread (module docstring)
+                if batch and self.read_interval:
+                    time.sleep(self.read_interval)  # let packets pile up, as the selector does
+            elif until_selectable and fd is not None:
                 return
 
     def _select(self, tracks: list[Track]) -> None:
@@ -199,6 +229,10 @@ class Readers:
             if fd is None:
                 if dev.is_open and spawn:
                     tr.thread = self._spawn(tr, until_selectable=True)
+                continue
+            if self.is_terminal(tr, fd):  # reconnected as a terminal: a thread of its own from now on
+                if spawn:
+                    tr.thread = self._spawn(tr, until_selectable=False)
                 continue
             if dev.has_buffered():
                 ready.append(tr)

@@ -202,15 +202,18 @@ def test_vectorised_hold_matches_per_site_hold():
     assert fast[4][:, 3].sum() == 0  # the silent site is never present (quat, free, acc, gyro, present, newest)
 
 
-def test_hub_selector_survives_an_unplugged_xbus_and_forwards_events():
-    """The selector hands a lost device to its own thread for the reconnect (with the
-    configuration handshake) and takes it back; the other device is served throughout."""
+def test_hub_serves_an_unplugged_xbus_on_its_own_thread_and_forwards_events():
+    """A serial port (a terminal) is read on a thread of its own, never by the selector, whose
+    wait on a terminal can sit in the kernel for seconds (drivers/hub/readers.py); it reconnects
+    there (with the configuration handshake) and the other device is served throughout."""
     sig = spinning_signals(("pelvis", "head"), seconds=20)
     sims = {s: make_sim_device(p, sig, s, name=s).start() for s, p in (("pelvis", "xbus"), ("head", "bno08x-rvc"))}
     try:
         devs = {s: drivers.make_device(sim.url) for s, sim in sims.items()}
         with Hub(devs, latency=0.05) as hub:
-            assert hub.readers.selector_thread is not None  # both are served by the selector
+            assert hub.readers.selector_thread is None  # no socket: nothing for a selector
+            threads = {s: hub.tracks[s].thread for s in sims}
+            assert all(t is not None and t.is_alive() for t in threads.values())
             list(hub.frames(duration=0.5))
             sims["pelvis"].disconnect(0.4)
             skipped = sims["head"].stats["skipped"]
@@ -225,12 +228,9 @@ def test_hub_selector_survives_an_unplugged_xbus_and_forwards_events():
                 np.flatnonzero(~present[:, 1]), unsent, hub.status(), hub.stats,
                 [(e.kind, e.device_id, round(e.t, 2)) for e in hub.events])
             assert sims["pelvis"].commands.count(0x10) >= 2  # re-configured after the re-plug
-            deadline = time.monotonic() + 2.0
-            while hub.tracks["pelvis"].thread is not None and time.monotonic() < deadline:
-                time.sleep(0.05)
-            assert hub.tracks["pelvis"].thread is None  # back on the selector
-            # and flowing again there (judged once it is back: while its reconnect thread
-            # hands it over, a loaded machine may deliver its samples in bursts)
+            assert hub.tracks["pelvis"].thread is threads["pelvis"] and threads["pelvis"].is_alive()
+            # and flowing again (judged once it is back: a loaded machine may deliver the
+            # reconnect's first samples in bursts)
             present = np.array([f.present for f in hub.frames(duration=1.0)])
             assert present[:, 0].mean() > 0.9
     finally:

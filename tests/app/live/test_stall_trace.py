@@ -3,7 +3,11 @@ given no frame for ``STALL_TRACE_S``: the diagnosis of a capture that stalls (NO
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 from app.live import LivePipeline, Pipeline, frames_from_signals
 from app.live import runner as live_runner
@@ -29,16 +33,37 @@ def _frames(seconds: float):
     return frames_from_signals(sig, t0=100.0)
 
 
+WATCHER = Path(__file__).parents[3] / "scripts" / "stall_watch.py"
+
+
+def _wait_for(path: Path, text: str, seconds: float = 30.0) -> str:
+    deadline = time.monotonic() + seconds
+    while text not in (path.read_text() if path.exists() else "") and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return path.read_text() if path.exists() else ""
+
+
 def test_a_hub_that_stops_giving_frames_gets_every_threads_stack_written(tmp_path, monkeypatch):
-    trace = tmp_path / "stall.txt"
-    live = _pipeline(_frames(0.5)[:30], monkeypatch, trace).start(warm_up=False)
+    prefix = tmp_path / "stall"
+    trace = tmp_path / f"stall.{os.getpid()}"  # one file per process
+    watcher = subprocess.Popen([sys.executable, str(WATCHER), str(prefix)])
     try:
-        deadline = time.monotonic() + 30.0
-        while "Timeout" not in (trace.read_text() if trace.exists() else "") and time.monotonic() < deadline:
-            time.sleep(0.1)  # the list runs out after half a second: the hub "stalls"
+        live = _pipeline(_frames(0.5)[:30], monkeypatch, prefix).start(warm_up=False)
+        try:
+            text = _wait_for(trace, "Timeout")  # the list runs out after half a second: the hub "stalls"
+            kernel = _wait_for(Path(f"{trace}.proc"), "kernel stack")
+        finally:
+            live.stop()
     finally:
-        live.stop()
-    text = trace.read_text()
-    assert text.startswith("hub frames at ")
+        watcher.kill()
+        watcher.wait()
+    assert text.startswith(f"pid {os.getpid()}\n")
+    assert "hub frames at " in text
     assert "Timeout (0:00:00.300000)!" in text and "_ingest_loop" in text  # the ingest thread, waiting
+    # the threads by kernel id and name, and what the kernel said of each through the stall
+    ingest = next(line for line in text.splitlines() if line.startswith("thread ") and "pipeline-ingest" in line)
+    tid = ingest.split()[3]
+    assert f"=== stall of pid {os.getpid()}" in kernel
+    row = next(line for line in kernel.splitlines() if line.startswith(f"{tid} "))
+    assert "pipeline-ingest" in row and "ms" in row  # its name, its state and its time on a core
 
