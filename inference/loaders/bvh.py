@@ -185,17 +185,25 @@ def parse_bvh(path: str | Path) -> SourceSkeleton:
     glob = np.zeros((n_frames, J, 3, 3))
     pos = np.zeros((n_frames, J, 3))
     rest_pos = np.zeros((J, 3))
-    col = 0
-    for j in range(J):
-        chans = channels[j]
-        cols = {c: col + k for k, c in enumerate(chans)}
-        col += len(chans)
+    starts = np.cumsum([0] + [len(c) for c in channels])
+    col_of = [{c: int(starts[j]) + k for k, c in enumerate(chans)} for j, chans in enumerate(channels)]
+    # each joint's local rotation, intrinsic in channel order: one conversion per channel order for
+    # all the joints that share it (a file's joints mostly do), not one per joint
+    by_order: dict[str, list[int]] = {}
+    for j, chans in enumerate(channels):
         rot_names = [c for c in chans if c in _ROT]
         if rot_names:
-            order = "".join(_ROT[c] for c in rot_names)
-            ang = np.deg2rad(data[:, [cols[c] for c in rot_names]])
-            local = euler_to_matrix(ang, order)  # intrinsic, in channel order
-        else:
+            by_order.setdefault("".join(_ROT[c] for c in rot_names), []).append(j)
+    locals_: dict[int, np.ndarray] = {}
+    for order, joints in by_order.items():
+        cols_rot = [[col_of[j][c] for c in channels[j] if c in _ROT] for j in joints]
+        mats = euler_to_matrix(np.deg2rad(data[:, cols_rot]), order)  # (T, joints, 3, 3)
+        for k, j in enumerate(joints):
+            locals_[j] = mats[:, k]
+    for j in range(J):
+        cols = col_of[j]
+        local = locals_.get(j)
+        if local is None:
             local = np.broadcast_to(np.eye(3), (n_frames, 3, 3))
         trans = np.broadcast_to(offsets[j], (n_frames, 3)).copy()
         for c, k in _POS.items():
