@@ -410,3 +410,31 @@ def test_prefixed_joint_names_keep_the_forearm_orientation_source():
     assert jm.name == "cmu31-cgspeed"
     assert jm.orient == {"l_forearm": "rig:LeftHand", "r_forearm": "rig:RightHand"}
     assert jm.segments["l_hand"] == "rig:LeftFingerBase" and jm.required() <= set(names)
+
+
+def test_an_amc_read_bone_by_bone_equals_its_line_by_line_reading(tmp_path, monkeypatch):
+    """A regular AMC (every frame the same bones in the same order) is read per bone over all frames
+    at once; the values are those of the line-by-line reading, which a frame in another order falls
+    back to with the same result."""
+    from inference.loaders import asf_amc
+
+    p = _write_asf_amc(tmp_path, T=25, moving=("lwrist",))
+    asf = asf_amc.parse_asf(tmp_path / "HDM_zz.asf")
+    fast = asf_amc.parse_amc(p, asf)
+    with monkeypatch.context() as m:
+        m.setattr(asf_amc, "_parse_regular", lambda lines, ndof: None)
+        slow = asf_amc.parse_amc(p, asf)
+    assert fast.keys() == slow.keys() and len(fast) > 3
+    for k in fast:
+        np.testing.assert_array_equal(fast[k], slow[k])
+    lines = p.read_bytes().decode("latin-1").split("\r\n")
+    ndof = {name: len([d for d in b.dofs if d != "l"]) for name, b in asf.bones.items()} | {"root": 6}
+    assert asf_amc._parse_regular(lines, ndof) is not None  # noqa: SLF001 (read bone by bone)
+    # one frame's bones in another order: not regular, read line by line, the same values
+    at = lines.index("3")
+    lines[at + 1], lines[at + 2] = lines[at + 2], lines[at + 1]
+    p.write_bytes("\r\n".join(lines).encode("latin-1"))
+    assert asf_amc._parse_regular(lines, ndof) is None  # noqa: SLF001
+    shuffled = asf_amc.parse_amc(p, asf)
+    for k in fast:
+        np.testing.assert_array_equal(shuffled[k], fast[k])
