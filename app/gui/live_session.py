@@ -45,7 +45,7 @@ class DeviceRow:
     url: str
     state: str  # ok, reconnecting, silent, waiting
     rate_hz: float | None
-    loss_pct: float | None
+    loss_pct: float | None  # of its samples, lost on the way or too late for their frames (not recorded)
     battery: float | None
     last_seen_s: float | None  # seconds since its last sample
     packets: int
@@ -180,7 +180,9 @@ class LiveSession:
             elif name not in self._rates:
                 self._rates[name] = (now, packets, None)
             lost = int(st.get("lost", 0))
-            loss = 100.0 * lost / (packets + lost) if packets + lost else None
+            # a sample that came after its frame was put out is in neither the poses nor the recording
+            late = min(int(st.get("late", 0)), packets)
+            loss = 100.0 * (lost + late) / (packets + lost) if packets + lost else None
             if name == INSOLES:
                 last = tr.insole[-1][0] if tr.insole else None
             else:

@@ -208,14 +208,14 @@ class Hub:
 
     def status(self) -> dict[str, dict[str, Any]]:
         """Per device, for a status panel: packets decoded, errors, gaps, lost packets,
-        queue drops, reconnects, battery (None if unknown)."""
+        queue drops, samples too late for their frames, reconnects, battery (None if unknown)."""
         out = {}
         for name, tr in self.tracks.items():
             st = tr.device.stats
             out[name] = {
                 "packets": int(st.decoded), "errors": int(st.errors), "gaps": int(self.stats.gaps.get(name, 0)),
-                "lost": int(st.lost_packets), "dropped": int(tr.dropped), "reconnects": int(st.reconnects),
-                "battery": tr.battery,
+                "lost": int(st.lost_packets), "dropped": int(tr.dropped), "late": int(tr.missed),
+                "reconnects": int(st.reconnects), "battery": tr.battery,
             }
         return out
 
@@ -223,6 +223,7 @@ class Hub:
     def _drain(self) -> None:
         """Move queued samples into the rings: per sample only the clock model and
         the gap bookkeeping (plain Python), the ring write once per device."""
+        put_out = -math.inf if self._next_index is None else (self._next_index - 1) / self.rate
         for tr in self.tracks.values():
             with tr.lock:
                 if not tr.queue:
@@ -249,6 +250,8 @@ class Hub:
                     self.stats.gaps[tr.name] = self.stats.gaps.get(tr.name, 0) + 1
                 if last is not None and st <= last:
                     st = last + 1e-6  # keep per-device times strictly increasing
+                if st <= put_out:
+                    tr.missed += 1
                 if insole:
                     tr.insole.append(
                         (

@@ -51,6 +51,9 @@ class Track:
         self.queue: deque[Sample] = deque(maxlen=queue_size)
         self.queue_size = queue_size
         self.dropped = 0
+        # samples whose time the grid had already put out when they reached the hub: missing from
+        # those frames, and so from a recording, which stores the frames (``Hub.status``: ``late``)
+        self.missed = 0
         self.battery: float | None = None  # the last level a sample reported
         self.lock = threading.Lock()
         self.clock = ClockModel()

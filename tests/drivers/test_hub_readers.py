@@ -23,7 +23,7 @@ from sim_devices.devices import make_sim_device, spinning_signals
 STALL_S = 0.4
 
 
-def _present_through_stalls(monkeypatch, catch_up: bool) -> np.ndarray:
+def _present_through_stalls(monkeypatch, catch_up: bool, late: list | None = None) -> np.ndarray:
     """Insole presence in the frames over three stalls of the selector, ``STALL_S`` each."""
     sig = spinning_signals(("head",), seconds=20)
     sim = make_sim_device("moticon-udp", sig, "head", name="insoles").start()
@@ -49,21 +49,29 @@ def _present_through_stalls(monkeypatch, catch_up: bool) -> np.ndarray:
             for _ in range(3):
                 stalls["left"] = 1
                 present += [f.insole_present for f in hub.frames(duration=0.6)]
+            if late is not None:
+                late.append(hub.status()["insoles"]["late"])
             return np.array(present)
     finally:
         sim.stop()
 
 
 def test_a_stalled_selector_loses_no_frame_when_the_grid_reads_first(monkeypatch):
-    present = _present_through_stalls(monkeypatch, catch_up=True)
+    late: list[int] = []
+    present = _present_through_stalls(monkeypatch, catch_up=True, late=late)
     assert present.mean() > 0.97, present.mean()
+    assert late[0] < 0.2 * 3 * STALL_S * 100, late  # the stalls' samples were read in time
 
 
 def test_without_reading_first_the_stalls_cost_their_frames(monkeypatch):
     """The same stalls with the selector the only reader: what ``catch_up`` is there for
     (and what makes the test above able to fail)."""
-    present = _present_through_stalls(monkeypatch, catch_up=False)
+    late: list[int] = []
+    present = _present_through_stalls(monkeypatch, catch_up=False, late=late)
     assert present.mean() < 0.8, present.mean()
+    # the samples that came too late for their frames are counted for the device's status (and a
+    # session's summary): missing from the frames, so from a recording too
+    assert late[0] >= 0.5 * (1 - present.mean()) * 3 * 0.6 * 100, (late, present.mean())
 
 
 def test_a_serial_port_is_read_on_a_thread_of_its_own():
