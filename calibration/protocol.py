@@ -89,6 +89,32 @@ def _slerp_R(R0: np.ndarray, R1: np.ndarray, w: np.ndarray) -> np.ndarray:
                                      np.broadcast_to(q1, (len(w),) + q1.shape), wq))
 
 
+def velocity_at(root: np.ndarray, fps: float, end: bool = False) -> np.ndarray:
+    """The root's velocity (m/s) over the first (or, ``end``, the last) three frames."""
+    r = root[-3:] if end else root[:3]
+    return (r[-1] - r[0]) * fps / max(len(r) - 1, 1)
+
+
+def root_blend(p0: np.ndarray, v0: np.ndarray, p1: np.ndarray, v1: np.ndarray, n: int, fps: float) -> np.ndarray:
+    """``n`` root positions strictly between (p0, moving at v0) and (p1, moving at v1), a cubic Hermite
+    path: the position and the velocity join at both ends. A blend whose weights rise from 0 to 1 with
+    zero slope stops the root at each end, so a subject standing still went to walking speed within
+    one 60 Hz sample: a single pelvis free acceleration of 113 m/s^2 at every simulated activity's start
+    (the demo's signal plot showed it). Callers place the standing end ``v * duration / 2`` behind (or
+    ahead of) the moving one, so the speed ramps evenly over the blend."""
+    s = ((np.arange(n) + 1) / (n + 1))[:, None]
+    D = (n + 1) / fps
+    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+    return h00 * p0 + h10 * D * v0 + h01 * p1 + h11 * D * v1
+
+
+def _ramp_offset(v: np.ndarray, n: int, fps: float) -> np.ndarray:
+    """How far (x, y, 0) a body moving at ``v`` covers while its speed ramps evenly from 0 over a blend of
+    ``n`` frames: where its standing end goes, behind the moving end (or ahead, after it)."""
+    D = (n + 1) / fps
+    return np.array([v[0], v[1], 0.0]) * D / 2
+
+
 def tpose_standing(motion_body, n: int, fps: float, xy: tuple[float, float] = (0.0, 0.0)) -> Motion:
     """``n`` frames of an exactly still T-pose, feet on the floor, facing +X."""
     R = tpose(n)
@@ -106,11 +132,12 @@ def session_motion(activity: Motion, protocol: Protocol | None = None) -> Motion
     fps = activity.fps
     n_hold = int(round((p.table + p.strap + p.tpose) * fps))
     n_blend = max(int(round(p.blend * fps)), 1)
-    xy = (float(activity.root[0, 0]), float(activity.root[0, 1]))
-    hold = tpose_standing(activity.body, n_hold + n_blend, fps, xy)
+    v1 = velocity_at(activity.root, fps)
+    start = activity.root[0] - _ramp_offset(v1, n_blend, fps)  # the subject stands where the ramp begins
+    hold = tpose_standing(activity.body, n_hold + n_blend, fps, (float(start[0]), float(start[1])))
     w = _smoothstep((np.arange(n_blend) + 1) / (n_blend + 1))
     Rb = _slerp_R(hold.rot[0], activity.rot[0], w)
-    rb = hold.root[0] + w[:, None] * (activity.root[0] - hold.root[0])
+    rb = root_blend(hold.root[0], np.zeros(3), activity.root[0], v1, n_blend, fps)
     rot = np.concatenate([hold.rot[:n_hold], Rb, activity.rot])
     root = np.concatenate([hold.root[:n_hold], rb, activity.root])
     meta = dict(activity.meta or {})
@@ -220,20 +247,31 @@ def walk_session_motion(activity: Motion, walk: Motion, protocol: WalkProtocol |
     body = activity.body
     n_np = int(round(p.npose * fps))
     n_bl = max(int(round(0.5 * fps)), 1)
-    start = _npose_standing(body, n_np, fps, (float(walk.root[0, 0]), float(walk.root[0, 1])))
     n_walk = int(round(p.walk * fps))
     w = walk.rot[:n_walk], walk.root[:n_walk]
-    r_in, p_in = _blend(start, w[0][0], w[1][0], n_bl)
+    # each blend between standing and moving joins the root's velocity too (``root_blend``): the standing
+    # body is placed where an even ramp of the speed over the blend puts it
+    v_in = velocity_at(w[1], fps)
+    at = w[1][0] - _ramp_offset(v_in, n_bl, fps)
+    start = _npose_standing(body, n_np, fps, (float(at[0]), float(at[1])))
+    r_in, _ = _blend(start, w[0][0], w[1][0], n_bl)
+    p_in = root_blend(start.root[-1], np.zeros(3), w[1][0], v_in, n_bl, fps)
     seg = Motion(rot=np.concatenate([start.rot, r_in, w[0]]), root=np.concatenate([start.root, p_in, w[1]]),
                  fps=fps, body=body)
-    end_xy = (float(w[1][-1, 0]), float(w[1][-1, 1]))
+    v_out = velocity_at(w[1], fps, end=True)
+    at = w[1][-1] + _ramp_offset(v_out, n_bl, fps)
+    end_xy = (float(at[0]), float(at[1]))
     stand = _npose_standing(body, int(round(p.stand * fps)), fps, end_xy)
-    r_st, p_st = _blend(seg, stand.rot[0], stand.root[0], n_bl)
-    act_root = activity.root - np.array([activity.root[0, 0] - end_xy[0], activity.root[0, 1] - end_xy[1], 0.0])
+    r_st, _ = _blend(seg, stand.rot[0], stand.root[0], n_bl)
+    p_st = root_blend(w[1][-1], v_out, stand.root[0], np.zeros(3), n_bl, fps)
     n_act_bl = max(int(round(p.blend * fps)), 1)
+    v_act = velocity_at(activity.root, fps)
+    act_at = np.array([end_xy[0], end_xy[1], 0.0]) + _ramp_offset(v_act, n_act_bl, fps)
+    act_root = activity.root - np.array([activity.root[0, 0] - act_at[0], activity.root[0, 1] - act_at[1], 0.0])
     pre = Motion(rot=np.concatenate([seg.rot, r_st, stand.rot]), root=np.concatenate([seg.root, p_st, stand.root]),
                  fps=fps, body=body)
-    r_ab, p_ab = _blend(pre, activity.rot[0], act_root[0], n_act_bl)
+    r_ab, _ = _blend(pre, activity.rot[0], act_root[0], n_act_bl)
+    p_ab = root_blend(pre.root[-1], np.zeros(3), act_root[0], v_act, n_act_bl, fps)
     rot = np.concatenate([pre.rot, r_ab, activity.rot])
     root = np.concatenate([pre.root, p_ab, act_root])
     meta = dict(activity.meta or {})
