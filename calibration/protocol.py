@@ -231,10 +231,9 @@ def _npose_standing(body, n: int, fps: float, xy: tuple[float, float], heading: 
     return Motion(rot=R, root=np.tile([xy[0], xy[1], z], (n, 1)), fps=fps, body=body, name="npose")
 
 
-def _blend(a: Motion, b_rot: np.ndarray, b_root: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """``n`` frames from the last frame of ``a`` to (b_rot, b_root)."""
-    w = _smoothstep((np.arange(n) + 1) / (n + 1))
-    return _slerp_R(a.rot[-1], b_rot, w), a.root[-1] + w[:, None] * (b_root - a.root[-1])
+def _blend(a: Motion, b_rot: np.ndarray, n: int) -> np.ndarray:
+    """``n`` orientations from the last frame of ``a`` to ``b_rot`` (the root's path: ``root_blend``)."""
+    return _slerp_R(a.rot[-1], b_rot, _smoothstep((np.arange(n) + 1) / (n + 1)))
 
 
 def walk_session_motion(activity: Motion, walk: Motion, protocol: WalkProtocol | None = None) -> Motion:
@@ -254,7 +253,7 @@ def walk_session_motion(activity: Motion, walk: Motion, protocol: WalkProtocol |
     v_in = velocity_at(w[1], fps)
     at = w[1][0] - _ramp_offset(v_in, n_bl, fps)
     start = _npose_standing(body, n_np, fps, (float(at[0]), float(at[1])))
-    r_in, _ = _blend(start, w[0][0], w[1][0], n_bl)
+    r_in = _blend(start, w[0][0], n_bl)
     p_in = root_blend(start.root[-1], np.zeros(3), w[1][0], v_in, n_bl, fps)
     seg = Motion(rot=np.concatenate([start.rot, r_in, w[0]]), root=np.concatenate([start.root, p_in, w[1]]),
                  fps=fps, body=body)
@@ -262,7 +261,7 @@ def walk_session_motion(activity: Motion, walk: Motion, protocol: WalkProtocol |
     at = w[1][-1] + _ramp_offset(v_out, n_bl, fps)
     end_xy = (float(at[0]), float(at[1]))
     stand = _npose_standing(body, int(round(p.stand * fps)), fps, end_xy)
-    r_st, _ = _blend(seg, stand.rot[0], stand.root[0], n_bl)
+    r_st = _blend(seg, stand.rot[0], n_bl)
     p_st = root_blend(w[1][-1], v_out, stand.root[0], np.zeros(3), n_bl, fps)
     n_act_bl = max(int(round(p.blend * fps)), 1)
     v_act = velocity_at(activity.root, fps)
@@ -270,7 +269,7 @@ def walk_session_motion(activity: Motion, walk: Motion, protocol: WalkProtocol |
     act_root = activity.root - np.array([activity.root[0, 0] - act_at[0], activity.root[0, 1] - act_at[1], 0.0])
     pre = Motion(rot=np.concatenate([seg.rot, r_st, stand.rot]), root=np.concatenate([seg.root, p_st, stand.root]),
                  fps=fps, body=body)
-    r_ab, _ = _blend(pre, activity.rot[0], act_root[0], n_act_bl)
+    r_ab = _blend(pre, activity.rot[0], n_act_bl)
     p_ab = root_blend(pre.root[-1], np.zeros(3), act_root[0], v_act, n_act_bl, fps)
     rot = np.concatenate([pre.rot, r_ab, activity.rot])
     root = np.concatenate([pre.root, p_ab, act_root])

@@ -1,6 +1,6 @@
 """The threads that read the devices (``Readers``) and each device's state in the hub (``Track``).
 
-One selector thread serves every device with a socket (UDP, a BLE bridge's socket): it wakes
+One selector thread serves every device with a socket (UDP): it wakes
 once per ``read_interval``, not once per packet, and drains each ready device with
 ``read_many``, so 13 sensors at 100 Hz cost ~100 wake-ups a second instead of 1300.
 Queue-backed transports (python-can's virtual bus, the HID seam) keep a thread of their own,
@@ -73,8 +73,19 @@ class Track:
             self.site_rings = {n: Ring(history) for n in self.site_of.values()}
             self.site_gaps = {n: deque(maxlen=64) for n in self.site_of.values()}
         self.thread: threading.Thread | None = None
-        self.descriptor: tuple[int, bool] | None = None  # (fd, a terminal) as last asked (``Readers.is_terminal``)
+        self.descriptor: tuple[int, bool] | None = None  # (fd, a terminal) as last asked (``is_terminal``)
         self.last_event: DeviceEvent | None = device.events[-1] if device.events else None
+
+    def is_terminal(self, fd: int) -> bool:
+        """Whether the device's descriptor ``fd`` is a terminal, which the selector must not
+        wait on (module docstring); asked once per descriptor the device has."""
+        if self.descriptor is None or self.descriptor[0] != fd:
+            try:
+                terminal = os.isatty(fd)
+            except OSError:
+                terminal = False
+            self.descriptor = (fd, terminal)
+        return self.descriptor[1]
 
 
 class Readers:
@@ -97,18 +108,6 @@ class Readers:
         # is not to be read from two threads
         self._read_lock = threading.Lock()
 
-    @staticmethod
-    def is_terminal(tr: Track, fd: int) -> bool:
-        """Whether the device's descriptor ``fd`` is a terminal, which the selector must not
-        wait on (module docstring); asked once per descriptor the device has."""
-        if tr.descriptor is None or tr.descriptor[0] != fd:
-            try:
-                terminal = os.isatty(fd)
-            except OSError:
-                terminal = False
-            tr.descriptor = (fd, terminal)
-        return tr.descriptor[1]
-
     def start(self) -> None:
         selectable: list[Track] = []
         for tr in self.tracks.values():
@@ -118,7 +117,7 @@ class Readers:
             # a selectable device without a descriptor yet (opened while not ready) goes to the
             # selector too: its scan gives it a thread until it reconnects and takes it back then
             # (or keeps it there for good, a terminal)
-            if self.selector and (fd is not None and not self.is_terminal(tr, fd)
+            if self.selector and (fd is not None and not tr.is_terminal(fd)
                                   or fd is None and tr.device.selectable):
                 selectable.append(tr)
             else:
@@ -156,7 +155,7 @@ class Readers:
             if batch:
                 self.deliver(tr.name, batch)
             fd = dev.fileno() if dev.connected else None
-            if fd is not None and self.is_terminal(tr, fd):
+            if fd is not None and tr.is_terminal(fd):
                 until_selectable = False  # a terminal keeps this thread (module docstring)
                 if batch and self.read_interval:
                     time.sleep(self.read_interval)  # let packets pile up, as the selector does
@@ -233,7 +232,7 @@ class Readers:
                 if dev.is_open and spawn:
                     tr.thread = self._spawn(tr, until_selectable=True)
                 continue
-            if self.is_terminal(tr, fd):  # reconnected as a terminal: a thread of its own from now on
+            if tr.is_terminal(fd):  # reconnected as a terminal: a thread of its own from now on
                 if spawn:
                     tr.thread = self._spawn(tr, until_selectable=False)
                 continue

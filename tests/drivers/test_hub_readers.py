@@ -85,8 +85,8 @@ def test_a_serial_port_is_read_on_a_thread_of_its_own():
         devs = {"head": drivers.make_device(serial_twin.url), "insoles": drivers.make_device(udp_twin.url)}
         with Hub(devs, latency=0.05) as hub:
             head, insoles = hub.tracks["head"], hub.tracks["insoles"]
-            assert hub.readers.is_terminal(head, head.device.fileno())
-            assert not hub.readers.is_terminal(insoles, insoles.device.fileno())
+            assert head.is_terminal(head.device.fileno())
+            assert not insoles.is_terminal(insoles.device.fileno())
             assert head.thread is not None and insoles.thread is None
             assert hub.readers._selectable == [insoles]  # noqa: SLF001 (the selector's list)
             frames = list(hub.frames(duration=1.5))
