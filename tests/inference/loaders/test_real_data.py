@@ -148,3 +148,29 @@ def test_shank_strides_of_a_real_walk_come_from_the_shanks_alone(shared_data):
     ratios = np.array([a / b for a, b in est.strides])
     assert np.median(ratios) == pytest.approx(0.8, abs=0.04)
     assert est.scale == pytest.approx(0.8, abs=0.05)
+
+
+def test_real_amc_files_read_bone_by_bone_as_line_by_line(shared_data, monkeypatch):
+    """HDM05's and CMU's own AMC files take the bone-by-bone reading (every frame lists the same
+    bones in the same order) and give the line-by-line reading's values to the bit."""
+    from inference.loaders import asf_amc
+    from inference.loaders.text import read_text_lines
+
+    files = [f for f in find_motion_files(shared_data / "hdm05")[::60] if ".amc" in f.name]
+    cmu = shared_data / "cmu"
+    if cmu.is_dir():
+        files += [f for f in find_motion_files(cmu) if ".amc" in f.name][::10]
+    assert len(files) >= 4
+    regular = asf_amc._parse_regular  # noqa: SLF001
+    for f in files:
+        asf = parse_asf(asf_amc.find_asf(f))
+        ndof = {n: len([d for d in b.dofs if d != "l"]) for n, b in asf.bones.items()} | {
+            "root": len(asf.root_order) or 6}
+        assert regular(read_text_lines(f), ndof) is not None, f.name  # taken bone by bone
+        fast = asf_amc.parse_amc(f, asf)
+        with monkeypatch.context() as m:
+            m.setattr(asf_amc, "_parse_regular", lambda lines, ndof: None)
+            slow = asf_amc.parse_amc(f, asf)
+        assert fast.keys() == slow.keys(), f.name
+        for k in fast:
+            np.testing.assert_array_equal(fast[k], slow[k])
