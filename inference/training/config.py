@@ -216,6 +216,13 @@ class TrainConfig:
     # answer keeps dg, loses the real stands); between, the student leans on the teacher
     # where the sensors leave a choice and on the truth where the teacher's chain errs
     teacher_share: float = 1.0
+    # the student answers with a chain of its own at these levels (e.g. "10D:3", as the
+    # shipped poser does) instead of one call: each of its calls is trained on the
+    # teacher's call (mirror-averaged with ``teacher_mirror_chains``) at the very state the
+    # student's own chain reached, so the student keeps the chain's choice among the poses
+    # the sensors allow while its network may be narrower than the teacher's. A student of
+    # another size starts from fresh weights with the teacher's normaliser (no ``--init``)
+    student_steps: str | None = None
     # the frame the "last" loss terms weigh, counted back from the newest: 0 for the live
     # poser, which shows the newest frame; k for a model that answers k frames late (an
     # import or replay, which has no need to answer at once, can show the answer for a frame

@@ -52,7 +52,7 @@ from inference.features.layout import (
 from inference.features.mirror import MirrorAveraged, mirror_features, mirror_points
 from inference.model.config import ModelConfig, atomic_torch_save
 from inference.model.denoiser import deepened_state_dict
-from inference.model.diffusion import Schedule, inpaint, paper_steps, parse_steps
+from inference.model.diffusion import Schedule, ddim_step, inpaint, paper_steps, parse_steps
 from inference.model.files import MODEL_FORMAT, build_model, newest_positions, save_model, with_reading
 from inference.model.regressor import random_observation_mask
 from inference.training.augment import rotate_yaw, scale_features, sensor_effects
@@ -246,7 +246,11 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
     unmasked = (None, *told) if told else ()  # the mask argument a mask-blind model is given
     m = None  # known entries, where the model is told them
     if cfg.kind == "diffusion" and ctx.teacher is not None:
-        pred, xn, m = _distilled(model, ctx, x, xn, xm, height, rng, told)
+        distil = _chain_distilled if cfg.student_steps else _distilled
+        pred, xn, m = distil(model, ctx, x, xn, xm, height, rng, told)
+        if pred.shape[0] != B:  # one window per level of the student's chain
+            reps = pred.shape[0] // B
+            offsets, contact_local = offsets.repeat(reps, 1, 1), contact_local.repeat(reps, 1, 1)
     elif cfg.kind == "diffusion":
         t = training_levels(cfg, B, gen, ctx.schedule.T)
         noise = torch.randn(xn.shape, generator=gen)
@@ -311,6 +315,54 @@ def _distilled(model: nn.Module, ctx: StepContext, x: Tensor, xn: Tensor, xm: Te
     t = torch.full((B,), ctx.schedule.T, dtype=torch.long)
     out = model(start[:, keep], t, height, m[:, keep])
     return torch.where(m[:, keep], xn[:, keep], out), target[:, keep], m[:, keep]
+
+
+def _chain_distilled(model: nn.Module, ctx: StepContext, x: Tensor, xn: Tensor, xm: Tensor, height: Tensor,
+                     rng: np.random.Generator, told: tuple) -> tuple[Tensor, Tensor, Tensor]:
+    """One batch of chain distillation (``TrainConfig.student_steps``): the student runs its
+    own chain (mean start, known entries replaced, deterministic DDIM), and each state it
+    reaches is answered by the teacher's call at that state; the student's answers at all
+    of them, stacked level by level (K*B windows), against the teacher's, the truth where
+    known. Trained on its own states rather than the teacher's, a student's small errors
+    at one level are what its next call learns to take back (as it must live)."""
+    cfg = ctx.cfg
+    if cfg.model.points or told:
+        raise ValueError("distillation is for models without a position input or reading tokens")
+    if cfg.model.window != cfg.window:
+        raise ValueError("a chain student reads the teacher's whole window (model.window = window)")
+    B, N = x.shape[:2]
+    sch = ctx.schedule
+    levels = parse_steps(cfg.student_steps, sch.T)
+    m = torch.as_tensor(random_observation_mask(rng, B, N, cfg.mask))
+    z = torch.where(m, xm, torch.zeros(()))  # the mean start: ~0 at the top level
+    states = []
+    with torch.no_grad():
+        for i, t in enumerate(levels):
+            states.append(z)
+            if i + 1 == len(levels):
+                break
+            x0 = torch.where(m, xm, model(z, torch.full((B,), t, dtype=torch.long), height, m))
+            z = torch.where(m, xm, ddim_step(sch, z, x0, t, levels[i + 1]))
+        K = len(levels)
+        zs = torch.cat(states)
+        ts = torch.cat([torch.full((B,), t, dtype=torch.long) for t in levels])
+        hs, mk, xk = height.repeat(K), m.repeat(K, 1, 1), xn.repeat(K, 1, 1)
+        teacher = ctx.teacher_mirror if cfg.teacher_mirror_chains else ctx.teacher
+        answer = teacher(zs, ts, hs, mk)
+        if cfg.teacher_share != 1.0:
+            answer = cfg.teacher_share * answer + (1.0 - cfg.teacher_share) * xk
+        target = torch.where(mk, xk, answer)
+    out = model(zs, ts, hs, mk)
+    return torch.where(mk, xk, out), target, mk
+
+
+def teacher_normaliser(cfg: TrainConfig) -> tuple[np.ndarray, np.ndarray] | None:
+    """The teacher's feature normaliser, for a student that starts from fresh weights (one
+    of another size than the teacher, which ``--init`` cannot start)."""
+    if cfg.teacher is None:
+        return None
+    obj = torch.load(cfg.teacher, map_location="cpu", weights_only=False)
+    return np.asarray(obj["norm_mean"]), np.asarray(obj["norm_std"])
 
 
 def load_teacher(cfg: TrainConfig, mean: np.ndarray, std: np.ndarray) -> nn.Module | None:
@@ -527,6 +579,8 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
     if ckpt is not None or init is not None:
         src = ckpt if ckpt is not None else init
         mean_np, std_np = src["norm_mean"], src["norm_std"]
+    elif cfg.teacher is not None:
+        mean_np, std_np = teacher_normaliser(cfg)
     else:
         # our own statistics (not a dataset-provided normaliser): they must match the
         # augmentation, and they travel with every checkpoint and model file

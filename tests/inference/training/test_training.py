@@ -737,6 +737,58 @@ def test_distillation_targets_the_teachers_chain_over_the_students_window(tmp_pa
     assert torch.equal(started["pos"], with_window(teacher, 21).model.state_dict()["pos"])
 
 
+def test_chain_distillation_trains_each_call_on_the_teachers_call_at_the_students_own_state(tmp_path):
+    """A chain student (``student_steps``): every level of its own chain is a training window
+    whose target is the teacher's call at that state. The teacher as its own student has
+    nothing to learn at any level; a student of another size starts fresh with the
+    teacher's normaliser and writes a model of its own size."""
+    from inference.model.diffusion import Schedule
+    from inference.training.loop import load_teacher
+
+    masked = {**TINY, "mask_input": True, "dropout": 0.0}
+    train(_cfg(steps=2, cond_prob=1.0, model=masked), tmp_path / "base", progress=False)
+    teacher_file = tmp_path / "base" / "model.pt"
+    teacher = load_model(teacher_file)
+    batch = synthetic_dataset(3, 70, seed=0).sample(np.random.default_rng(0), 4, 61)
+    mean, std = torch.as_tensor(teacher.norm_mean), torch.as_tensor(teacher.norm_std)
+
+    def run(student, **kw):
+        cfg = _cfg(**{"cond_prob": 1.0, "model": masked, "teacher": str(teacher_file), "student_steps": "10D:3",
+                      "augment_yaw": False, "augment_mirror": 0.0, **kw})
+        ctx = StepContext(cfg=cfg, mean=mean, std=std, schedule=Schedule.cosine(),
+                          teacher=load_teacher(cfg, teacher.norm_mean, teacher.norm_std))
+        return batch_loss(student, batch, ctx, np.random.default_rng(1), torch.Generator().manual_seed(1))
+
+    loss, terms = run(teacher.model)
+    assert terms["simple"] < 1e-10 and terms["fk"] < 1e-10
+    # the mirror-averaged teacher is another function: the same student now has something to learn
+    assert run(teacher.model, teacher_mirror_chains=True)[1]["simple"] > 1e-6
+    # three levels, three windows per training window: a student that records its calls sees
+    # its own chain (the mean start, then the states its answers lead to) and is trained at each
+    calls = []
+
+    class Recording(torch.nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.net = teacher.model
+
+        def forward(self, z, t, h, m):
+            calls.append((z.shape[0], sorted(set(t.tolist()))))
+            return self.net(z, t, h, m)
+
+    run(Recording())
+    assert calls == [(4, [1000]), (4, [400]), (12, [0, 400, 1000])]
+    # a narrower student than the teacher: fresh weights, the teacher's normaliser
+    small = {**masked, "d_model": 16, "ff": 32}
+    res = train(_cfg(steps=2, cond_prob=1.0, model=small, teacher=str(teacher_file), student_steps="10D:3",
+                     infer_steps="10D:3"), tmp_path / "small", progress=False)
+    student = load_model(tmp_path / "small" / "model.pt")
+    assert res.step == 2 and student.config.d_model == 16
+    assert np.allclose(student.norm_mean, teacher.norm_mean) and np.allclose(student.norm_std, teacher.norm_std)
+    with pytest.raises(ValueError, match="whole window"):
+        run(with_window(teacher, 21).model, model={**masked, "window": 21})
+
+
 def test_distillation_from_mirror_chains_targets_both_chains_averaged(tmp_path):
     """With ``teacher_mirror_chains`` the target is the teacher's chain averaged with the chain
     of the window's mirror image, each started from the data mean (as ``Poser(mirror_chains=True)``
