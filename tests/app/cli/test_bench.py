@@ -126,10 +126,32 @@ def test_bench_times_the_default_beside_the_settings_it_replaced(capsys):
     assert ref["reference"]["passes_per_pose"] == 6 and ref["reference"]["mirror_chains"]
 
 
+def test_a_narrower_model_is_timed_against_a_network_of_the_shipped_size():
+    """The ratio issue 50 asks for is to the shipped model's cost: a student of another size
+    is timed against the reference settings on a network of the shipped size, not its own."""
+    m = _tiny_paper()
+    ref = cli_bench.reference_model(m, None)
+    assert {k: getattr(ref.config, k) for k in cli_bench.REFERENCE_SIZE} == cli_bench.REFERENCE_SIZE
+    assert ref.config.window == cli_bench.REFERENCE_WINDOW and ref.config.mask_input == m.config.mask_input
+    # a model of the shipped size keeps its own weights
+    same = _reference_sized()
+    kept = cli_bench.reference_model(same, None)
+    assert all(torch.equal(a, b) for a, b in zip(kept.model.state_dict().values(), same.model.state_dict().values()))
+
+
+def _reference_sized():
+    from dataclasses import replace
+
+    m = _tiny_paper()
+    cfg = replace(m.config, **cli_bench.REFERENCE_SIZE)
+    return LoadedModel(model=build_model("diffusion", cfg).eval(), kind="diffusion", config=cfg,
+                       norm_mean=m.norm_mean, norm_std=m.norm_std)
+
+
 def test_the_reference_of_a_short_window_file_is_its_whole_trained_window(tmp_path):
     from inference.model.files import load_model, save_model
 
-    m = _tiny_paper()
+    m = _reference_sized()
     path = tmp_path / "short.pt"
     save_model(path, m.model, "diffusion", m.norm_mean, m.norm_std, meta={"window": 7})
     short = load_model(path)
