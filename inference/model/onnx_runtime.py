@@ -105,6 +105,14 @@ class OnnxNet:
         opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
         self.session = ort.InferenceSession(graph, opts, providers=["CPUExecutionProvider"])
 
+    def run_np(self, z: np.ndarray, t: np.ndarray, height: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+        """The call on numpy arrays (float32 z and height, int64 t, bool mask), answered in
+        numpy: what ``diffusion.inpaint``'s live loop uses, with no tensor made per call."""
+        feeds: dict[str, Any] = {"z": z, "t": t, "height": height}
+        if self.mask_input:
+            feeds["mask"] = np.zeros(self.shape, dtype=bool) if mask is None else mask
+        return self.session.run(None, feeds)[0]
+
     def __call__(self, z: Tensor, t: Tensor, height: Tensor, mask: Tensor | None = None) -> Tensor:
         feeds: dict[str, Any] = {
             "z": np.ascontiguousarray(z.detach().numpy(), dtype=np.float32),

@@ -47,6 +47,42 @@ def test_onnx_net_matches_the_torch_model(mirror):
 
 
 @needs_ort
+@pytest.mark.parametrize("batch", [1, 2])
+def test_the_live_inpainting_on_numpy_is_the_torch_loops(batch):
+    """``inpaint`` with a network that answers numpy (``OnnxNet.run_np``) runs its
+    replace-DDIM chain from the mean on numpy: the same answers as the torch loop over the
+    same network, the known entries exactly as given."""
+    from inference.model.diffusion import inpaint, parse_steps
+
+    m = _tiny()
+    net = onnx_runtime.OnnxNet(m.model, batch, m.config.window, N_FEATURES, mask_input=True)
+
+    class TorchOnly:  # the same network without the numpy call: inpaint's torch loop
+        config = m.config
+
+        def __call__(self, *a):
+            return net(*a)
+
+    g = torch.Generator().manual_seed(3)
+    x = torch.randn(batch, m.config.window, N_FEATURES, generator=g)
+    mask = torch.rand(batch, m.config.window, N_FEATURES, generator=g) > 0.6
+    h = torch.full((batch,), 1.7)
+    kw = {"mode": "replace-ddim", "start": "mean", "mask_input": True}
+    calls = []
+    run_np = net.run_np
+    net.run_np = lambda *a: calls.append(a[1].tolist()) or run_np(*a)
+    got = inpaint(net, x, mask, h, parse_steps("10D:3"), **kw)
+    assert calls == [[1000] * batch, [400] * batch, [0] * batch]  # the numpy path, one call a level
+    want = inpaint(TorchOnly(), x, mask, h, parse_steps("10D:3"), **kw)
+    assert got.dtype == torch.float32 and got.shape == want.shape
+    np.testing.assert_allclose(got.numpy(), want.numpy(), atol=1e-5, rtol=1e-5)
+    assert torch.equal(got[mask], x[mask])
+    # the other modes keep the torch loop
+    assert torch.equal(inpaint(net, x, mask, h, [1000, 0], mode="replace", start="mean", mask_input=True),
+                       inpaint(TorchOnly(), x, mask, h, [1000, 0], mode="replace", start="mean", mask_input=True))
+
+
+@needs_ort
 def test_poser_steps_alike_on_both_runtimes():
     m = _tiny()
     rng = np.random.default_rng(2)
