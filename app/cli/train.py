@@ -55,6 +55,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, help="random seed (overrides the config)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--export", type=Path, metavar="FILE", help="write OUT/last.pt's EMA weights to FILE and exit")
+    p.add_argument("--at-step", type=int, metavar="N",
+                   help="with --export: the run's kept checkpoint of step N (OUT/step_000NNNN.pt, kept every "
+                        "keep_every steps) instead of OUT/last.pt, e.g. to score a run while it goes on")
     p.add_argument("--retag", type=Path, metavar="MODEL_PT",
                    help="with --export: take MODEL_PT, a model file, instead of OUT/last.pt and only change the "
                         "poser defaults given (weights untouched), e.g. to ship --mirror with a baseline whose run "
@@ -98,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     import torch
 
     from inference.training.config import LAST, TrainConfig
-    from inference.training.loop import export_model, train
+    from inference.training.loop import export_model, kept_checkpoint_name, train
 
     if args.retag is not None and args.export is None:
         raise ValueError("--retag needs --export DEST")
@@ -134,9 +137,13 @@ def run(args: argparse.Namespace) -> int:
             retag_model(args.retag, args.export, poser, reading=args.reading)
             print(json.dumps({"exported": str(args.export), "retagged": str(args.retag), **poser}))
             return 0
-        export_model(args.out / LAST, args.export, fp16=args.fp16, default_steps=args.default_steps, poser=poser,
+        src = args.out / LAST if args.at_step is None else args.out / kept_checkpoint_name(args.at_step)
+        if not src.exists():
+            raise FileNotFoundError(f"--export: no checkpoint {src}"
+                                    + ("" if args.at_step is None else " (kept every keep_every steps)"))
+        export_model(src, args.export, fp16=args.fp16, default_steps=args.default_steps, poser=poser,
                      reading=args.reading)
-        print(json.dumps({"exported": str(args.export), "fp16": args.fp16}))
+        print(json.dumps({"exported": str(args.export), "fp16": args.fp16, "checkpoint": str(src)}))
         return 0
     if args.config is not None:
         cfg = TrainConfig.load(args.config)

@@ -134,6 +134,11 @@ class StepContext:
         return MirrorAveraged(self.teacher, self.mean, self.std)
 
 
+def kept_checkpoint_name(step: int) -> str:
+    """The file name of the checkpoint a run keeps at ``step`` (``TrainConfig.keep_every``)."""
+    return f"step_{step:07d}.pt"
+
+
 def step_seeds(seed: int, rank: int, step: int) -> tuple[np.random.Generator, torch.Generator]:
     """The random state of one step, a pure function of (seed, rank, step): resuming a
     run anywhere reproduces the draws of an uninterrupted run."""
@@ -631,7 +636,7 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
         }
         atomic_torch_save(obj, last)
         if cfg.keep_every and step % cfg.keep_every == 0:
-            atomic_torch_save(obj, out / f"step_{step:07d}.pt")
+            atomic_torch_save(obj, out / kept_checkpoint_name(step))
         save_model(out / MODEL_FILE, ema.model, cfg.kind, mean_np, std_np, step=step,
                    meta={"val": val, "train_config": cfg.to_dict(), "default_steps": cfg.infer_steps,
                          "inpaint_mode": inpaint_mode_for(cfg), "acc_filter": "causal" if cfg.causal else "centred"})

@@ -781,9 +781,17 @@ def test_chain_distillation_trains_each_call_on_the_teachers_call_at_the_student
     # a narrower student than the teacher: fresh weights, the teacher's normaliser
     small = {**masked, "d_model": 16, "ff": 32}
     res = train(_cfg(steps=2, cond_prob=1.0, model=small, teacher=str(teacher_file), student_steps="10D:3",
-                     infer_steps="10D:3"), tmp_path / "small", progress=False)
+                     infer_steps="10D:3", keep_every=2), tmp_path / "small", progress=False)
     student = load_model(tmp_path / "small" / "model.pt")
     assert res.step == 2 and student.config.d_model == 16
+    # a kept checkpoint exports as the run goes on (--at-step); one never kept is named
+    from app.cli.main import main
+
+    assert main(["train", "--out", str(tmp_path / "small"), "--export", str(tmp_path / "s2.pt"), "--at-step", "2",
+                 "--no-mirror"]) == 0
+    assert load_model(tmp_path / "s2.pt").step == 2
+    assert main(["train", "--out", str(tmp_path / "small"), "--export", str(tmp_path / "s1.pt"), "--at-step", "1"]) != 0
+    assert not (tmp_path / "s1.pt").exists()
     assert np.allclose(student.norm_mean, teacher.norm_mean) and np.allclose(student.norm_std, teacher.norm_std)
     with pytest.raises(ValueError, match="whole window"):
         run(with_window(teacher, 21).model, model={**masked, "window": 21})
