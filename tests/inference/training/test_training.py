@@ -737,6 +737,16 @@ def test_distillation_targets_the_teachers_chain_over_the_students_window(tmp_pa
     assert torch.equal(started["pos"], with_window(teacher, 21).model.state_dict()["pos"])
 
 
+def _tiny_teacher(tmp_path):
+    """A tiny mask-reading diffusion model trained two steps, its file, a batch and its normaliser."""
+    masked = {**TINY, "mask_input": True, "dropout": 0.0}
+    train(_cfg(steps=2, cond_prob=1.0, model=masked), tmp_path / "base", progress=False)
+    teacher_file = tmp_path / "base" / "model.pt"
+    teacher = load_model(teacher_file)
+    batch = synthetic_dataset(3, 70, seed=0).sample(np.random.default_rng(0), 4, 61)
+    return masked, teacher_file, teacher, batch, torch.as_tensor(teacher.norm_mean), torch.as_tensor(teacher.norm_std)
+
+
 def test_chain_distillation_trains_each_call_on_the_teachers_call_at_the_students_own_state(tmp_path):
     """A chain student (``student_steps``): every level of its own chain is a training window
     whose target is the teacher's call at that state. The teacher as its own student has
@@ -745,12 +755,7 @@ def test_chain_distillation_trains_each_call_on_the_teachers_call_at_the_student
     from inference.model.diffusion import Schedule
     from inference.training.loop import load_teacher
 
-    masked = {**TINY, "mask_input": True, "dropout": 0.0}
-    train(_cfg(steps=2, cond_prob=1.0, model=masked), tmp_path / "base", progress=False)
-    teacher_file = tmp_path / "base" / "model.pt"
-    teacher = load_model(teacher_file)
-    batch = synthetic_dataset(3, 70, seed=0).sample(np.random.default_rng(0), 4, 61)
-    mean, std = torch.as_tensor(teacher.norm_mean), torch.as_tensor(teacher.norm_std)
+    masked, teacher_file, teacher, batch, mean, std = _tiny_teacher(tmp_path)
 
     def run(student, **kw):
         cfg = _cfg(**{"cond_prob": 1.0, "model": masked, "teacher": str(teacher_file), "student_steps": "10D:3",
@@ -807,12 +812,7 @@ def test_distillation_from_mirror_chains_targets_both_chains_averaged(tmp_path):
     from inference.model.diffusion import Schedule
     from inference.training.loop import load_teacher
 
-    masked = {**TINY, "mask_input": True, "dropout": 0.0}
-    train(_cfg(steps=2, cond_prob=1.0, model=masked), tmp_path / "base", progress=False)
-    teacher_file = tmp_path / "base" / "model.pt"
-    teacher = load_model(teacher_file)
-    batch = synthetic_dataset(3, 70, seed=0).sample(np.random.default_rng(0), 4, 61)
-    mean, std = torch.as_tensor(teacher.norm_mean), torch.as_tensor(teacher.norm_std)
+    masked, teacher_file, teacher, batch, mean, std = _tiny_teacher(tmp_path)
     cfg = _cfg(cond_prob=1.0, model=masked, teacher=str(teacher_file), teacher_steps="1", teacher_mirror_chains=True,
                augment_yaw=False, augment_mirror=0.0)
     ctx = StepContext(cfg=cfg, mean=mean, std=std, schedule=Schedule.cosine(),
