@@ -40,14 +40,14 @@ def main(argv: list[str] | None = None) -> int:
 
     import torch
 
-    from app.cli.bench import _walk, stage_times
+    from app.cli.bench_loop import stage_times, walk_input
     from app.live.model_choice import load_model
     from inference.poser.poser import Poser
     from tests.inference.poser.reference_poser import ReferencePoser
 
     torch.set_num_threads(args.threads)
     model, label, _ = load_model("diffusion")
-    motion, inp = _walk(args.frames + 10, 0)
+    motion, inp = walk_input(args.frames + 10, 0)
     if args.sites:
         from inference.evaluation.runner import clip_input
 

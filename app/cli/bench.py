@@ -45,13 +45,7 @@ import time
 
 import numpy as np
 
-
-def _walk(n_frames: int, seed: int):
-    """A generated walking clip (at least ``n_frames`` at 20 Hz) and its input at the paper's 6 sites."""
-    from inference.evaluation.runner import SIX, clip_input, synthetic_motion
-
-    motion = synthetic_motion(seconds=max(2.0, n_frames / 20.0 + 0.5), seed=seed)
-    return motion, clip_input(motion, SIX)
+from app.cli.bench_loop import STAGES, interleaved_times, stage_times, walk_input
 
 
 def bench_poser(model, steps=None, frames: int = 200, warmup: int = 10, label: str = "",
@@ -66,7 +60,7 @@ def bench_poser(model, steps=None, frames: int = 200, warmup: int = 10, label: s
 
     from inference.poser.poser import Poser
 
-    motion, inp = _walk(frames + warmup, seed)
+    motion, inp = walk_input(frames + warmup, seed)
     poser = Poser(model, body=motion.body, steps=steps, seed=seed, mirror=mirror, confidence=confidence,
                   runtime=runtime)
     n = inp.features.shape[0]
@@ -96,41 +90,6 @@ def bench_poser(model, steps=None, frames: int = 200, warmup: int = 10, label: s
     }
 
 
-STAGES = ("observe", "enter", "model", "finish")
-"""``Poser.step``'s stages: the observation, the window's shift, the model call (``_predict``), and
-everything after it (cleaning, contacts, FK, root, filters, the PoseFrame)."""
-
-
-def stage_times(posers: dict, inp, frames: int, warmup: int = 10) -> dict[str, dict[str, np.ndarray]]:
-    """Each poser's thread CPU time (ms) of each of ``STAGES`` per frame (``<stage>_cpu``), and the
-    wall time (``<stage>_wall``), the posers stepped in turn as ``_interleaved`` does."""
-    import torch
-
-    names = list(posers)
-    n = inp.features.shape[0]
-    out = {name: {f"{s}_{k}": np.empty(frames) for s in STAGES for k in ("wall", "cpu")} for name in names}
-    for i in range(warmup + frames):
-        k = i % n
-        r = i % len(names)
-        for name in names[r:] + names[:r]:
-            p = posers[name]
-            with torch.inference_mode():
-                t = [(time.perf_counter(), time.thread_time())]
-                obs = p.observe(inp.features[k], inp.mask[k])
-                t.append((time.perf_counter(), time.thread_time()))
-                win, mask = p.enter(obs)
-                t.append((time.perf_counter(), time.thread_time()))
-                y = p._predict(win, mask)[0, -1]
-                t.append((time.perf_counter(), time.thread_time()))
-                p.finish(y, win, obs)
-                t.append((time.perf_counter(), time.thread_time()))
-            if i >= warmup:
-                for j, s in enumerate(STAGES):
-                    out[name][f"{s}_wall"][i - warmup] = (t[j + 1][0] - t[j][0]) * 1e3
-                    out[name][f"{s}_cpu"][i - warmup] = (t[j + 1][1] - t[j][1]) * 1e3
-    return out
-
-
 def bench_stages(model, steps=None, frames: int = 200, warmup: int = 10, seed: int = 0,
                  mirror: bool | None = None) -> dict:
     """The live step split into ``STAGES`` (``stage_times``, ONNX Runtime for the model call where
@@ -138,7 +97,7 @@ def bench_stages(model, steps=None, frames: int = 200, warmup: int = 10, seed: i
     p50 of the step's work outside the model call (``outside_model_p50_ms``)."""
     from inference.poser.poser import Poser
 
-    motion, inp = _walk(frames + warmup, seed)
+    motion, inp = walk_input(frames + warmup, seed)
     p = Poser(model, body=motion.body, steps=steps, seed=seed, mirror=mirror, runtime="auto")
     t = stage_times({"live": p}, inp, frames, warmup)["live"]
     out: dict = {f"{s}_p50_ms": round(float(np.median(t[f"{s}_cpu"])), 3) for s in STAGES}
@@ -148,36 +107,17 @@ def bench_stages(model, steps=None, frames: int = 200, warmup: int = 10, seed: i
     return out
 
 
-def _interleaved(posers: dict, inp, frames: int, warmup: int) -> dict[str, np.ndarray]:
-    """Step every poser on the same frames, one after the other within each frame, the
-    order turning by one each frame: the shared machine's load changes within seconds, and
-    timing one poser after the other would hand the difference to whichever ran in the
-    quieter stretch. Returns each poser's timed frames in ms."""
-    names = list(posers)
-    n = inp.features.shape[0]
-    ms = {name: np.empty(frames) for name in names}
-    for i in range(warmup + frames):
-        k = i % n
-        r = i % len(names)
-        for name in names[r:] + names[:r]:
-            t0 = time.perf_counter()
-            posers[name].step(inp.features[k], inp.mask[k])
-            if i >= warmup:
-                ms[name][i - warmup] = (time.perf_counter() - t0) * 1e3
-    return ms
-
-
 def bench_runtimes(model, steps=None, frames: int = 200, warmup: int = 10, seed: int = 0,
                    mirror: bool | None = None) -> dict:
     """``Poser.step`` with the model call on torch and on ONNX Runtime, the two posers
-    stepped in turn on the same frames (``_interleaved``). Returns torch_/onnx_ p50_ms,
+    stepped in turn on the same frames (``interleaved_times``). Returns torch_/onnx_ p50_ms,
     p99_ms and the speed-up of the medians."""
     from inference.poser.poser import Poser
 
-    motion, inp = _walk(frames + warmup, seed)
+    motion, inp = walk_input(frames + warmup, seed)
     posers = {rt: Poser(model, body=motion.body, steps=steps, seed=seed, mirror=mirror, runtime=rt)
               for rt in ("torch", "onnx")}
-    ms = _interleaved(posers, inp, frames, warmup)
+    ms = interleaved_times(posers, inp, frames, warmup)
     out: dict = {"frames": int(frames), "interleaved": True}
     for rt, v in ms.items():
         out[f"{rt}_p50_ms"] = round(float(np.percentile(v, 50)), 3)
@@ -247,18 +187,18 @@ def bench_reference(model, steps=None, frames: int = 200, warmup: int = 10, seed
     ``REFERENCE_STEPS``, the shipped file's inpainting: replacement DDIM from the data mean, the
     measured history, whole-chain mirror averaging, whatever the default does: a default that
     answers without averaging is timed against what it replaces), both on the live runtime,
-    stepped in turn on the same frames (``_interleaved``): the ratio holds on any machine, where
+    stepped in turn on the same frames (``interleaved_times``): the ratio holds on any machine, where
     the milliseconds do not."""
     from inference.model.diffusion import parse_steps
     from inference.poser.poser import Poser
 
-    motion, inp = _walk(frames + warmup, seed)
+    motion, inp = walk_input(frames + warmup, seed)
     ref = reference_model(model, spec)
     posers = {"default": Poser(model, body=motion.body, steps=steps, seed=seed, mirror=mirror, runtime="auto"),
               "reference": Poser(ref, body=motion.body, steps=parse_steps(REFERENCE_STEPS), seed=seed, mirror=True,
                                  mirror_chains=True, noise="mean", inpaint_mode="replace-ddim", history="measured",
                                  runtime="auto")}
-    ms = _interleaved(posers, inp, frames, warmup)
+    ms = interleaved_times(posers, inp, frames, warmup)
     out: dict = {"frames": int(frames), "interleaved": True}
     for name, poser in posers.items():
         out[name] = {"p50_ms": round(float(np.percentile(ms[name], 50)), 3),
@@ -326,14 +266,14 @@ def rotation_gap_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def bench_variants(model, steps=None, frames: int = 200, warmup: int = 10, seed: int = 0,
                    mirror: bool | None = None, variants: tuple[str, ...] = VARIANTS) -> dict:
     """Each variant of the model call (``VARIANTS``) as a live Poser, all stepped in turn on
-    the same frames of the generated walk (``_interleaved``'s order), and what each changes:
+    the same frames of the generated walk (``interleaved_times``'s order), and what each changes:
     per row p50_ms, p99_ms, ratio_p50 / ratio_p99 to the first row, and its poses against
     the first row's, frame by frame (each poser on its own history, as live): the segments'
     orientation difference, mean and max over frames and segments (``mean_deg``,
     ``max_deg``), and the largest per-frame mean (``frame_max_deg``)."""
     import torch
 
-    motion, inp = _walk(frames + warmup, seed)
+    motion, inp = walk_input(frames + warmup, seed)
     posers = {v: _VariantPoser(model, v, motion.body, steps, seed, mirror) for v in variants}
     names = list(posers)
     n = inp.features.shape[0]
@@ -393,7 +333,7 @@ def bench_sizes(model, sizes: list[tuple[int, int, int]], steps=None, frames: in
     from inference.model.files import build_model
     from inference.poser.poser import Poser
 
-    motion, inp = _walk(frames + warmup, seed)
+    motion, inp = walk_input(frames + warmup, seed)
     base = _config_label(model).split()[-1]
     models = {base: model}
     for layers, d, ff in sizes:
@@ -403,7 +343,7 @@ def bench_sizes(model, sizes: list[tuple[int, int, int]], steps=None, frames: in
             model, model=build_model(model.kind, cfg).eval(), config=cfg))
     posers = {name: Poser(m, body=motion.body, steps=steps, seed=seed, mirror=mirror, runtime=runtime)
               for name, m in models.items()}
-    ms = _interleaved(posers, inp, frames, warmup)
+    ms = interleaved_times(posers, inp, frames, warmup)
     p50 = {name: float(np.percentile(v, 50)) for name, v in ms.items()}
     rows = [{"size": name, "parameters": sum(p.numel() for p in models[name].model.parameters()),
              "p50_ms": round(p50[name], 3), "p99_ms": round(float(np.percentile(ms[name], 99)), 3),
