@@ -212,7 +212,7 @@ def ddim_step(schedule: Schedule, z: Tensor, x0: Tensor, t: int, s: int, eta: fl
     ab_t = float(schedule.alpha_bar[t])
     ab_s = float(schedule.alpha_bar[s])
     if ab_t >= 1.0:
-        return x0.clone()
+        return x0 * 1.0  # a new tensor (or numpy array: the live loop's ``_replace_ddim_mean_np`` calls this too)
     eps = (z - math.sqrt(ab_t) * x0) / math.sqrt(1 - ab_t)
     sigma = eta * math.sqrt(max(0.0, (1 - ab_s) / (1 - ab_t) * (1 - ab_t / ab_s)))
     out = math.sqrt(ab_s) * x0 + math.sqrt(max(0.0, 1 - ab_s - sigma**2)) * eps
@@ -336,21 +336,12 @@ def _replace_ddim_mean_np(run, x_input: np.ndarray, mask: np.ndarray, height: np
     height = np.ascontiguousarray(height, dtype=np.float32)
     b = x_input.shape[0]
     z = np.where(mask, x_input, np.float32(schedule.sqrt_ab(steps[0])) * x_input)
-    x = z
     for i, t in enumerate(steps):
         x = np.where(mask, x_input, run(z, np.full(b, t, dtype=np.int64), height, mask if use_mask else None))
         if i + 1 == len(steps):
-            break
-        s = steps[i + 1]
-        ab_t, ab_s = float(schedule.alpha_bar[t]), float(schedule.alpha_bar[s])
-        if ab_t >= 1.0:
-            z = x.copy()
-        else:
-            # ddim_step with eta 0: z_s = sqrt(ab_s) x0 + sqrt(1 - ab_s) eps
-            eps = (z - np.float32(math.sqrt(ab_t)) * x) * np.float32(1.0 / math.sqrt(1.0 - ab_t))
-            z = np.float32(math.sqrt(ab_s)) * x + np.float32(math.sqrt(max(0.0, 1.0 - ab_s))) * eps
-        z = np.where(mask, x_input, z)
-    return x
+            return x
+        z = np.where(mask, x_input, ddim_step(schedule, z, x, t, steps[i + 1]))  # float32 kept (Python scalars)
+    raise AssertionError("unreachable: validate_steps refuses an empty step list")
 
 
 def redraw(model, x_hat: Tensor, x_input: Tensor, mask: Tensor, height: Tensor, level: int, noise: Tensor,

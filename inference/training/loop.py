@@ -361,11 +361,9 @@ def _chain_distilled(model: nn.Module, ctx: StepContext, x: Tensor, xn: Tensor, 
     return torch.where(mk, xk, out), target, mk
 
 
-def teacher_normaliser(cfg: TrainConfig) -> tuple[np.ndarray, np.ndarray] | None:
-    """The teacher's feature normaliser, for a student that starts from fresh weights (one
-    of another size than the teacher, which ``--init`` cannot start)."""
-    if cfg.teacher is None:
-        return None
+def teacher_normaliser(cfg: TrainConfig) -> tuple[np.ndarray, np.ndarray]:
+    """The feature normaliser of ``cfg.teacher``, for a student that starts from fresh weights
+    (one of another size than the teacher, which ``--init`` cannot start)."""
     obj = torch.load(cfg.teacher, map_location="cpu", weights_only=False)
     return np.asarray(obj["norm_mean"]), np.asarray(obj["norm_std"])
 
