@@ -171,7 +171,7 @@ def judge(d: DeviceCheck) -> list[str]:
 
 
 def _check_model(spec: str, report: SetupCheck) -> None:
-    from inference.poser.models import DEFAULT_WEIGHTS, POSER_KINDS
+    from inference.poser.models import DEFAULT_WEIGHTS, MODEL_NAMES
 
     if spec == "floor":
         return
@@ -181,7 +181,7 @@ def _check_model(spec: str, report: SetupCheck) -> None:
                                    "capture would run the floor baseline")
         return
     if not Path(spec).exists():
-        report.problems.append(f"model {spec!r} is not a file and not one of {', '.join(POSER_KINDS)}; "
+        report.problems.append(f"model {spec!r} is not a file and not one of {', '.join(MODEL_NAMES)}; "
                                "fix [model] name in the setup")
 
 

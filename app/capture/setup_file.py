@@ -426,7 +426,7 @@ class _Parser:
     def _model(self, table: dict[str, Any]) -> tuple[str, str | None]:
         name = self._text("model", "name", table.get("name", DEFAULT_MODEL)).strip()
         if not name:
-            raise self.error("the model name is empty", 'use "diffusion", "regressor", "floor" or a model file',
+            raise self.error("the model name is empty", 'use "diffusion", "fast", "regressor", "floor" or a model file',
                              self.line("model", "name"))
         steps = table.get("steps")
         if steps is None:
@@ -561,7 +561,8 @@ def _dump(setup: Setup, base: Path | None) -> str:
     lines += [
         "",
         "[model]",
-        '# name: "diffusion", "regressor", "floor" (no model) or a model file;',
+        '# name: "diffusion", "fast" (a third of the compute, less accurate), "regressor", "floor" (no model)',
+        '#   or a model file;',
         '# steps: diffusion steps, e.g. "10D:3" (fewer = faster); leave out for the model\'s own',
         f"name = {_quote(setup.model)}",
         f"steps = {_quote(setup.steps)}" if setup.steps is not None else '# steps = "10D:3"',

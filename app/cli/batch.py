@@ -47,7 +47,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="where outputs and summary.csv go")
     p.add_argument("--sensors", action="append", default=[], metavar="SITE,SITE,...",
                    help="also replay with only these recorded sites (repeatable); all sensors always run")
-    p.add_argument("--model", default="diffusion", help="diffusion | regressor | floor | PATH.pt")
+    p.add_argument("--model", default="diffusion", help="diffusion | fast | regressor | floor | PATH.pt")
     p.add_argument("--steps", default=None, help="diffusion steps (default: the model's)")
     p.add_argument("--seed", type=int, default=None, help="inpainting noise seed (default: each session's)")
     p.add_argument("--latency", default=None, choices=("centred", "low"), help="default: as recorded")
@@ -145,7 +145,9 @@ def run_batch(args: argparse.Namespace) -> int:
 
     options = _options(args)
     inputs = find_inputs(args.inputs)
-    if options.settings.model not in ("diffusion", "regressor", "floor") and not Path(options.settings.model).is_file():
+    from inference.poser.models import MODEL_NAMES
+
+    if options.settings.model not in MODEL_NAMES and not Path(options.settings.model).is_file():
         raise FileNotFoundError(f"--model {options.settings.model}: no such file")
     args.out.mkdir(parents=True, exist_ok=True)
     root = common_root(inputs)

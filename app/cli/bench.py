@@ -443,7 +443,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="timed frames of the paper-size model (default 10; ~1-3 s each on 2 cores)")
     p.add_argument("--threads", type=int, default=1,
                    help="torch threads (default 1, the live loop's setting; 0 = torch's default)")
-    p.add_argument("--model", default="diffusion", help="diffusion | regressor | floor | PATH.pt")
+    p.add_argument("--model", default="diffusion", help="diffusion | fast | regressor | floor | PATH.pt")
     p.add_argument("--steps", default=None, help="diffusion steps (default: the model's own)")
     p.add_argument("--mirror", action=argparse.BooleanOptionalAction, default=None,
                    help="mirror averaging on/off (default: the model file's own)")

@@ -128,7 +128,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="diffusion steps: K (evenly spaced), 'paper' (10D list) or a list 1000,500,0; "
                         "default: the model's own")
     p.add_argument("--model", default="diffusion",
-                   help="diffusion | regressor | floor (shipped weights / baseline) or a model file PATH.pt")
+                   help="diffusion | fast | regressor | floor (shipped weights / baseline) or a model file PATH.pt")
     p.add_argument("--noise", action=argparse.BooleanOptionalAction, default=True,
                    help="sensor noise model on the synthesized signals (default on)")
     p.add_argument("--inpaint-noise", choices=NOISE_MODES, default=None,

@@ -61,7 +61,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("replay", help="re-run the poser over a recorded session (other model, sensor subset)",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("recording", type=Path, metavar="REC.h5", help="a session recording")
-    p.add_argument("--model", default="diffusion", help="diffusion | regressor | floor | PATH.pt (default diffusion)")
+    p.add_argument("--model", default="diffusion",
+                   help="diffusion | fast | regressor | floor | PATH.pt (default diffusion)")
     p.add_argument("--sensors", default=None,
                    help="comma separated recorded sites to use (default: all the recording has)")
     p.add_argument("--insoles", action=argparse.BooleanOptionalAction, default=None,

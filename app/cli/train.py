@@ -81,6 +81,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--mirror", action=argparse.BooleanOptionalAction, default=None,
                    help="with --export: the poser averages each model answer with the answer for the mirror-image "
                         "window (inference.mirror; twice the batch per call)")
+    p.add_argument("--draws-from", metavar="MODEL",
+                   help="with --export: the model whose calls make the poser's confidence draws (a shipped name "
+                        "such as diffusion, or a file reading the same features), for a chain student that never "
+                        "learnt the re-noised states the draws start from")
     p.add_argument("--reading", metavar="NAME",
                    help="with --export: the dataset reading (none, bandai, hdm05, cmu) a model with reading tokens "
                         "answers in when not told, which is what the poser gets; none = the untold answer")
@@ -120,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
             parse_steps(args.default_steps)  # reject a bad list now, not in the poser
         poser = {k: v for k, v in (("inpaint_mode", args.inpaint_mode), ("history", args.history),
                                    ("noise", args.noise), ("contact_threshold", args.contact_threshold),
-                                   ("mirror", args.mirror))
+                                   ("mirror", args.mirror), ("draws_from", args.draws_from))
                  if v is not None}
         if args.default_steps is not None and (args.blend is not None or args.retag is not None):
             poser["default_steps"] = args.default_steps  # a model file's defaults (export_model takes it apart)

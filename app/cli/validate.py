@@ -35,7 +35,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "(e.g. medial knee and ankle markers removed after calibration)")
     p.add_argument("--sensors", action="append", default=[], metavar="SET",
                    help="comma separated recorded sites to re-run with (repeatable; default: all recorded)")
-    p.add_argument("--model", default="diffusion", help="diffusion | regressor | floor | PATH.pt (default diffusion)")
+    p.add_argument("--model", default="diffusion",
+                   help="diffusion | fast | regressor | floor | PATH.pt (default diffusion)")
     p.add_argument("--steps", default=None, help="diffusion steps (default: as recorded)")
     p.add_argument("--seed", type=int, default=None, help="inpainting seed (default: the session's)")
     p.add_argument("--offset", "--time-offset", dest="time_offset", type=float, default=None, metavar="S",

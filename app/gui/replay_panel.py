@@ -225,7 +225,7 @@ class ReplayPanel(QtWidgets.QWidget):
         form = QtWidgets.QFormLayout()
         self.model = QtWidgets.QComboBox()
         self.model.setEditable(True)
-        self.model.addItems(["diffusion", "regressor", "floor"])
+        self.model.addItems(["diffusion", "fast", "regressor", "floor"])
         self.steps = QtWidgets.QLineEdit()
         self.steps.setPlaceholderText("the model's own")
         form.addRow("Model", self.model)

@@ -19,7 +19,7 @@ from app.gui.body_figure import BodyFigure
 from app.gui.presets import PRESETS, preset, sites_of
 from app.gui.setup_model import SetupModel
 
-MODELS = ("diffusion", "regressor", "floor")
+MODELS = ("diffusion", "fast", "regressor", "floor")
 Report = Callable[[str, str], None]
 
 

@@ -3,7 +3,7 @@ entry point makes (the demo, the capture, the CLI replay and the window's re-run
 bench, advise, train) and that used to be made in each, a little differently. They are
 made here.
 
-The model: a CLI-style spec ("diffusion", "regressor", "floor" or a file), which the latency
+The model: a CLI-style spec ("diffusion", "fast", "regressor", "floor" or a file), which the latency
 mode may turn into the model trained for it (``app.live.latency.model_spec_for``), loaded
 (``inference.poser.models.resolve_model``), labelled the way recordings and summaries name
 it (``model_label``: a replay compares labels to know it runs the recorded model), and

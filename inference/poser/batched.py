@@ -203,7 +203,7 @@ def _draws_of(poser: Poser, out: Tensor, wins: Tensor, masks: Tensor, heights: T
     k = poser.confidence.draws
     n = batch * k
     got = poser.draw(_pad(out[idx], batch), _pad(wins[idx], batch), _pad(masks[idx], batch),
-                     _pad(torch.cat(noise), n), net=poser.net_for(n, mirror=False), heights=_pad(heights[idx], batch))
+                     _pad(torch.cat(noise), n), net=poser.draw_net_for(n), heights=_pad(heights[idx], batch))
     return got[: len(idx) * k]
 
 

@@ -10,6 +10,8 @@ import types
 import warnings
 from pathlib import Path
 
+import numpy as np
+
 from inference.model.diffusion import paper_steps, parse_steps
 from inference.model.files import LoadedModel, load_model
 from inference.poser.contact_detector import ContactDetector, load_detector
@@ -21,6 +23,9 @@ WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
 DEFAULT_WEIGHTS: dict[str, Path] = {
     "diffusion": WEIGHTS_DIR / "diffusionposer.pt",
     "regressor": WEIGHTS_DIR / "regressor.pt",
+    # a narrow network that runs the default's three-level chain at about a third of its compute
+    # per pose, for a laptop the default does not keep up on; it costs accuracy (MODEL_CARD.md)
+    "fast": WEIGHTS_DIR / "diffusionposer_fast.pt",
 }
 
 
@@ -31,6 +36,10 @@ PELVIS_ODOMETRY_WEIGHTS = WEIGHTS_DIR / "pelvis_odometry.pt"
 
 
 POSER_KINDS = ("diffusion", "regressor", "floor")
+
+
+# what ``--model`` takes besides a file: the shipped files by name, and the floor
+MODEL_NAMES = (*DEFAULT_WEIGHTS, "floor")
 
 
 # what of the history the model is told is known: all of it (the paper: measured and
@@ -62,7 +71,7 @@ def default_weights(kind: str = "diffusion") -> Path:
     them) when they are not there, because a half-installed checkout should say so
     rather than fall back to something silently worse."""
     if kind not in DEFAULT_WEIGHTS:
-        raise ValueError(f"no default weights for model kind {kind!r}; kinds: {', '.join(DEFAULT_WEIGHTS)}")
+        raise ValueError(f"no shipped weights named {kind!r}; names: {', '.join(DEFAULT_WEIGHTS)}")
     path = DEFAULT_WEIGHTS[kind]
     if not path.exists():
         raise FileNotFoundError(
@@ -111,7 +120,7 @@ def _shipped_stage(path: Path, mtime_ns: int, loader):
 
 def resolve_model(spec: str | os.PathLike | LoadedModel | None = "diffusion",
                   window: int | None = None) -> LoadedModel | None:
-    """A model from a CLI-style spec: "diffusion"/"regressor" (shipped weights), "floor"
+    """A model from a CLI-style spec: "diffusion"/"regressor"/"fast" (shipped weights), "floor"
     (no model: returns None), a path to a model file or checkpoint, or a LoadedModel;
     ``window``: the frames it reads (``inference.model.files.with_window``; None: its file's)."""
     if spec is None or isinstance(spec, LoadedModel):
@@ -122,8 +131,33 @@ def resolve_model(spec: str | os.PathLike | LoadedModel | None = "diffusion",
     if s in DEFAULT_WEIGHTS:
         return load_model(default_weights(s), window=window)
     if not Path(s).exists():
-        raise FileNotFoundError(f"model {s!r}: not a file, and not one of {', '.join(POSER_KINDS)}")
+        raise FileNotFoundError(f"model {s!r}: not a file, and not one of {', '.join(MODEL_NAMES)}")
     return load_model(s, window=window)
+
+
+def draws_model(model: LoadedModel | None) -> LoadedModel | None:
+    """The model whose calls make a poser's confidence draws: ``model`` itself, or the one its
+    file names (meta ``draws_from``: a shipped name or a file). A chain student learns only the
+    states its own chain reaches, not an answer re-noised to a middle level, so its file names
+    its teacher; the two must read the same features."""
+    spec = ((model.meta or {}) if model is not None else {}).get("draws_from")
+    if not spec:
+        return model
+    path = DEFAULT_WEIGHTS[spec] if spec in DEFAULT_WEIGHTS else Path(spec)
+    if not path.exists():
+        raise FileNotFoundError(f"the confidence draws of this model come from {spec!r}, which is missing ({path})")
+    other = _draws_file(path.resolve(), path.stat().st_mtime_ns, model.config.window)
+    same = (np.array_equal(np.asarray(other.norm_mean), np.asarray(model.norm_mean))
+            and np.array_equal(np.asarray(other.norm_std), np.asarray(model.norm_std)))
+    if other.kind != "diffusion" or not same or other.config.mask_input != model.config.mask_input:
+        raise ValueError(f"draws_from {spec!r}: not a diffusion model reading this model's features")
+    return other
+
+
+@functools.lru_cache(maxsize=2)
+def _draws_file(path: Path, mtime_ns: int, window: int) -> LoadedModel:
+    """One loaded draws model per file (the posers of an offline run share its traces)."""
+    return load_model(path, window=window)
 
 
 def default_steps(model: LoadedModel | None) -> list[int]:

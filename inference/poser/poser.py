@@ -94,6 +94,7 @@ from inference.poser.models import (
     WEIGHTS_DIR,
     default_steps,
     default_weights,
+    draws_model,
     mirror_for,
     noise_mode_for,
     resolve_detector,
@@ -285,8 +286,11 @@ class Poser:
         self._net = self.net_for(1) if model is not None else None
         self.confidence = confidence_settings(confidence) if self.kind == "diffusion" else None
         self._draw_net = None
+        # the draws re-noise an answer to a middle level: a chain student never saw such a state
+        # (it learns only its own chain's), so its file names the model that draws for it
+        self.draw_model = draws_model(model) if self.confidence is not None else model
         if self.confidence is not None:
-            self._draw_net = self.net_for(self.confidence.draws, mirror=False)
+            self._draw_net = self.draw_net_for(self.confidence.draws)
             self._spread = SpreadPool(self.confidence.pool)
         if model is not None:
             self._mean = torch.as_tensor(model.norm_mean, dtype=torch.float32)
@@ -321,19 +325,20 @@ class Poser:
         cfg = getattr(self.model, "config", None) if self.model is not None else None
         return bool(getattr(cfg, "points", False)) and self.kind == "diffusion"
 
-    def net_for(self, windows: int, mirror: bool | None = None):
-        """The model as called on ``windows`` windows at once: a frozen trace of that batch
-        shape (mirror averaging doubles it) when the poser freezes. Traces are kept per
-        model and shape (``_model_nets``), so the many posers of an offline run share them."""
+    def net_for(self, windows: int, mirror: bool | None = None, model: LoadedModel | None = None):
+        """The model (``model``: another one, the draws') as called on ``windows`` windows at
+        once: a frozen trace of that batch shape (mirror averaging doubles it) when the poser
+        freezes. Traces are kept per model and shape (``_model_nets``), so the many posers of
+        an offline run share them."""
         mirror = self.mirror if mirror is None else mirror
+        model = model or self.model
         # a model with a position input takes it as a keyword the traces do not carry: eager
-        frozen = self._freeze and isinstance(self.model.model, Denoiser) and not self.takes_points
-        nets = _model_nets(self.model)
+        frozen = self._freeze and isinstance(model.model, Denoiser) and not self.takes_points
+        nets = _model_nets(model)
         # one window (mirror-averaged inside the graph) or the two chains of whole-chain mirror averaging
         onnx = frozen and (windows == 1 or (windows == 2 and not mirror)) and self.runtime == "onnx"
         key = (windows, mirror, frozen, self.window) + (("onnx",) if onnx else ())
         if key not in nets:
-            model = self.model
             batch = windows * (2 if mirror else 1)
             fast = None
             if onnx:
@@ -345,6 +350,11 @@ class Poser:
                 net = freeze_for_cpu(model.model, batch=batch, window=self.window) if frozen else model.model
                 nets[key] = MirrorAveraged(net, model.norm_mean, model.norm_std) if mirror else net
         return nets[key]
+
+    def draw_net_for(self, windows: int):
+        """The net of the confidence draws for ``windows`` windows (no mirror averaging: the
+        draws estimate a width, not a pose)."""
+        return self.net_for(windows, mirror=False, model=self.draw_model)
 
     # ------------------------------------------------------------------ state
     def reset(self, root_xy0: tuple[float, float] | None = None) -> None:
@@ -550,7 +560,7 @@ class Poser:
         h = rep(heights) if heights is not None else self._height.expand(noise.shape[0])
         pts = self.points_window() if heights is None else None
         return redraw(net or self._draw_net, rep(out), rep(win), rep(mask), h, self.confidence.level, noise,
-                      self.schedule, mask_input=self.model.config.mask_input, points=pts)
+                      self.schedule, mask_input=self.draw_model.config.mask_input, points=pts)
 
     def finish(self, y_n: Tensor | np.ndarray, win: Tensor, obs: Observation,
                draws: Tensor | None = None, earlier: Tensor | np.ndarray | None = None) -> PoseFrame:

@@ -4,6 +4,8 @@ the ones the sensors leave open."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
@@ -12,7 +14,8 @@ from inference.body.skeleton import SEGMENT_INDEX, SITE_SEGMENT
 from inference.evaluation.runner import clip_input, synthetic_motion
 from inference.features.layout import N_FEATURES
 from inference.model.config import ModelConfig
-from inference.model.files import LoadedModel, build_model
+from inference.model.files import LoadedModel, build_model, load_model, save_model
+from inference.poser.batched import reconstruct_many
 from inference.poser.confidence import ConfidenceSettings, SpreadPool, band
 from inference.poser.models import DEFAULT_WEIGHTS, resolve_model
 from inference.poser.poser import Poser, reconstruct_offline
@@ -21,8 +24,8 @@ THREE = ("pelvis", "l_wrist", "r_wrist")
 SHIPPED = dict(history="measured", noise="mean", inpaint_mode="replace-ddim")
 
 
-def _tiny() -> LoadedModel:
-    torch.manual_seed(0)
+def _tiny(seed: int = 0) -> LoadedModel:
+    torch.manual_seed(seed)
     cfg = ModelConfig.tiny()
     return LoadedModel(model=build_model("diffusion", cfg).eval(), kind="diffusion", config=cfg,
                        norm_mean=np.zeros(N_FEATURES, np.float32), norm_std=np.ones(N_FEATURES, np.float32))
@@ -70,6 +73,45 @@ def test_no_confidence_for_models_that_draw_nothing(clip):
     m, inp = clip
     p = Poser(None, body=m.body, confidence=True)
     assert p.confidence is None and p.step(inp.features[0], inp.mask[0]).spread_deg is None
+
+
+def test_a_student_file_draws_with_the_model_it_names(clip, tmp_path):
+    """A chain student's pose is its own; its draws are the named teacher's calls near that
+    pose, frame by frame and in lock step alike."""
+    m, inp = clip
+    student, teacher = _tiny(0), _tiny(1)
+    path = tmp_path / "teacher.pt"
+    save_model(path, teacher.model, "diffusion", teacher.norm_mean, teacher.norm_std)
+    named = replace(student, meta={"draws_from": str(path)})
+    settings = ConfidenceSettings(draws=2)
+
+    def run(model, draw_model=None):
+        p = Poser(model, body=m.body, steps=3, confidence=settings, **SHIPPED)
+        if draw_model is not None:  # the reference: the teacher's net put in by hand
+            p.draw_model = draw_model
+            p._draw_net = p.draw_net_for(settings.draws)
+        return reconstruct_offline(p, inp.features, inp.mask)
+
+    got, own = run(named), run(student)
+    assert np.array_equal(got.rot, own.rot) and np.array_equal(got.root, own.root)
+    assert not np.allclose(got.spread_deg, own.spread_deg)
+    ref = run(student, load_model(path))
+    assert np.array_equal(got.spread_deg, ref.spread_deg)
+    assert np.array_equal(got.root_spread_m, ref.root_spread_m)
+    [many] = reconstruct_many([Poser(named, body=m.body, steps=3, confidence=settings, **SHIPPED)],
+                              [(inp.features, inp.mask)])
+    assert np.allclose(many.spread_deg, got.spread_deg, atol=1e-2)
+
+
+def test_a_draws_model_that_reads_other_features_is_refused(clip, tmp_path):
+    m, _ = clip
+    teacher = _tiny(1)
+    path = tmp_path / "teacher.pt"
+    save_model(path, teacher.model, "diffusion", teacher.norm_mean + 1.0, teacher.norm_std)
+    with pytest.raises(ValueError, match="draws_from"):
+        Poser(replace(_tiny(0), meta={"draws_from": str(path)}), body=m.body, confidence=True, **SHIPPED)
+    with pytest.raises(FileNotFoundError, match="missing"):
+        Poser(replace(_tiny(0), meta={"draws_from": str(tmp_path / "gone.pt")}), body=m.body, confidence=True)
 
 
 def test_spread_pool_is_the_mean_of_the_latest_draws():
