@@ -793,8 +793,13 @@ def test_chain_distillation_trains_each_call_on_the_teachers_call_at_the_student
     from app.cli.main import main
 
     assert main(["train", "--out", str(tmp_path / "small"), "--export", str(tmp_path / "s2.pt"), "--at-step", "2",
-                 "--no-mirror"]) == 0
-    assert load_model(tmp_path / "s2.pt").step == 2
+                 "--no-mirror", "--draws-from", str(teacher_file)]) == 0
+    exported = load_model(tmp_path / "s2.pt")
+    assert exported.step == 2 and exported.meta["draws_from"] == str(teacher_file)
+    # its confidence draws are the teacher's calls (it never learnt the re-noised states they start from)
+    from inference.poser.poser import Poser
+
+    assert Poser(exported, confidence=True).draw_model.config.d_model == teacher.config.d_model != 16
     assert main(["train", "--out", str(tmp_path / "small"), "--export", str(tmp_path / "s1.pt"), "--at-step", "1"]) != 0
     assert not (tmp_path / "s1.pt").exists()
     assert np.allclose(student.norm_mean, teacher.norm_mean) and np.allclose(student.norm_std, teacher.norm_std)
