@@ -2,13 +2,14 @@
 flat (the default) or in GL, beside the same capture without a window, in one run.
 
     xvfb-run -a .venv/bin/python benchmarks/outdoor_cpu.py [--seconds 50] [--repeat 2]
-        [--variants 3d,2d,headless,"2d light"] [--json]
+        [--variants 3d,2d,headless,"2d light","2d fast"] [--json]
 
 Each round starts the simulated suit in its own process (`imucap devices simulate
 --setup`), then `imucap capture --setup --record` for ``--seconds``: with the window on
 the outdoor view (``--view outdoor --outdoor-skeleton 2d|3d``; under Xvfb here, so GL is
 software GL, llvmpipe, on threads of the capture process), or ``--headless``. "light" is
-the setup's lighter model setting (one diffusion step, for a laptop on battery). The
+the setup's lighter model setting (one diffusion step, for a laptop on battery); "fast" the
+narrow chain student (``[model] name = "fast"``, a third of the model's compute). The
 capture process's CPU time, all its threads (devices, hub, model, drawing, recording),
 is read from /proc twice a second; its share of one core is taken over the last 15 s
 before it stops, when it has posed for a while (the start-up's imports and the
@@ -38,8 +39,10 @@ from app.recording import read_recording
 from inference.signals.resample import FPS_MODEL
 
 SIX = ("pelvis", "head", "l_wrist", "r_wrist", "l_shank", "r_shank")
-# name -> (the setup's [model] steps, the outdoor skeleton or None for no window)
-VARIANTS = {"3d": (None, "3d"), "2d": (None, "2d"), "headless": (None, None), "2d light": ("1", "2d")}
+# name -> (the setup's [model] name and steps, the outdoor skeleton or None for no window)
+VARIANTS = {"3d": ("diffusion", None, "3d"), "2d": ("diffusion", None, "2d"), "headless": ("diffusion", None, None),
+            "2d light": ("diffusion", "1", "2d"), "2d fast": ("fast", None, "2d"),
+            "headless fast": ("fast", None, None)}
 LIVE_S = 15.0  # seconds of posing over which the share is taken
 CLI = [sys.executable, "-m", "app.cli.main"]
 
@@ -53,11 +56,11 @@ def _process_cpu(pid: int) -> float | None:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def one_round(steps: str | None, seconds: float, skeleton: str | None = "2d") -> dict:
+def one_round(steps: str | None, seconds: float, skeleton: str | None = "2d", model: str = "diffusion") -> dict:
     """One capture of ``seconds`` after its start-up: its CPU share while it poses, and what
     its window said it took itself."""
     folder = Path(tempfile.mkdtemp(prefix="imucap-outdoor-"))
-    setup = simulated_setup(SIX, "xbus", folder=folder, steps=steps)
+    setup = simulated_setup(SIX, "xbus", folder=folder, model=model, steps=steps)
     path = folder / "setup.toml"
     save_setup(setup, path)
     rec = folder / "rec.h5"
@@ -108,8 +111,8 @@ def main() -> None:
     runs: dict[str, list[dict]] = {n: [] for n in names}
     for _ in range(args.repeat):
         for name in names:
-            steps, skeleton = VARIANTS[name]
-            runs[name].append(one_round(steps, args.seconds, skeleton))
+            model, steps, skeleton = VARIANTS[name]
+            runs[name].append(one_round(steps, args.seconds, skeleton, model))
     shares = {n: [r.get("live_share") for r in rs] for n, rs in runs.items()}
     med = {n: float(np.median([x for x in v if x is not None])) if any(x is not None for x in v) else None
            for n, v in shares.items()}
@@ -118,12 +121,16 @@ def main() -> None:
                  "share_of_one_core": {n: None if v is None else round(v, 3) for n, v in med.items()},
                  f"ratio_to_{names[0]}": {n: None if v is None or not base else round(v / base, 3)
                                           for n, v in med.items()}}
-    if med.get("headless") is not None:
-        res["window_share"] = {n: round(v - med["headless"], 3) for n, v in med.items()
-                               if v is not None and VARIANTS[n][1] is not None}
+    # a window variant less the headless capture of the same model
+    bare = {n: next((h for h, (m, st, sk) in VARIANTS.items() if sk is None and m == VARIANTS[n][0]), None)
+            for n in med}
+    shares_less = {n: round(v - med[bare[n]], 3) for n, v in med.items()
+                   if v is not None and VARIANTS[n][2] is not None and med.get(bare[n]) is not None}
+    if shares_less:
+        res["window_share"] = shares_less
     res["windows"] = {n: [{k: r["window"].get(k) for k in ("gui_thread_cores", "draws_per_s", "draw_p50_ms",
                                                            "outdoor")} for r in rs]
-                      for n, rs in runs.items() if VARIANTS[n][1] is not None}
+                      for n, rs in runs.items() if VARIANTS[n][2] is not None}
     print(json.dumps(res) if args.json else "\n".join(f"{k}: {v}" for k, v in res.items()))
 
 

@@ -63,6 +63,13 @@ class ModelConfig:
     # where absent). Zero at first, so a model fine-tuned from one without it starts as
     # that model; their orientations reach the model as known segment orientations.
     points: bool = False
+    # a linear map from each frame's input (and mask) straight to its output, beside the
+    # transformer. A narrow network squeezes a frame's 190 features through d_model numbers, and
+    # the segments next to a worn one (a hand below a wrist sensor, the neck below the head, a
+    # foot below a shank) are, to first order, that measurement turned by a constant: linear in
+    # it, yet lost in the squeeze (a 64-wide chain student's hands were 15 deg behind its
+    # teacher's on dg). Zero at first, so a model grown with it starts as the model it grew from.
+    bypass: bool = False
     T: int = 1000
 
     @classmethod

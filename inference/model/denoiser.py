@@ -65,6 +65,10 @@ class Denoiser(nn.Module):
         self.decoder = nn.TransformerDecoder(layer, num_layers=cfg.layers)
         self.norm = nn.LayerNorm(d)
         self.out_proj = nn.Linear(d, cfg.features)
+        if cfg.bypass:
+            self.bypass = nn.Linear(cfg.features * (2 if cfg.mask_input else 1), cfg.features)
+            nn.init.zeros_(self.bypass.weight)
+            nn.init.zeros_(self.bypass.bias)
         if cfg.skip:
             ab = cosine_alpha_bar(cfg.T).float()
             self.register_buffer("skip_a", ab.sqrt(), persistent=False)
@@ -107,6 +111,8 @@ class Denoiser(nn.Module):
         else:
             h = self._lean_decoder(tokens, cond)
         out = self.out_proj(self.norm(h[:, 2:]))
+        if self.config.bypass:
+            out = out + self.bypass(inp)
         if self.config.skip:
             a = self.skip_a[t].to(out.dtype)[:, None, None]
             b = self.skip_b[t].to(out.dtype)[:, None, None]

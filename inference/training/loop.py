@@ -553,11 +553,11 @@ def train(cfg: TrainConfig, out_dir: str | os.PathLike, resume: bool = False,
         # dropout is training behaviour, not architecture: a fine-tune may switch it
         init_model = replace(ModelConfig.from_dict(init["model_config"]), dropout=cfg.model.dropout)
         deeper = replace(init_model, layers=cfg.model.layers) == cfg.model and cfg.model.layers > init_model.layers
-        grow = {k: True for k in ("points",) if getattr(cfg.model, k) and not getattr(init_model, k)}
+        grow = {k: True for k in ("points", "bypass") if getattr(cfg.model, k) and not getattr(init_model, k)}
         if grow.get("points") and not cfg.model.mask_input:
             grow = {}
-        # reading tokens or a position input added to a model without them start at zero:
-        # the same model at first
+        # reading tokens, a position input or a bypass added to a model without them start at
+        # zero: the same model at first
         added = ((not init_model.readings and cfg.model.readings
                   and replace(init_model, readings=cfg.model.readings, reading=cfg.model.reading) == cfg.model)
                  or (bool(grow) and replace(init_model, **grow) == cfg.model))

@@ -197,3 +197,27 @@ def test_mask_input_model_reads_the_mask_traced_or_not():
     y = inpaint(f, z, mask, h, paper_steps(), generator=torch.Generator().manual_seed(0), mode="replace",
                 mask_input=True)
     assert torch.allclose(x, y, atol=1e-4)
+
+
+def test_a_bypass_starts_at_zero_and_adds_a_linear_map_of_the_input(tmp_path):
+    """The bypass (``ModelConfig.bypass``): grown onto a trained network it changes nothing
+    until trained; trained, each frame's output gains a linear map of that frame's input and
+    mask, and the file round trip keeps it."""
+    torch.manual_seed(0)
+    base = replace(ModelConfig.tiny(), mask_input=True)
+    plain = build_model("diffusion", base).eval()
+    grown = build_model("diffusion", replace(base, bypass=True)).eval()
+    grown.load_state_dict({**grown.state_dict(), **plain.state_dict()})
+    z, t, h = _inputs()
+    m = torch.rand(z.shape) > 0.5
+    with torch.no_grad():
+        assert torch.equal(grown(z, t, h, m), plain(z, t, h, m))
+        torch.nn.init.normal_(grown.bypass.weight, std=0.1)
+        inp = torch.cat([z, m.float()], dim=-1)
+        want = plain(z, t, h, m) + inp @ grown.bypass.weight.T + grown.bypass.bias
+        assert torch.allclose(grown(z, t, h, m), want, **F32_PATHS)
+    save_model(tmp_path / "b.pt", grown, "diffusion", np.zeros(N_FEATURES), np.ones(N_FEATURES))
+    back = load_model(tmp_path / "b.pt")
+    assert back.config.bypass
+    with torch.no_grad():
+        assert torch.equal(back.model(z, t, h, m), grown(z, t, h, m))

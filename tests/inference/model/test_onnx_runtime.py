@@ -15,12 +15,15 @@ from inference.model.files import LoadedModel, build_model
 from inference.poser.poser import Poser
 
 
-def _tiny(mask_input: bool = True) -> LoadedModel:
+def _tiny(mask_input: bool = True, bypass: bool = False) -> LoadedModel:
     torch.manual_seed(0)
     cfg = ModelConfig.tiny()
-    cfg.mask_input = mask_input
+    cfg.mask_input, cfg.bypass = mask_input, bypass
     rng = np.random.default_rng(0)
-    return LoadedModel(model=build_model("diffusion", cfg).eval(), kind="diffusion", config=cfg,
+    net = build_model("diffusion", cfg).eval()
+    if bypass:  # trained: not the zeros it starts at
+        torch.nn.init.normal_(net.bypass.weight, std=0.05)
+    return LoadedModel(model=net, kind="diffusion", config=cfg,
                        norm_mean=rng.normal(size=N_FEATURES).astype(np.float32),
                        norm_std=rng.uniform(0.5, 2.0, N_FEATURES).astype(np.float32))
 
@@ -29,9 +32,9 @@ needs_ort = pytest.mark.skipif(not onnx_runtime.onnxruntime_available(), reason=
 
 
 @needs_ort
-@pytest.mark.parametrize("mirror", [False, True])
-def test_onnx_net_matches_the_torch_model(mirror):
-    m = _tiny()
+@pytest.mark.parametrize("mirror,bypass", [(False, False), (True, False), (False, True)])
+def test_onnx_net_matches_the_torch_model(mirror, bypass):
+    m = _tiny(bypass=bypass)
     module = MirrorAveraged(m.model, m.norm_mean, m.norm_std) if mirror else m.model
     net = onnx_runtime.OnnxNet(module, 1, m.config.window, N_FEATURES, mask_input=True)
     g = torch.Generator().manual_seed(1)

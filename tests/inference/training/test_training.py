@@ -444,6 +444,12 @@ def test_init_from_starts_a_new_run_from_another_runs_weights(tmp_path):
     assert out["train_config"]["model"]["dropout"] == 0.0
     for k, v in src["ema"].items():
         assert torch.allclose(out["model"][k], v), k
+    # a bypass grown onto those weights starts at zero (the same answers at first) and trains
+    grown = train(_cfg(steps=2, lr=1e-2, model={**TINY, "bypass": True}), tmp_path / "bypass", progress=False,
+                  init_from=tmp_path / "base" / "last.pt")
+    assert grown.step == 2
+    out = torch.load(tmp_path / "bypass" / "last.pt", weights_only=False)
+    assert out["model_config"]["bypass"] and out["model"]["bypass.weight"].abs().sum() > 0
     # a run of another size cannot start from these weights
     with pytest.raises(ValueError, match="differs"):
         train(_cfg(steps=1, model={**TINY, "ff": TINY["ff"] * 2}), tmp_path / "other", progress=False,
