@@ -291,6 +291,8 @@ class DemoRun:
             "acc_filter": "causal" if s.pipeline.causal else "centred",
             "events": res["events"], "spec": self.spec.describe(),
         }
+        if res.get("advice"):
+            out["advice"] = res["advice"]
         if cfg.streams:
             out["streams"] = [k.summary() for k in cfg.streams if hasattr(k, "summary")]
         if p.confidence is not None and self.spread.n:

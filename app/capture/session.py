@@ -27,7 +27,7 @@ import numpy as np
 from app import APP_VERSION
 from app.capture.setup_file import Setup
 from app.live import LivePipeline, LivePose, Pipeline, Sink, close_sink
-from app.live.model_choice import choose_model, set_torch_threads
+from app.live.model_choice import choose_model, keep_up_advice, set_torch_threads
 from app.replay import poser_metadata
 from calibration import Calibration, GuidedCalibration
 from drivers.base import DeviceEvent
@@ -318,6 +318,7 @@ class CaptureSession:
         st = self.live.stats() if self.live is not None else {}
         hub = self.hub.status() if self.hub is not None else {}
         lat = list(self.watch.latency)
+        pipe = self.pipeline.stats.summary()
         return {
             "frames": self.watch.poses, "fps": round(self.fps(), 2),
             "latency_p50_ms": float(np.percentile(lat, 50)) if lat else None,
@@ -330,4 +331,5 @@ class CaptureSession:
             "pipeline": st, "model": self.model_label,
             "record": str(self.options.record) if self.options.record else None,
             "recording_error": self.recording_error,
+            "advice": keep_up_advice(self.watch.poses, pipe["poses_skipped"], self.setup.model),
         }

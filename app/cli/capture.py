@@ -185,6 +185,8 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(res, default=str))
     else:
         print(f"{res['frames']} poses at {res['fps']} fps; calibration: {res['calibration_status']}")
+        if res.get("advice"):
+            print(f"imucap capture: {res['advice']}", file=sys.stderr)
         if record is not None:
             print(f"recorded {record}")
     return 0

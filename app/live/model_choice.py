@@ -88,6 +88,25 @@ def choose_model(spec: str, latency: str = "centred", *, fallback: bool = False,
     return ModelChoice(spec, model, label, causal, warning)
 
 
+# share of the 20 Hz frames passed over (late poses) above which a session says the machine did not
+# keep up: a slow laptop's first sign, on which the user can act (a lighter model or fewer steps)
+KEEP_UP_SKIPPED = 0.02
+KEEP_UP_MIN_FRAMES = 100  # fewer frames say nothing about a machine
+
+
+def keep_up_advice(posed: int, skipped: int, spec: str) -> str | None:
+    """One line for a session whose poses were skipped past ``KEEP_UP_SKIPPED``, naming the
+    lever for the model it ran (``spec`` as asked: the default has a lighter twin), else None."""
+    total = posed + skipped
+    if total < KEEP_UP_MIN_FRAMES or skipped <= KEEP_UP_SKIPPED * total:
+        return None
+    share = f"{100.0 * skipped / total:.0f} % of the poses were skipped: this machine did not keep up with the model"
+    if spec == "diffusion":
+        return (f"{share}; --model fast (a setup's [model] name = \"fast\") runs the same three-level chain at about "
+                "a third of the compute, a little less accurately (docs/latency.md)")
+    return f"{share}; fewer diffusion steps or a lighter model would (docs/latency.md)"
+
+
 def set_torch_threads(threads: int) -> None:
     """Run torch's operators on ``threads`` threads; 0 or less leaves torch's own choice."""
     if threads > 0:
@@ -96,4 +115,5 @@ def set_torch_threads(threads: int) -> None:
         torch.set_num_threads(threads)
 
 
-__all__ = ["FLOOR_FALLBACK_LABEL", "ModelChoice", "choose_model", "load_model", "model_label", "set_torch_threads"]
+__all__ = ["FLOOR_FALLBACK_LABEL", "KEEP_UP_SKIPPED", "ModelChoice", "choose_model", "keep_up_advice", "load_model",
+           "model_label", "set_torch_threads"]

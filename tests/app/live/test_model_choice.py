@@ -7,7 +7,15 @@ from __future__ import annotations
 import pytest
 
 from app.live import latency
-from app.live.model_choice import FLOOR_FALLBACK_LABEL, choose_model, load_model, model_label, set_torch_threads
+from app.live.model_choice import (
+    FLOOR_FALLBACK_LABEL,
+    KEEP_UP_SKIPPED,
+    choose_model,
+    keep_up_advice,
+    load_model,
+    model_label,
+    set_torch_threads,
+)
 from inference.poser.models import DEFAULT_WEIGHTS
 
 
@@ -57,3 +65,21 @@ def test_thread_count():
         assert torch.get_num_threads() == 1
     finally:
         torch.set_num_threads(before)
+
+
+def test_a_session_that_did_not_keep_up_is_told_the_lever_for_its_model():
+    assert keep_up_advice(1000, 0, "diffusion") is None
+    assert keep_up_advice(1000, int(KEEP_UP_SKIPPED * 1000), "diffusion") is None  # within the share
+    assert keep_up_advice(40, 30, "diffusion") is None  # too short to say anything of the machine
+    line = keep_up_advice(900, 100, "diffusion")
+    assert line.startswith("10 % of the poses were skipped") and "--model fast" in line and "\n" not in line
+    other = keep_up_advice(900, 100, "fast")
+    assert "--model fast" not in other and "fewer diffusion steps" in other
+
+
+@pytest.mark.skipif(not DEFAULT_WEIGHTS["fast"].exists(), reason="fast weights not installed")
+def test_the_fast_model_is_a_narrow_chain_whose_draws_come_from_the_default():
+    model, label, warning = load_model("fast")
+    assert warning is None and label.endswith("(diffusionposer_fast.pt)")
+    assert model.config.d_model < 128 and model.meta["draws_from"] == "diffusion"
+    assert not model.meta.get("mirror") and model.meta["default_steps"] == "10D:3"
