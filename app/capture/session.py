@@ -318,7 +318,6 @@ class CaptureSession:
         st = self.live.stats() if self.live is not None else {}
         hub = self.hub.status() if self.hub is not None else {}
         lat = list(self.watch.latency)
-        pipe = self.pipeline.stats.summary()
         return {
             "frames": self.watch.poses, "fps": round(self.fps(), 2),
             "latency_p50_ms": float(np.percentile(lat, 50)) if lat else None,
@@ -331,5 +330,5 @@ class CaptureSession:
             "pipeline": st, "model": self.model_label,
             "record": str(self.options.record) if self.options.record else None,
             "recording_error": self.recording_error,
-            "advice": keep_up_advice(self.watch.poses, pipe["poses_skipped"], self.setup.model),
+            "advice": keep_up_advice(self.watch.poses, self.pipeline.stats.poses_skipped, self.setup.model),
         }
