@@ -170,44 +170,49 @@ def run_batch(args: argparse.Namespace) -> int:
         print("\nbatch: stopping: no new recordings" + (", running ones ended" if interrupts > 1 else
               " (Ctrl-C again to end the running ones); run the same command to finish"), file=sys.stderr)
 
+    # the handler stays until the end: a second Ctrl-C while the summary is written is counted,
+    # and does not lose the summary to a KeyboardInterrupt
     old = signal.signal(signal.SIGINT, on_sigint)
-    progress = _Progress(len(todo), not args.no_progress)
-    results: dict[str, dict[str, Any]] = dict(finished)
-    t0 = time.perf_counter()
-    broke: str | None = None
     try:
-        for res in runner.run(todo) if todo else ():
-            results[res["recording"]] = res
-            progress.update(res)
-    except Exception as exc:  # noqa: BLE001 - the executor itself failed (a cluster gone): keep what is done
-        broke = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+        progress = _Progress(len(todo), not args.no_progress)
+        results: dict[str, dict[str, Any]] = dict(finished)
+        t0 = time.perf_counter()
+        broke: str | None = None
+        try:
+            for res in runner.run(todo) if todo else ():
+                results[res["recording"]] = res
+                progress.update(res)
+        except Exception as exc:  # noqa: BLE001 - the executor itself failed (a cluster gone): keep what is done
+            broke = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+        finally:
+            progress.close()
+            runner.close()
+        wall = time.perf_counter() - t0
+        ordered = [results[t.recording] for t in tasks if t.recording in results]
+        written = write_summary(args.out, ordered)
+        done = [r for r in ordered if r["status"] == "done"]
+        motion_s = sum(float(r.get("motion_s") or 0.0) for r in done)
+        summary = {
+            "done": len(done), "skipped": sum(r["status"] == "skipped" for r in ordered),
+            "failed": [{"recording": r["recording"], "reason": r["reason"]}
+                       for r in ordered if r["status"] == "failed"],
+            "not_run": len(tasks) - len(ordered), "recordings": len(tasks),
+            "summary": [str(p) for p in written], "wall_s": round(wall, 2), "motion_s": round(motion_s, 2),
+            "motion_hours_per_hour": round(motion_s / wall, 2) if done and wall > 0 else None,
+            "cpu_s": round(sum(float(r.get("cpu_s") or 0.0) for r in done), 2),
+        }
+        if args.json:
+            print(json.dumps(summary))
+        else:
+            print(f"{summary['done']} done, {summary['skipped']} up to date, {len(summary['failed'])} failed"
+                  + (f", {summary['not_run']} not run (stopped)" if summary["not_run"] else "")
+                  + f"; {written[0]}")
+            for f in summary["failed"]:
+                print(f"  failed: {f['recording']}: {f['reason']}")
+        if broke is not None and not interrupts:
+            print(f"imucap batch: error: stopped by {broke}; {written[0]} holds the {len(ordered)} recording(s) "
+                  "finished; run the same command to finish", file=sys.stderr)
+            return 1
+        return 130 if interrupts else 0
     finally:
         signal.signal(signal.SIGINT, old)
-        progress.close()
-        runner.close()
-    wall = time.perf_counter() - t0
-    ordered = [results[t.recording] for t in tasks if t.recording in results]
-    written = write_summary(args.out, ordered)
-    done = [r for r in ordered if r["status"] == "done"]
-    motion_s = sum(float(r.get("motion_s") or 0.0) for r in done)
-    summary = {
-        "done": len(done), "skipped": sum(r["status"] == "skipped" for r in ordered),
-        "failed": [{"recording": r["recording"], "reason": r["reason"]} for r in ordered if r["status"] == "failed"],
-        "not_run": len(tasks) - len(ordered), "recordings": len(tasks),
-        "summary": [str(p) for p in written], "wall_s": round(wall, 2), "motion_s": round(motion_s, 2),
-        "motion_hours_per_hour": round(motion_s / wall, 2) if done and wall > 0 else None,
-        "cpu_s": round(sum(float(r.get("cpu_s") or 0.0) for r in done), 2),
-    }
-    if args.json:
-        print(json.dumps(summary))
-    else:
-        print(f"{summary['done']} done, {summary['skipped']} up to date, {len(summary['failed'])} failed"
-              + (f", {summary['not_run']} not run (stopped)" if summary["not_run"] else "")
-              + f"; {written[0]}")
-        for f in summary["failed"]:
-            print(f"  failed: {f['recording']}: {f['reason']}")
-    if broke is not None and not interrupts:
-        print(f"imucap batch: error: stopped by {broke}; {written[0]} holds the {len(ordered)} recording(s) "
-              "finished; run the same command to finish", file=sys.stderr)
-        return 1
-    return 130 if interrupts else 0

@@ -43,6 +43,10 @@ def main(argv: list[str] | None = None) -> int:
         # one clear line, no traceback
         print(f"imucap {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        # Ctrl-C where a command does not handle it itself: the shell's 130 and one line, not a traceback
+        print(f"imucap {args.command}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":
