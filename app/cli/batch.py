@@ -215,4 +215,7 @@ def run_batch(args: argparse.Namespace) -> int:
             return 1
         return 130 if interrupts else 0
     finally:
-        signal.signal(signal.SIGINT, old)
+        # once stopped by Ctrl-C there is nothing left to stop: one more, pressed while the interpreter
+        # shuts down (torch and the pool take ~0.3 s; Python puts SIGINT back to its default there), would
+        # end the process by the signal instead of the 130 it returns
+        signal.signal(signal.SIGINT, signal.SIG_IGN if interrupts else old)
