@@ -31,10 +31,10 @@ fi
 # every test module again (half of a collection's CPU) and each CLI subprocess compiled the
 # package anew
 unset PYTHONDONTWRITEBYTECODE
-# Three runs, each at its priority (tests/conftest.py sorts the tests; docs/testing.md):
-# - realtime, nice 0, one worker: the tests that must keep up in real time (devices streaming, the demo,
-#   the windows); they mostly wait on the clock;
-# - solo, nice 0, one worker, after the realtime run: the captures in a process of their own whose figures
+# Four runs, each at its priority (tests/conftest.py sorts the tests; docs/testing.md):
+# - realtime and windows, nice 0, one worker each, side by side: the tests that must keep up in real time
+#   (devices streaming, the demo; the windows in a lane of their own); they mostly wait on the clock;
+# - solo, nice 0, one worker, after both realtime lanes: the captures in a process of their own whose figures
 #   (a calibration, a score against the truth) need a core, one at a time. Beside the realtime run, on a
 #   machine where a live step costs 25 ms, the two live runs' posers, simulators and windows asked for more
 #   than the two cores and a capture made 10-13 poses a second: three live tests of a run failed there and
@@ -62,9 +62,14 @@ run() {  # run NAME NICE DISPLAY WORKERS MARKERS [pytest args]
 DISPLAY_BASE=$((100 + RANDOM % 300))
 # what the kernel says each thread of a stalled capture is doing (scripts/stall_watch.py; NOTES.md "Tests")
 .venv/bin/python scripts/stall_watch.py "$LOGS/realtime.stall" "$LOGS/solo.stall" "$LOGS/rest.stall" \
-  "$LOGS/again.stall" >/dev/null 2>&1 &
+  "$LOGS/windows.stall" "$LOGS/again.stall" >/dev/null 2>&1 &
 watch_pid=$!
-{ run realtime 0 "$DISPLAY_BASE" 1 "realtime" "$@"; run solo 0 $((DISPLAY_BASE + 600)) 1 "solo" "$@"; } &
+{
+  run windows 0 $((DISPLAY_BASE + 150)) 1 "realtime" "$@" &
+  run realtime 0 "$DISPLAY_BASE" 1 "realtime" "$@"
+  wait
+  run solo 0 $((DISPLAY_BASE + 600)) 1 "solo" "$@"
+} &
 live_pid=$!
 run rest 10 $((DISPLAY_BASE + 300)) 2 "not solo and not realtime" "$@" &
 rest_pid=$!
@@ -75,7 +80,7 @@ wait "$live_pid"
 # the first failure stays in the log, named again at the end. A failure of the rest, a live run that failed without
 # naming its tests (a crash, its ceiling) or a second failure fails the suite.
 again=()
-for name in realtime solo; do
+for name in realtime windows solo; do
   [ "$(cat "$LOGS/$name.rc" 2>/dev/null)" = 0 ] && continue
   mapfile -t ids < <(sed -n -E 's/^(FAILED|ERROR) ([^ ]+).*/\2/p' "$LOGS/$name.log" | sort -u)
   if [ "${#ids[@]}" = 0 ]; then again=(); echo none >"$LOGS/again.rc"; break; fi
@@ -87,7 +92,7 @@ fi
 wait "$rest_pid"
 kill "$watch_pid" 2>/dev/null || true
 ok=0
-for name in realtime rest solo again; do
+for name in realtime windows rest solo again; do
   [ -f "$LOGS/$name.rc" ] || continue
   echo "=== $name ($(cat "$LOGS/$name.rc" 2>/dev/null || echo none))"
   [ -f "$LOGS/$name.log" ] && cat "$LOGS/$name.log"
@@ -103,7 +108,7 @@ for name in realtime rest solo again; do
   fi
 done
 [ "$(cat "$LOGS/rest.rc")" = 0 ] || ok=1
-for name in realtime solo; do
+for name in realtime windows solo; do
   if [ "$(cat "$LOGS/$name.rc")" != 0 ] && [ "$(cat "$LOGS/again.rc" 2>/dev/null)" != 0 ]; then ok=1; fi
 done
 if [ "${#again[@]}" -gt 0 ] && [ "$(cat "$LOGS/again.rc" 2>/dev/null)" = 0 ]; then

@@ -59,6 +59,14 @@ REALTIME_MODULES = {"sim_devices/test_suit.py", "drivers/test_batched.py",
                     "sim_devices/test_wireless_twins.py", "test_lean_install.py", "app/capture/test_simulate_vr.py",
                     "drivers/test_ximu3_loss.py", "drivers/test_ximu3_tcp.py",
                     "drivers/test_hub_readers.py"}
+# The realtime modules run in two lanes side by side, one test at a time in each: they mostly wait on the
+# clock (the realtime run used ~0.2 of a core over its 8 minutes), and one lane after the other was the
+# suite's critical path. The windows (software GL under Xvfb) and the wireless twins in one lane, the demos,
+# the bench and the wired devices in the other: ~4 minutes each (docs/testing.md).
+WINDOW_MODULES = {"app/gui/test_main_window.py", "app/gui/test_window_unplug.py", "app/gui/test_window_workflow.py",
+                  "app/gui/test_window_simulate.py", "app/gui/test_outdoor_view.py", "test_lean_install.py",
+                  "sim_devices/test_wireless_twins.py", "drivers/test_ximu3_loss.py"}
+assert WINDOW_MODULES <= REALTIME_MODULES
 
 
 # Separate processes in real time (a simulator, `imucap capture`) whose figures (a calibration
@@ -76,10 +84,10 @@ SOLO_MODULES = {"app/capture/test_capture_e2e.py", "test_readme.py", "app/captur
 DATA_ONE_CORE_MODULES = {"inference/loaders/test_real_data.py", "inference/loaders/test_cmu.py"}
 
 
-# scripts/test.sh names each run's share (``IMUCAP_TEST_RUN``: realtime, solo or rest) so that its
+# scripts/test.sh names each run's share (``IMUCAP_TEST_RUN``: realtime, windows, solo or rest) so that its
 # workers import only the modules they will run: every worker collected all ~1,400 tests (torch,
 # Qt and the model's modules each time) to deselect most of them by marker
-_RUN_MODULES = {"realtime": REALTIME_MODULES, "solo": SOLO_MODULES}
+_RUN_MODULES = {"realtime": REALTIME_MODULES - WINDOW_MODULES, "windows": WINDOW_MODULES, "solo": SOLO_MODULES}
 
 
 def pytest_ignore_collect(collection_path, config):
