@@ -31,15 +31,16 @@ fi
 # every test module again (half of a collection's CPU) and each CLI subprocess compiled the
 # package anew
 unset PYTHONDONTWRITEBYTECODE
-# Four runs, each at its priority (tests/conftest.py sorts the tests; docs/testing.md):
+# Five runs, each at its priority (tests/conftest.py sorts the tests; docs/testing.md):
 # - realtime and windows, nice 0, one worker each, side by side: the tests that must keep up in real time
 #   (devices streaming, the demo; the windows in a lane of their own); they mostly wait on the clock;
-# - solo, nice 0, one worker, after both realtime lanes: the captures in a process of their own whose figures
-#   (a calibration, a score against the truth) need a core, one at a time. Beside the realtime run, on a
-#   machine where a live step costs 25 ms, the two live runs' posers, simulators and windows asked for more
-#   than the two cores and a capture made 10-13 poses a second: three live tests of a run failed there and
-#   passed alone (docs/testing.md, "On a slower machine");
-# - rest, nice 10, two workers, beside both: everything else, on the cores the live runs leave (the
+# - solo and solo2, nice 0, one worker each, side by side once both realtime lanes are done: the captures in
+#   a process of their own whose figures (a calibration, a score against the truth) need the cores, one
+#   capture per lane and never beside a realtime lane. Beside the realtime run, on a machine where a live
+#   step costs 25 ms, the live runs' posers, simulators and windows asked for more than the two cores and a
+#   capture made 10-13 poses a second: three live tests of a run failed there and passed alone
+#   (docs/testing.md, "On a slower machine"); a failed live test gets its second run below;
+# - rest, nice 10, two workers, beside them: everything else, on the cores the live runs leave (the
 #   scheduler weighs nice 0 / 10 as 1024 / 110).
 # Each run has its own X server (-n), temporary folder and log; the logs are printed at the end. Each
 # collects only its own modules (IMUCAP_TEST_RUN, tests/conftest.py).
@@ -62,25 +63,27 @@ run() {  # run NAME NICE DISPLAY WORKERS MARKERS [pytest args]
 DISPLAY_BASE=$((100 + RANDOM % 300))
 # what the kernel says each thread of a stalled capture is doing (scripts/stall_watch.py; NOTES.md "Tests")
 .venv/bin/python scripts/stall_watch.py "$LOGS/realtime.stall" "$LOGS/solo.stall" "$LOGS/rest.stall" \
-  "$LOGS/windows.stall" "$LOGS/again.stall" >/dev/null 2>&1 &
+  "$LOGS/windows.stall" "$LOGS/solo2.stall" "$LOGS/again.stall" >/dev/null 2>&1 &
 watch_pid=$!
 {
   run windows 0 $((DISPLAY_BASE + 150)) 1 "realtime" "$@" &
   run realtime 0 "$DISPLAY_BASE" 1 "realtime" "$@"
   wait
+  run solo2 0 $((DISPLAY_BASE + 750)) 1 "solo" "$@" &
   run solo 0 $((DISPLAY_BASE + 600)) 1 "solo" "$@"
+  wait
 } &
 live_pid=$!
 run rest 10 $((DISPLAY_BASE + 300)) 2 "not solo and not realtime" "$@" &
 rest_pid=$!
 wait "$live_pid"
-# A live test (realtime or solo) that failed gets one more run once both live runs are done, beside only the rest
+# A live test (realtime or solo) that failed gets one more run once the live runs are done, beside only the rest
 # run, which yields the cores at nice 10: their figures and timing need the cores (docs/testing.md, "A second run
 # alone"). It runs while the rest finishes, so it costs the suite little time. It passes only if it passes there;
 # the first failure stays in the log, named again at the end. A failure of the rest, a live run that failed without
 # naming its tests (a crash, its ceiling) or a second failure fails the suite.
 again=()
-for name in realtime windows solo; do
+for name in realtime windows solo solo2; do
   [ "$(cat "$LOGS/$name.rc" 2>/dev/null)" = 0 ] && continue
   mapfile -t ids < <(sed -n -E 's/^(FAILED|ERROR) ([^ ]+).*/\2/p' "$LOGS/$name.log" | sort -u)
   if [ "${#ids[@]}" = 0 ]; then again=(); echo none >"$LOGS/again.rc"; break; fi
@@ -92,7 +95,7 @@ fi
 wait "$rest_pid"
 kill "$watch_pid" 2>/dev/null || true
 ok=0
-for name in realtime windows rest solo again; do
+for name in realtime windows rest solo solo2 again; do
   [ -f "$LOGS/$name.rc" ] || continue
   echo "=== $name ($(cat "$LOGS/$name.rc" 2>/dev/null || echo none))"
   [ -f "$LOGS/$name.log" ] && cat "$LOGS/$name.log"
@@ -108,7 +111,7 @@ for name in realtime windows rest solo again; do
   fi
 done
 [ "$(cat "$LOGS/rest.rc")" = 0 ] || ok=1
-for name in realtime windows solo; do
+for name in realtime windows solo solo2; do
   if [ "$(cat "$LOGS/$name.rc")" != 0 ] && [ "$(cat "$LOGS/again.rc" 2>/dev/null)" != 0 ]; then ok=1; fi
 done
 if [ "${#again[@]}" -gt 0 ] && [ "$(cat "$LOGS/again.rc" 2>/dev/null)" = 0 ]; then

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import time
 
 import numpy as np
@@ -54,7 +55,8 @@ def test_driver_reads_twin(protocol, signals):
             assert samples[-1].device_time is not None and samples[-1].device_time > samples[0].device_time
             if protocol == "xbus":
                 assert sim.configured_outputs is not None  # it received SetOutputConfiguration
-                assert [m for m in sim.commands[:3]] == [0x30, 0xC0, 0x10]
+                # a command whose acknowledgement is late is sent again (the driver's retry, on a busy machine)
+                assert [m for m, _ in itertools.groupby(sim.commands)][:3] == [0x30, 0xC0, 0x10]
                 assert dev.acknowledged == [0x30, 0xC0, 0x10]
             if protocol != "dualsense":  # dualsense orientation comes from our AHRS: heading starts at 0
                 k = len(samples) - 1
