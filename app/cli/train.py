@@ -81,6 +81,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--mirror", action=argparse.BooleanOptionalAction, default=None,
                    help="with --export: the poser averages each model answer with the answer for the mirror-image "
                         "window (inference.mirror; twice the batch per call)")
+    p.add_argument("--mirror-chains", action=argparse.BooleanOptionalAction, default=None,
+                   help="with --export (and --mirror): average whole chains, the model's and its mirror image's, "
+                        "rather than each call's answers (the shipped file's setting)")
     p.add_argument("--draws-from", metavar="MODEL",
                    help="with --export: the model whose calls make the poser's confidence draws (a shipped name "
                         "such as diffusion, or a file reading the same features), for a chain student that never "
@@ -124,7 +127,8 @@ def run(args: argparse.Namespace) -> int:
             parse_steps(args.default_steps)  # reject a bad list now, not in the poser
         poser = {k: v for k, v in (("inpaint_mode", args.inpaint_mode), ("history", args.history),
                                    ("noise", args.noise), ("contact_threshold", args.contact_threshold),
-                                   ("mirror", args.mirror), ("draws_from", args.draws_from))
+                                   ("mirror", args.mirror), ("mirror_chains", args.mirror_chains),
+                                   ("draws_from", args.draws_from))
                  if v is not None}
         if args.default_steps is not None and (args.blend is not None or args.retag is not None):
             poser["default_steps"] = args.default_steps  # a model file's defaults (export_model takes it apart)

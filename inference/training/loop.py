@@ -752,6 +752,8 @@ def export_model(checkpoint: str | os.PathLike, dest: str | os.PathLike, fp16: b
     meta = {"val": ck.get("val"), "train_config": cfg, "default_steps": steps,
             "inpaint_mode": inpaint_mode_for(TrainConfig.from_dict(cfg)),
             "acc_filter": "causal" if cfg.get("causal") else "centred"}
+    if cfg.get("answer_lag"):  # trained to be best k frames back: the poser answers that late (inference/poser/lag.py)
+        meta["answer_lag"] = int(cfg["answer_lag"])
     meta.update(poser or {})
     save_model(dest, model, ck["kind"], ck["norm_mean"], ck["norm_std"], step=int(ck["step"]), meta=meta, fp16=fp16)
 

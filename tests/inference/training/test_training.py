@@ -581,6 +581,25 @@ def test_retag_changes_a_model_files_poser_defaults_and_not_its_weights(tmp_path
     assert "--out is required" in capsys.readouterr().err
 
 
+def test_a_model_trained_to_answer_late_says_so_in_its_file_and_answers_late(tmp_path):
+    """A run trained on frame N-1-k (``answer_lag``) exports with meta ``answer_lag`` k, and a
+    poser built on the file answers that late without being told; ``--mirror-chains`` is kept."""
+    from app.cli.main import main
+    from inference.poser.poser import Poser
+
+    train(_cfg(steps=2, answer_lag=3, model={**TINY, "mask_input": True}), tmp_path / "late", progress=False)
+    assert main(["train", "--out", str(tmp_path / "late"), "--export", str(tmp_path / "late.pt"), "--noise", "mean",
+                 "--mirror", "--mirror-chains"]) == 0
+    model = load_model(tmp_path / "late.pt")
+    assert model.meta["answer_lag"] == 3 and model.meta["mirror_chains"] is True
+    poser = Poser(model)
+    assert poser.answer_lag == 3 and poser.chain_mirror
+    assert Poser(model, answer_lag=0).answer_lag == 0  # a live answer on request
+    train(_cfg(steps=2, model={**TINY, "mask_input": True}), tmp_path / "live", progress=False)
+    export_model(tmp_path / "live" / "last.pt", tmp_path / "live.pt")
+    assert "answer_lag" not in load_model(tmp_path / "live.pt").meta
+
+
 def test_blend_mixes_a_file_with_its_fine_tune_and_refuses_strangers(tmp_path, capsys):
     """The blend is each weight's mix, answers between its two files, keeps A's poser
     defaults and normaliser; files of another network or normaliser are refused in one line."""
