@@ -77,7 +77,7 @@ assert WINDOW_MODULES <= REALTIME_MODULES
 SOLO_MODULES = {"app/capture/test_capture_e2e.py", "test_readme.py", "app/capture/test_replay_reproduces_capture.py",
                 "app/capture/test_capture_wireless.py", "app/capture/test_capture_vr.py"}
 # ... in two lanes once both realtime lanes are done, one capture at a time in each: two captures at once ask
-# for ~1 of the 2 cores with the live step at ~6 ms (the lanes ~2:45 each; docs/testing.md)
+# for ~1 of the 2 cores with the live step at ~6 ms (the lanes 2:36-2:42 / 3:17-3:31; docs/testing.md)
 SOLO_SECOND = {"app/capture/test_capture_vr.py", "app/capture/test_capture_wireless.py", "test_readme.py"}
 assert SOLO_SECOND <= SOLO_MODULES
 

@@ -140,7 +140,6 @@ def run_batch(args: argparse.Namespace) -> int:
     need("pyarrow", "imucap batch (its summary.parquet)")
     from app.batch.executors import DaskCluster, LocalPool
     from app.batch.plan import common_root, find_inputs, output_folder
-    from app.batch.summary import write_summary
     from app.batch.task import Task, skipped, up_to_date
 
     options = _options(args)
@@ -187,35 +186,41 @@ def run_batch(args: argparse.Namespace) -> int:
         finally:
             progress.close()
             runner.close()
-        wall = time.perf_counter() - t0
         ordered = [results[t.recording] for t in tasks if t.recording in results]
-        written = write_summary(args.out, ordered)
-        done = [r for r in ordered if r["status"] == "done"]
-        motion_s = sum(float(r.get("motion_s") or 0.0) for r in done)
-        summary = {
-            "done": len(done), "skipped": sum(r["status"] == "skipped" for r in ordered),
-            "failed": [{"recording": r["recording"], "reason": r["reason"]}
-                       for r in ordered if r["status"] == "failed"],
-            "not_run": len(tasks) - len(ordered), "recordings": len(tasks),
-            "summary": [str(p) for p in written], "wall_s": round(wall, 2), "motion_s": round(motion_s, 2),
-            "motion_hours_per_hour": round(motion_s / wall, 2) if done and wall > 0 else None,
-            "cpu_s": round(sum(float(r.get("cpu_s") or 0.0) for r in done), 2),
-        }
-        if args.json:
-            print(json.dumps(summary))
-        else:
-            print(f"{summary['done']} done, {summary['skipped']} up to date, {len(summary['failed'])} failed"
-                  + (f", {summary['not_run']} not run (stopped)" if summary["not_run"] else "")
-                  + f"; {written[0]}")
-            for f in summary["failed"]:
-                print(f"  failed: {f['recording']}: {f['reason']}")
-        if broke is not None and not interrupts:
-            print(f"imucap batch: error: stopped by {broke}; {written[0]} holds the {len(ordered)} recording(s) "
-                  "finished; run the same command to finish", file=sys.stderr)
-            return 1
-        return 130 if interrupts else 0
+        return _report(args, ordered, len(tasks), time.perf_counter() - t0, broke, interrupted=interrupts > 0)
     finally:
         # once stopped by Ctrl-C there is nothing left to stop: one more, pressed while the interpreter
         # shuts down (torch and the pool take ~0.3 s; Python puts SIGINT back to its default there), would
         # end the process by the signal instead of the 130 it returns
         signal.signal(signal.SIGINT, signal.SIG_IGN if interrupts else old)
+
+
+def _report(args: argparse.Namespace, ordered: list[dict[str, Any]], n_tasks: int, wall: float, broke: str | None,
+            interrupted: bool) -> int:
+    """Write the summary of the recordings finished (in input order), print it, and give the exit code."""
+    from app.batch.summary import write_summary
+
+    written = write_summary(args.out, ordered)
+    done = [r for r in ordered if r["status"] == "done"]
+    motion_s = sum(float(r.get("motion_s") or 0.0) for r in done)
+    summary = {
+        "done": len(done), "skipped": sum(r["status"] == "skipped" for r in ordered),
+        "failed": [{"recording": r["recording"], "reason": r["reason"]} for r in ordered if r["status"] == "failed"],
+        "not_run": n_tasks - len(ordered), "recordings": n_tasks,
+        "summary": [str(p) for p in written], "wall_s": round(wall, 2), "motion_s": round(motion_s, 2),
+        "motion_hours_per_hour": round(motion_s / wall, 2) if done and wall > 0 else None,
+        "cpu_s": round(sum(float(r.get("cpu_s") or 0.0) for r in done), 2),
+    }
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(f"{summary['done']} done, {summary['skipped']} up to date, {len(summary['failed'])} failed"
+              + (f", {summary['not_run']} not run (stopped)" if summary["not_run"] else "")
+              + f"; {written[0]}")
+        for f in summary["failed"]:
+            print(f"  failed: {f['recording']}: {f['reason']}")
+    if broke is not None and not interrupted:
+        print(f"imucap batch: error: stopped by {broke}; {written[0]} holds the {len(ordered)} recording(s) "
+              "finished; run the same command to finish", file=sys.stderr)
+        return 1
+    return 130 if interrupted else 0

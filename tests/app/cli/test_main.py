@@ -4,14 +4,8 @@ from __future__ import annotations
 
 import signal
 
-import pytest
-
 from app.cli import data as cli_data
 from app.cli import main as cli_main
-
-
-def _parser_whose_inspect_does(monkeypatch: pytest.MonkeyPatch, action) -> None:
-    monkeypatch.setattr(cli_data, "_cmd_inspect", action)  # registered afresh by each main()
 
 
 def test_a_ctrl_c_a_command_does_not_handle_ends_with_130_and_one_line(monkeypatch, capsys):
@@ -19,7 +13,7 @@ def test_a_ctrl_c_a_command_does_not_handle_ends_with_130_and_one_line(monkeypat
         signal.raise_signal(signal.SIGINT)
         return 0
 
-    _parser_whose_inspect_does(monkeypatch, interrupted)
+    monkeypatch.setattr(cli_data, "_cmd_inspect", interrupted)  # registered afresh by each main()
     assert cli_main.main(["data", "inspect", "x.bvh"]) == 130
     err = capsys.readouterr().err
     assert err.strip() == "imucap data: interrupted"
@@ -29,6 +23,6 @@ def test_a_bad_input_ends_with_2_and_one_line(monkeypatch, capsys):
     def bad(args):  # noqa: ARG001
         raise FileNotFoundError("x.bvh: no such file")
 
-    _parser_whose_inspect_does(monkeypatch, bad)
+    monkeypatch.setattr(cli_data, "_cmd_inspect", bad)
     assert cli_main.main(["data", "inspect", "x.bvh"]) == 2
     assert capsys.readouterr().err.strip() == "imucap data: error: x.bvh: no such file"
