@@ -329,31 +329,46 @@ def _chain_distilled(model: nn.Module, ctx: StepContext, x: Tensor, xn: Tensor, 
     reaches is answered by the teacher's call at that state; the student's answers at all
     of them, stacked level by level (K*B windows), against the teacher's, the truth where
     known. Trained on its own states rather than the teacher's, a student's small errors
-    at one level are what its next call learns to take back (as it must live)."""
+    at one level are what its next call learns to take back (as it must live).
+
+    A student reading fewer frames than the teacher (``model.window < window``: the newest
+    of them, as ``with_window`` gives it live) has no state for the older frames the teacher
+    reads; there the teacher's own chain runs in step with the student's, so each teacher
+    call sees the student's state in the newest frames and its own before them, as it would
+    have live. Its answers then come a level at a time (the same arithmetic as one call)."""
     cfg = ctx.cfg
     if cfg.model.points or told:
         raise ValueError("distillation is for models without a position input or reading tokens")
-    if cfg.model.window != cfg.window:
-        raise ValueError("a chain student reads the teacher's whole window (model.window = window)")
+    if cfg.model.window > cfg.window:
+        raise ValueError(f"a chain student reads at most the teacher's {cfg.window} frames "
+                         f"(model.window {cfg.model.window})")
     B, N = x.shape[:2]
+    W = cfg.model.window
+    keep = slice(N - W, N)
     sch = ctx.schedule
     levels = parse_steps(cfg.student_steps, sch.T)
     m = torch.as_tensor(random_observation_mask(rng, B, N, cfg.mask))
+    mw, xw = m[:, keep], xm[:, keep]
+    teacher = ctx.teacher_mirror if cfg.teacher_mirror_chains else ctx.teacher
     z = torch.where(m, xm, torch.zeros(()))  # the mean start: ~0 at the top level
-    states = []
+    states, answers = [], []
     with torch.no_grad():
         for i, t in enumerate(levels):
-            states.append(z)
+            tt = torch.full((B,), t, dtype=torch.long)
+            states.append(z[:, keep])
+            if W < N:
+                answers.append(teacher(z, tt, height, m))
             if i + 1 == len(levels):
                 break
-            x0 = torch.where(m, xm, model(z, torch.full((B,), t, dtype=torch.long), height, m))
+            x0 = torch.where(mw, xw, model(z[:, keep], tt, height, mw))
+            if W < N:
+                x0 = torch.cat([torch.where(m, xm, answers[-1])[:, : N - W], x0], dim=1)
             z = torch.where(m, xm, ddim_step(sch, z, x0, t, levels[i + 1]))
         K = len(levels)
         zs = torch.cat(states)
         ts = torch.cat([torch.full((B,), t, dtype=torch.long) for t in levels])
-        hs, mk, xk = height.repeat(K), m.repeat(K, 1, 1), xn.repeat(K, 1, 1)
-        teacher = ctx.teacher_mirror if cfg.teacher_mirror_chains else ctx.teacher
-        answer = teacher(zs, ts, hs, mk)
+        hs, mk, xk = height.repeat(K), mw.repeat(K, 1, 1), xn[:, keep].repeat(K, 1, 1)
+        answer = torch.cat(answers)[:, keep] if W < N else teacher(zs, ts, hs, mk)
         if cfg.teacher_share != 1.0:
             answer = cfg.teacher_share * answer + (1.0 - cfg.teacher_share) * xk
         target = torch.where(mk, xk, answer)

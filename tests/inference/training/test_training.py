@@ -7,6 +7,7 @@ import math
 import os
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -828,8 +829,49 @@ def test_chain_distillation_trains_each_call_on_the_teachers_call_at_the_student
     assert main(["train", "--out", str(tmp_path / "small"), "--export", str(tmp_path / "s1.pt"), "--at-step", "1"]) != 0
     assert not (tmp_path / "s1.pt").exists()
     assert np.allclose(student.norm_mean, teacher.norm_mean) and np.allclose(student.norm_std, teacher.norm_std)
-    with pytest.raises(ValueError, match="whole window"):
-        run(with_window(teacher, 21).model, model={**masked, "window": 21})
+
+
+def test_a_chain_student_of_fewer_frames_is_answered_by_the_teacher_over_its_whole_window(tmp_path):
+    """A chain student reading the newest 21 of the teacher's 61 frames: its calls see 21
+    frames, the teacher's see 61 (its own chain in the older frames, the student's state in
+    the newest), one teacher call a level; the teacher reading 21 frames as its own student
+    learns something (the older frames' answers it does not see), and a run from the
+    teacher's file starts from its newest positions and writes a 21-frame model."""
+    from inference.model.diffusion import Schedule
+    from inference.training.loop import load_teacher
+
+    masked, teacher_file, teacher, batch, mean, std = _tiny_teacher(tmp_path)
+    short = {**masked, "window": 21}
+    cfg = _cfg(**{"cond_prob": 1.0, "model": short, "teacher": str(teacher_file), "student_steps": "10D:3",
+                  "augment_yaw": False, "augment_mirror": 0.0})
+    ctx = StepContext(cfg=cfg, mean=mean, std=std, schedule=Schedule.cosine(),
+                      teacher=load_teacher(cfg, teacher.norm_mean, teacher.norm_std))
+    calls = []
+
+    class Recording(torch.nn.Module):
+        def __init__(self, net, who):
+            super().__init__()
+            self.net, self.who = net, who
+
+        def forward(self, z, t, h, m):
+            calls.append((self.who, z.shape[0], z.shape[1], sorted(set(t.tolist()))))
+            return self.net(z, t, h, m)
+
+    ctx.teacher = Recording(ctx.teacher, "teacher")
+    loss, terms = batch_loss(Recording(with_window(teacher, 21).model, "student"), batch, ctx,
+                             np.random.default_rng(1), torch.Generator().manual_seed(1))
+    assert calls == [("teacher", 4, 61, [1000]), ("student", 4, 21, [1000]), ("teacher", 4, 61, [400]),
+                     ("student", 4, 21, [400]), ("teacher", 4, 61, [0]), ("student", 12, 21, [0, 400, 1000])]
+    assert np.isfinite(float(loss.detach())) and terms["simple"] > 0
+    too_long = _cfg(**{"cond_prob": 1.0, "model": {**masked, "window": 81}, "teacher": str(teacher_file),
+                       "student_steps": "10D:3"})
+    with pytest.raises(ValueError, match="reads"):
+        batch_loss(teacher.model, batch, replace(ctx, cfg=too_long), np.random.default_rng(1),
+                   torch.Generator().manual_seed(1))
+    res = train(_cfg(steps=2, cond_prob=1.0, model=short, teacher=str(teacher_file), student_steps="10D:3",
+                     infer_steps="10D:3"), tmp_path / "short", progress=False, init_from=teacher_file)
+    student = load_model(tmp_path / "short" / "model.pt")
+    assert res.step == 2 and student.config.window == 21 and student.config.d_model == teacher.config.d_model
 
 
 def test_distillation_from_mirror_chains_targets_both_chains_averaged(tmp_path):
