@@ -28,8 +28,10 @@ sensor, and each left-out segment is compared with what its own sensor measured:
 ``held_out`` (log -> set -> ``deg`` per left-out site, ``mean_deg``, ``frames``; ``phases``:
 walking / turning / standing / other -> ``seconds`` and ``deg``; ``constant_deg`` and
 ``dynamic_deg``: the mean rotation between reconstruction and sensor and the error left
-after it), and with --against the same for that model under ``against.held_out``.
---sensors does not apply to it.
+after it), and with --against the same for that model under ``against.held_out`` and, per log,
+set and left-out site, --model minus it with a percentile bootstrap interval over 2 s blocks
+of the log (``against.held_out_differences``: one take's frames are not independent, so a
+block of about two strides stands in for a clip). --sensors does not apply to it.
 
 --against SPEC scores a second model on the same clips, sensors and noise, and adds
 ``against``: its figures and, for GA, LA, JPE and the papers' metrics, --model minus it with a percentile
@@ -276,13 +278,10 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError("--data @real alone takes no --report, --export-dir or --confidence (no truth)")
         result = {"clips": 0, "frames": 0, **{k: None for k in ("ga_deg", "la_deg", "jpe_cm", "jitter_ratio",
                                                                 "re2_m", "re5_m", "re10_m")},
-                  "segments": None, "model": str(args.model), "seed": args.seed,
-                  "held_out": real_held_out(args.model, args.seed, progress, args.answer_lag,
-                                 args.knee_twist)}
+                  "segments": None, "model": str(args.model), "seed": args.seed}
         if args.against is not None:
-            result["against"] = {"model": str(args.against),
-                                 "held_out": real_held_out(args.against, args.seed, progress, args.answer_lag,
-                                 args.knee_twist)}
+            result["against"] = {"model": str(args.against)}
+        _score_real(result, args, progress)
         result["seconds"] = round(time.time() - t0, 2)
         _print_real(result, args.json)
         return 0
@@ -421,11 +420,7 @@ def run(args: argparse.Namespace) -> int:
         result["report"] = {"path": str(args.report), "rows": rows, "comparisons": comparisons}
 
     if real:
-        result["held_out"] = real_held_out(args.model, args.seed, progress, args.answer_lag,
-                                 args.knee_twist)
-        if args.against is not None:
-            result["against"]["held_out"] = real_held_out(args.against, args.seed, progress, args.answer_lag,
-                                 args.knee_twist)
+        _score_real(result, args, progress)
     result["seconds"] = round(time.time() - t0, 2)
     if args.json:
         print(json.dumps(result))
@@ -447,6 +442,20 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _score_real(result: dict, args: argparse.Namespace, progress: bool) -> None:
+    """``held_out`` of the real logs for --model, and with --against its own and, per log,
+    set and left-out site, the difference with a block bootstrap interval
+    (``held_out_differences``: app/evaluation/real.py, ``compare_held_out``)."""
+    from app.evaluation.real import compare_held_out, drop_frame_errors
+
+    mine = real_held_out(args.model, args.seed, progress, args.answer_lag, args.knee_twist)
+    result["held_out"] = drop_frame_errors(mine)
+    if args.against is not None:
+        theirs = real_held_out(args.against, args.seed, progress, args.answer_lag, args.knee_twist)
+        result["against"]["held_out"] = drop_frame_errors(theirs)
+        result["against"]["held_out_differences"] = compare_held_out(mine, theirs, seed=args.seed)
+
+
 def _print_real(result: dict, as_json: bool) -> None:
     if as_json:
         print(json.dumps(result))
@@ -454,8 +463,16 @@ def _print_real(result: dict, as_json: bool) -> None:
     for name, sets in result["held_out"].items():
         for label, r in sets.items():
             other = result.get("against", {}).get("held_out", {}).get(name, {}).get(label)
-            cells = ", ".join(f"{s} {v}" + (f" (against {other['deg'][s]})" if other else "")
-                              for s, v in r["deg"].items())
+            diff = result.get("against", {}).get("held_out_differences", {}).get(name, {}).get(label, {})
+
+            def cell(s: str, v: float) -> str:
+                if not other:
+                    return f"{s} {v}"
+                d = diff.get(s)
+                ci = f", {d['difference']:+.2f} [{d['low']:+.2f}, {d['high']:+.2f}]" if d else ""
+                return f"{s} {v} (against {other['deg'][s]}{ci})"
+
+            cells = ", ".join(cell(s, v) for s, v in r["deg"].items())
             print(f"{name} {label}: {cells}; mean {r['mean_deg']} deg over {r['frames']} frames")
             if "constant_deg" in r:
                 print("  constant / dynamic: " + ", ".join(f"{s} {r['constant_deg'][s]} / {r['dynamic_deg'][s]}"

@@ -57,6 +57,12 @@ OPENSENSE_MAP: dict[str, str] = {
 }
 EXPORT_SUFFIXES = (".txt", ".csv", ".tsv")
 
+# where ``split_errors`` keeps each site's per-frame errors (site -> {"t", "deg"})
+FRAMES_KEY = "frame_errors"
+
+# the block a comparison of two models on one log resamples: about two strides
+BLOCK_SECONDS = 2.0
+
 
 @dataclass(frozen=True)
 class RealLog:
@@ -128,13 +134,16 @@ def split_errors(poses: Sequence[Any], measured: Sequence[Any], sites: Sequence[
     """Per left-out site, over the frames ``held_out_errors`` pairs (both replays at the
     same time, the site delivered): ``phases`` (phase -> seconds of paired frames and deg
     per site, None where the phase has no frame), ``constant_deg`` and ``dynamic_deg``
-    (``constant_and_dynamic``). ``phase_of(t)`` labels the pose times."""
+    (``constant_and_dynamic``), and under ``FRAMES_KEY`` each site's per-frame errors with
+    their times, for a paired comparison of two models (``compare_held_out``; not written
+    out). ``phase_of(t)`` labels the pose times."""
     by_t = {round(lp.t, 6): lp for lp in measured}
     pairs = [(lp, by_t[round(lp.t, 6)]) for lp in poses if round(lp.t, 6) in by_t]
     labels = phase_of(np.array([a.t for a, _ in pairs])) if pairs else np.array([], dtype=str)
     phases: dict[str, Any] = {p: {"seconds": round(float(np.sum(labels == p)) / fps, 2), "deg": {}} for p in PHASES}
     constant: dict[str, float | None] = {}
     dynamic: dict[str, float | None] = {}
+    frames: dict[str, dict[str, list[float]]] = {}
     for s in sites:
         k, seg = SITE_INDEX[s], SITE_SEGMENT_INDEX[SITE_INDEX[s]]
         use = np.array([b.observed_sites[k] for _, b in pairs], dtype=bool)
@@ -152,7 +161,8 @@ def split_errors(poses: Sequence[Any], measured: Sequence[Any], sites: Sequence[
             phases[p]["deg"][s] = round(float(np.mean(err[m])), 2) if m.any() else None
         c, d = constant_and_dynamic(Ra, Rb)
         constant[s], dynamic[s] = round(c, 2), round(d, 2)
-    return {"phases": phases, "constant_deg": constant, "dynamic_deg": dynamic}
+        frames[s] = {"t": [round(pairs[i][0].t, 6) for i in np.flatnonzero(use)], "deg": err.tolist()}
+    return {"phases": phases, "constant_deg": constant, "dynamic_deg": dynamic, FRAMES_KEY: frames}
 
 
 def score_recording(rec: Recording, model: str = "diffusion", seed: int = 0,
@@ -203,6 +213,44 @@ def score_logs(logs: Sequence[RealLog], import_log: ImportFn, model: str = "diff
     return out
 
 
+def compare_held_out(held_out: dict[str, Any], against: dict[str, Any], block_s: float = BLOCK_SECONDS,
+                     seed: int = 0, fps: float = FPS_MODEL) -> dict[str, Any]:
+    """log -> set -> site -> the error of ``held_out`` minus ``against``'s (deg) on the
+    frames both scored, with a paired bootstrap interval over ``block_s`` blocks of the log
+    (``paired_block_difference``: one take's frames are not independent) and ``decided``
+    when it excludes zero. Both must keep their per-frame errors (``FRAMES_KEY``)."""
+    from inference.metrics.errors import paired_block_difference
+
+    block = max(1, int(round(block_s * fps)))
+    out: dict[str, Any] = {}
+    for log, sets in held_out.items():
+        for label, r in sets.items():
+            other = against.get(log, {}).get(label)
+            if other is None:
+                continue
+            for site, fa in r.get(FRAMES_KEY, {}).items():
+                fb = other.get(FRAMES_KEY, {}).get(site)
+                if fb is None:
+                    continue
+                tb = {t: i for i, t in enumerate(fb["t"])}
+                both = [(i, tb[t]) for i, t in enumerate(fa["t"]) if t in tb]
+                if not both:
+                    continue
+                ia, ib = np.array(both).T
+                d = paired_block_difference(np.asarray(fa["deg"])[ia], np.asarray(fb["deg"])[ib], block, seed=seed)
+                row = {k: round(v, 2) if isinstance(v, float) else v for k, v in d.as_dict().items()}
+                row["blocks"] = row.pop("clips")
+                row["model_lower"] = row.pop("model_lower")
+                out.setdefault(log, {}).setdefault(label, {})[site] = row
+    return out
+
+
+def drop_frame_errors(held_out: dict[str, Any]) -> dict[str, Any]:
+    """``held_out`` without the per-frame errors (what is written out)."""
+    return {log: {label: {k: v for k, v in r.items() if k != FRAMES_KEY} for label, r in sets.items()}
+            for log, sets in held_out.items()}
+
+
 def mean_over(held_out: dict[str, Any], label: str) -> dict[str, float] | None:
     """Site -> error (deg) of set ``label``, averaged over the logs that scored it."""
     per: dict[str, list[float]] = {}
@@ -213,5 +261,6 @@ def mean_over(held_out: dict[str, Any], label: str) -> dict[str, float] | None:
     return {s: round(float(np.mean(v)), 2) for s, v in per.items()} or None
 
 
-__all__ = ["OPENSENSE_MAP", "REAL_SETS", "RealLog", "held_out_sets", "mean_over", "real_logs", "recording_phases",
+__all__ = ["BLOCK_SECONDS", "FRAMES_KEY", "OPENSENSE_MAP", "REAL_SETS", "RealLog", "compare_held_out",
+           "drop_frame_errors", "held_out_sets", "mean_over", "real_logs", "recording_phases",
            "score_logs", "score_recording", "split_errors"]

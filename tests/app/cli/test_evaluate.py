@@ -262,10 +262,15 @@ def test_real_set_scores_the_held_out_sites_of_each_real_log(capsys):
 
     if not real_logs(data_root()):
         pytest.skip("no real x-IMU3 log under the data folder")
-    code, out, _ = _run(capsys, "--data", "@real", "--model", "floor", "--json")
+    code, out, _ = _run(capsys, "--data", "@real", "--model", "floor", "--against", "floor", "--json")
     res = json.loads(out)
     assert code == 0 and res["clips"] == 0 and res["ga_deg"] is None
     sets = res["held_out"]["ximu3/logged_lower_body"]
+    # against itself: every left-out site differs by nothing, settled nowhere; no per-frame errors written
+    diff = res["against"]["held_out_differences"]["ximu3/logged_lower_body"]["pelvis+shanks"]
+    assert set(diff) == set(sets["pelvis+shanks"]["deg"]) and diff["l_thigh"]["blocks"] >= 8
+    assert all(d["difference"] == 0.0 and not d["decided"] for d in diff.values())
+    assert "frame_errors" not in sets["pelvis+shanks"] and "frame_errors" not in out
     assert set(sets["pelvis+shanks"]["deg"]) == {"l_thigh", "r_thigh", "l_foot", "r_foot"}
     # a standing pose is far from a walk's thighs: the scoring sees the motion
     assert sets["pelvis+shanks"]["deg"]["l_thigh"] > 10.0 and sets["pelvis+shanks"]["frames"] > 300

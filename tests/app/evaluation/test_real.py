@@ -9,7 +9,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from app.evaluation.real import OPENSENSE_MAP, REAL_SETS, held_out_sets, mean_over, real_logs, split_errors
+from app.evaluation.real import (FRAMES_KEY, OPENSENSE_MAP, REAL_SETS, compare_held_out, drop_frame_errors,
+                                 held_out_sets, mean_over, real_logs, split_errors)
 from inference.body.rotations import matrix_about_axis
 from inference.body.skeleton import N_SITES, SEGMENT_INDEX, SITE_INDEX
 from inference.metrics.errors import evaluate_clip, segment_errors
@@ -90,6 +91,33 @@ def test_split_errors_by_phase_and_into_constant_and_dynamic():
     assert out["constant_deg"]["l_thigh"] == pytest.approx(12.5, abs=0.1)  # the mean offset
     assert out["dynamic_deg"]["l_thigh"] == pytest.approx((30 * 2.5 + 10 * 7.5) / 40, abs=0.1)
     assert out["constant_deg"]["r_thigh"] is None
+
+
+def test_two_models_on_one_log_differ_by_a_block_bootstrap_over_its_frames():
+    """A model 1 deg worse on every frame is settled worse; one whose difference swings with
+    the stride (+-3 deg, mean 0.2) is not, though a bootstrap over single frames would call
+    it (the frames of a take are not independent); frames only one model scored are left out."""
+    t = np.round(np.arange(400) / 20.0, 6)
+    base = 8.0 + 2.0 * np.sin(t * 2.0)
+    swing = 0.2 + 3.0 * np.sin(2 * np.pi * t / 8.0)
+
+    def held(err, keep=slice(None)):
+        return {"log": {"pelvis+shanks": {"deg": {}, FRAMES_KEY: {"l_thigh": {"t": t[keep].tolist(),
+                                                                             "deg": err[keep].tolist()}}}}}
+
+    worse = compare_held_out(held(base + 1.0), held(base))["log"]["pelvis+shanks"]["l_thigh"]
+    assert worse["difference"] == pytest.approx(1.0) and worse["decided"] and worse["low"] > 0.9
+    assert worse["blocks"] == 10 and worse["model_lower"] == 0
+    unsure = compare_held_out(held(base + swing), held(base))["log"]["pelvis+shanks"]["l_thigh"]
+    assert unsure["low"] < 0 < unsure["high"] and not unsure["decided"]
+    from scipy.stats import bootstrap
+
+    per_frame = bootstrap((swing,), np.mean, confidence_level=0.95, rng=np.random.default_rng(0)).confidence_interval
+    assert per_frame.low > 0 or unsure["high"] - unsure["low"] > 2 * (per_frame.high - per_frame.low)
+    part = compare_held_out(held(base + 1.0, slice(100, None)), held(base))["log"]["pelvis+shanks"]["l_thigh"]
+    assert part["blocks"] == 8 and part["difference"] == pytest.approx(1.0)
+    assert compare_held_out(held(base), {"other": {}}) == {}
+    assert FRAMES_KEY not in drop_frame_errors(held(base))["log"]["pelvis+shanks"]
 
 
 def test_held_out_sets_need_every_site_and_something_left_over():

@@ -187,3 +187,17 @@ def test_ga_is_also_given_over_the_frames_whose_truth_a_body_can_make():
     assert cm.implausible == 4 and s["implausible_truth_share"] == pytest.approx(0.4)
     assert s["ga_deg"] == pytest.approx(0.4 * 180.0 / len(EVAL_SEGMENTS))
     assert s["ga_deg_plausible_truth"] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_paired_block_difference_resamples_whole_blocks_and_names_bad_input():
+    """Blocks of 40 frames, the last one shorter; a constant difference has nothing to
+    resample; series of different lengths are refused."""
+    from inference.metrics.errors import paired_block_difference
+
+    a = np.linspace(5.0, 9.0, 90)
+    d = paired_block_difference(a + 0.5, a, 40)
+    assert d.clips == 3 and d.difference == pytest.approx(0.5) and d.low == d.high == pytest.approx(0.5)
+    noisy = paired_block_difference(a + np.random.default_rng(0).normal(0, 1, 90), a, 10)
+    assert noisy.clips == 9 and noisy.low < noisy.difference < noisy.high
+    with pytest.raises(ValueError, match="same"):
+        paired_block_difference(a, a[:-1], 40)
