@@ -23,8 +23,9 @@ WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
 DEFAULT_WEIGHTS: dict[str, Path] = {
     "diffusion": WEIGHTS_DIR / "diffusionposer.pt",
     "regressor": WEIGHTS_DIR / "regressor.pt",
-    # a narrow network that runs the default's three-level chain at about a third of its compute
-    # per pose, for a laptop the default does not keep up on; it costs accuracy (MODEL_CARD.md)
+    # the default's network over its newest 21 frames without mirror averaging: the same three-level
+    # chain at about a third of its compute per pose, for a laptop the default does not keep up on;
+    # it costs a little accuracy (MODEL_CARD.md)
     "fast": WEIGHTS_DIR / "diffusionposer_fast.pt",
 }
 
