@@ -456,6 +456,14 @@ def _score_real(result: dict, args: argparse.Namespace, progress: bool) -> None:
         result["against"]["held_out_differences"] = compare_held_out(mine, theirs, seed=args.seed)
 
 
+def _real_cell(site: str, deg: float, other: dict | None, diff: dict | None) -> str:
+    """One left-out site of the text output: its error, the other model's, and the difference's interval."""
+    if not other:
+        return f"{site} {deg}"
+    ci = f", {diff['difference']:+.2f} [{diff['low']:+.2f}, {diff['high']:+.2f}]" if diff else ""
+    return f"{site} {deg} (against {other['deg'][site]}{ci})"
+
+
 def _print_real(result: dict, as_json: bool) -> None:
     if as_json:
         print(json.dumps(result))
@@ -465,14 +473,7 @@ def _print_real(result: dict, as_json: bool) -> None:
             other = result.get("against", {}).get("held_out", {}).get(name, {}).get(label)
             diff = result.get("against", {}).get("held_out_differences", {}).get(name, {}).get(label, {})
 
-            def cell(s: str, v: float) -> str:
-                if not other:
-                    return f"{s} {v}"
-                d = diff.get(s)
-                ci = f", {d['difference']:+.2f} [{d['low']:+.2f}, {d['high']:+.2f}]" if d else ""
-                return f"{s} {v} (against {other['deg'][s]}{ci})"
-
-            cells = ", ".join(cell(s, v) for s, v in r["deg"].items())
+            cells = ", ".join(_real_cell(s, v, other, diff.get(s)) for s, v in r["deg"].items())
             print(f"{name} {label}: {cells}; mean {r['mean_deg']} deg over {r['frames']} frames")
             if "constant_deg" in r:
                 print("  constant / dynamic: " + ", ".join(f"{s} {r['constant_deg'][s]} / {r['dynamic_deg'][s]}"

@@ -9,8 +9,17 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from app.evaluation.real import (FRAMES_KEY, OPENSENSE_MAP, REAL_SETS, compare_held_out, drop_frame_errors,
-                                 held_out_sets, mean_over, real_logs, split_errors)
+from app.evaluation.real import (
+    FRAMES_KEY,
+    OPENSENSE_MAP,
+    REAL_SETS,
+    compare_held_out,
+    drop_frame_errors,
+    held_out_sets,
+    mean_over,
+    real_logs,
+    split_errors,
+)
 from inference.body.rotations import matrix_about_axis
 from inference.body.skeleton import N_SITES, SEGMENT_INDEX, SITE_INDEX
 from inference.metrics.errors import evaluate_clip, segment_errors
