@@ -61,6 +61,10 @@ class LossWeights:
     # thigh and shortens the stride the root correction walks (docs/model.md, "Losses");
     # this term compares amplitudes, not positions, so it pulls the other way
     swing: float = 0.0
+    # a chain student's answer to each state's mirror image against the mirror of its answer
+    # (normalised features, the unknown entries): a student that answers one window a pose
+    # has no mirror pair to cancel a left/right bias of its own (docs/model.md, "The fast model")
+    mirror: float = 0.0
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -250,9 +250,10 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
         told = (reading,)
     unmasked = (None, *told) if told else ()  # the mask argument a mask-blind model is given
     m = None  # known entries, where the model is told them
+    extra_terms: dict[str, Tensor] = {}  # loss terms beyond the motion's (a chain student's mirror term)
     if cfg.kind == "diffusion" and ctx.teacher is not None:
         distil = _chain_distilled if cfg.student_steps else _distilled
-        pred, xn, m = distil(model, ctx, x, xn, xm, height, rng, told)
+        pred, xn, m, extra_terms = distil(model, ctx, x, xn, xm, height, rng, told)
         if pred.shape[0] != B:  # one window per level of the student's chain
             reps = pred.shape[0] // B
             offsets, contact_local = offsets.repeat(reps, 1, 1), contact_local.repeat(reps, 1, 1)
@@ -287,12 +288,13 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
         pred = model(torch.where(m, xm, torch.zeros(())), m, height)
     gate = sites_known_share(m, cfg.swing_gate) if cfg.swing_gate and m is not None else None
     terms = motion_losses(pred, xn, ctx.mean, ctx.std, offsets, contact_local, gate, cfg.answer_lag)
+    terms.update(extra_terms)
     loss = total_loss(terms, cfg.loss)
     return loss, {k: float(v.detach()) for k, v in terms.items()}
 
 
 def _distilled(model: nn.Module, ctx: StepContext, x: Tensor, xn: Tensor, xm: Tensor, height: Tensor,
-               rng: np.random.Generator, told: tuple) -> tuple[Tensor, Tensor, Tensor]:
+               rng: np.random.Generator, told: tuple) -> tuple[Tensor, Tensor, Tensor, dict[str, Tensor]]:
     """One distillation batch: (the student's answer, its target, the known entries), each
     over the student's window (the newest ``cfg.model.window`` frames). The target is the
     teacher's chain on the whole window where unknown (mixed with the truth by
@@ -319,11 +321,11 @@ def _distilled(model: nn.Module, ctx: StepContext, x: Tensor, xn: Tensor, xm: Te
     keep = slice(N - cfg.model.window, N)
     t = torch.full((B,), ctx.schedule.T, dtype=torch.long)
     out = model(start[:, keep], t, height, m[:, keep])
-    return torch.where(m[:, keep], xn[:, keep], out), target[:, keep], m[:, keep]
+    return torch.where(m[:, keep], xn[:, keep], out), target[:, keep], m[:, keep], {}
 
 
 def _chain_distilled(model: nn.Module, ctx: StepContext, x: Tensor, xn: Tensor, xm: Tensor, height: Tensor,
-                     rng: np.random.Generator, told: tuple) -> tuple[Tensor, Tensor, Tensor]:
+                     rng: np.random.Generator, told: tuple) -> tuple[Tensor, Tensor, Tensor, dict[str, Tensor]]:
     """One batch of chain distillation (``TrainConfig.student_steps``): the student runs its
     own chain (mean start, known entries replaced, deterministic DDIM), and each state it
     reaches is answered by the teacher's call at that state; the student's answers at all
@@ -373,7 +375,13 @@ def _chain_distilled(model: nn.Module, ctx: StepContext, x: Tensor, xn: Tensor, 
             answer = cfg.teacher_share * answer + (1.0 - cfg.teacher_share) * xk
         target = torch.where(mk, xk, answer)
     out = model(zs, ts, hs, mk)
-    return torch.where(mk, xk, out), target, mk
+    extra: dict[str, Tensor] = {}
+    if cfg.loss.mirror > 0:
+        # the student's answer to each state's mirror image, mirrored back, against its own answer
+        op = ctx.teacher_mirror
+        back = op.mirror(model(op.mirror(zs), ts, hs, mk[..., op.idx]))
+        extra["mirror"] = (out - back).square().mul(~mk).sum() / (~mk).sum().clamp(min=1)
+    return torch.where(mk, xk, out), target, mk, extra
 
 
 def teacher_normaliser(cfg: TrainConfig) -> tuple[np.ndarray, np.ndarray]:

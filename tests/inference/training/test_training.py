@@ -862,7 +862,18 @@ def test_a_chain_student_of_fewer_frames_is_answered_by_the_teacher_over_its_who
                              np.random.default_rng(1), torch.Generator().manual_seed(1))
     assert calls == [("teacher", 4, 61, [1000]), ("student", 4, 21, [1000]), ("teacher", 4, 61, [400]),
                      ("student", 4, 21, [400]), ("teacher", 4, 61, [0]), ("student", 12, 21, [0, 400, 1000])]
-    assert np.isfinite(float(loss.detach())) and terms["simple"] > 0
+    assert np.isfinite(float(loss.detach())) and terms["simple"] > 0 and "mirror" not in terms
+    # the mirror term: a student answering every window as the mirror of its mirror image's answer
+    # (the teacher averaged with its mirror image, call by call) has nothing to learn from it
+    from inference.features.mirror import MirrorAveraged
+
+    mirrored = replace(ctx, cfg=replace(cfg, loss=replace(cfg.loss, mirror=1.0)), teacher=ctx.teacher.net)
+    student = with_window(teacher, 21).model
+    _, terms = batch_loss(student, batch, mirrored, np.random.default_rng(1), torch.Generator().manual_seed(1))
+    assert terms["mirror"] > 1e-6
+    _, terms = batch_loss(MirrorAveraged(student, mean.numpy(), std.numpy()), batch, mirrored,
+                          np.random.default_rng(1), torch.Generator().manual_seed(1))
+    assert terms["mirror"] < 1e-10
     too_long = _cfg(**{"cond_prob": 1.0, "model": {**masked, "window": 81}, "teacher": str(teacher_file),
                        "student_steps": "10D:3"})
     with pytest.raises(ValueError, match="reads"):
