@@ -472,7 +472,6 @@ def _print_real(result: dict, as_json: bool) -> None:
         for label, r in sets.items():
             other = result.get("against", {}).get("held_out", {}).get(name, {}).get(label)
             diff = result.get("against", {}).get("held_out_differences", {}).get(name, {}).get(label, {})
-
             cells = ", ".join(_real_cell(s, v, other, diff.get(s)) for s, v in r["deg"].items())
             print(f"{name} {label}: {cells}; mean {r['mean_deg']} deg over {r['frames']} frames")
             if "constant_deg" in r:

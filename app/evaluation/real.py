@@ -240,7 +240,6 @@ def compare_held_out(held_out: dict[str, Any], against: dict[str, Any], block_s:
                 d = paired_block_difference(np.asarray(fa["deg"])[ia], np.asarray(fb["deg"])[ib], block, seed=seed)
                 row = {k: round(v, 2) if isinstance(v, float) else v for k, v in d.as_dict().items()}
                 row["blocks"] = row.pop("clips")
-                row["model_lower"] = row.pop("model_lower")
                 out.setdefault(log, {}).setdefault(label, {})[site] = row
     return out
 

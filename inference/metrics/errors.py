@@ -295,7 +295,6 @@ def paired_difference(a: list[ClipMetrics], b: list[ClipMetrics], metric: str = 
     return PairedDifference(metric, diff, low, high, confidence, len(a), int(np.sum(ma < mb)))
 
 
-
 def paired_block_difference(a: np.ndarray, b: np.ndarray, block: int, confidence: float = 0.95,
                             n_resamples: int = 4000, seed: int = 0) -> PairedDifference:
     """mean(a) - mean(b) of two per-frame error series of one recording, paired frame by
