@@ -89,19 +89,13 @@ class Denoiser(nn.Module):
         return torch.stack([step, body], dim=1)
 
     def forward(self, z: Tensor, t: Tensor, height: Tensor, mask: Tensor | None = None,
-                reading: Tensor | None = None, points: Tensor | None = None, rows: int | None = None) -> Tensor:
+                reading: Tensor | None = None, points: Tensor | None = None) -> Tensor:
         """z (B, N, F) noised window, t (B,) int levels, height (B,) metres -> x0 (B, N, F).
         mask (B, N, F) bool, True = known: read only by ``mask_input`` models (None there
         means nothing is known: unconditional generation). reading (B,) int indices of
         READINGS for models with ``readings``; None = the model's own ``reading``.
         points (B, N, 16) or (1, N, 16): tracked points' position input for models with
-        ``points`` (None: none tracked).
-
-        rows: answer only the window's newest ``rows`` frames (B, rows, F), in eval mode
-        without autograd. The last layer is then computed for those frames' tokens alone
-        (every frame still feeds its attention), which is exact: a live step's last level
-        is read at its newest frame (and the late answer's few before it), so the other
-        frames' last layer, norm and output projection are work thrown away."""
+        ``points`` (None: none tracked)."""
         n = z.shape[1]
         cond = self.cond_tokens(t, height, reading)
         inp = z
@@ -113,16 +107,10 @@ class Denoiser(nn.Module):
             frames = frames + self.points_proj(points.to(frames.dtype))
         tokens = torch.cat([cond, frames], dim=1) + self.pos[:, : n + 2]
         if self.training or torch.is_grad_enabled():
-            if rows is not None:
-                raise ValueError("rows is an inference shortcut: call the model in eval mode without autograd")
-            h = self.decoder(tokens, cond)[:, 2:]
+            h = self.decoder(tokens, cond)
         else:
-            h = self._lean_decoder(tokens, cond, rows)
-            if rows is None:
-                h = h[:, 2:]
-        if rows is not None:
-            inp, z = inp[:, -rows:], z[:, -rows:]
-        out = self.out_proj(self.norm(h))
+            h = self._lean_decoder(tokens, cond)
+        out = self.out_proj(self.norm(h[:, 2:]))
         if self.config.bypass:
             out = out + self.bypass(inp)
         if self.config.skip:
@@ -131,45 +119,31 @@ class Denoiser(nn.Module):
             out = a * z.to(out.dtype) + b * out
         return out
 
-    def _lean_decoder(self, x: Tensor, mem: Tensor, rows: int | None = None) -> Tensor:
+    def _lean_decoder(self, x: Tensor, mem: Tensor) -> Tensor:
         """The decoder stack in eval mode, written out with the layers' own weights.
 
         Same maths as ``nn.TransformerDecoder`` with norm_first layers (a test pins it),
         but about half the per-call time for live-size models on CPU: nn.MultiheadAttention
         spends more time in argument checks and reshapes than in arithmetic for a
         63-token window, and the live loop calls the model K times per 50 ms frame.
-
-        rows: the last layer for the newest ``rows`` tokens alone, which are returned
-        (B, rows, d); None returns every token (B, L, d).
         """
         B, L, d = x.shape
         heads = self.config.heads
         hd = d // heads
-        last = len(self.decoder.layers) - 1
-        for i, layer in enumerate(self.decoder.layers):
+        for layer in self.decoder.layers:
             sa, ca = layer.self_attn, layer.multihead_attn
             # self-attention over [step, height, frames]
             y = F.layer_norm(x, (d,), layer.norm1.weight, layer.norm1.bias, layer.norm1.eps)
-            if rows is not None and i == last:
-                # the newest tokens ask, every token answers
-                w, b = sa.in_proj_weight, sa.in_proj_bias
-                x = x[:, -rows:]
-                q = F.linear(y[:, -rows:], w[:d], b[:d]).view(B, rows, heads, hd).transpose(1, 2)
-                kv = F.linear(y, w[d:], b[d:]).view(B, L, 2, heads, hd).permute(2, 0, 3, 1, 4)
-                a = F.scaled_dot_product_attention(q, kv[0], kv[1])
-                x = x + F.linear(a.transpose(1, 2).reshape(B, rows, d), sa.out_proj.weight, sa.out_proj.bias)
-            else:
-                qkv = F.linear(y, sa.in_proj_weight, sa.in_proj_bias).view(B, L, 3, heads, hd).permute(2, 0, 3, 1, 4)
-                a = F.scaled_dot_product_attention(qkv[0], qkv[1], qkv[2])
-                x = x + F.linear(a.transpose(1, 2).reshape(B, L, d), sa.out_proj.weight, sa.out_proj.bias)
-            n = x.shape[1]
+            qkv = F.linear(y, sa.in_proj_weight, sa.in_proj_bias).view(B, L, 3, heads, hd).permute(2, 0, 3, 1, 4)
+            a = F.scaled_dot_product_attention(qkv[0], qkv[1], qkv[2])
+            x = x + F.linear(a.transpose(1, 2).reshape(B, L, d), sa.out_proj.weight, sa.out_proj.bias)
             # cross-attention to the two memory tokens
             y = F.layer_norm(x, (d,), layer.norm2.weight, layer.norm2.bias, layer.norm2.eps)
             w, b = ca.in_proj_weight, ca.in_proj_bias
-            q = F.linear(y, w[:d], b[:d]).view(B, n, heads, hd).transpose(1, 2)
+            q = F.linear(y, w[:d], b[:d]).view(B, L, heads, hd).transpose(1, 2)
             kv = F.linear(mem, w[d:], b[d:]).view(B, -1, 2, heads, hd).permute(2, 0, 3, 1, 4)
             a = F.scaled_dot_product_attention(q, kv[0], kv[1])
-            x = x + F.linear(a.transpose(1, 2).reshape(B, n, d), ca.out_proj.weight, ca.out_proj.bias)
+            x = x + F.linear(a.transpose(1, 2).reshape(B, L, d), ca.out_proj.weight, ca.out_proj.bias)
             # feed-forward
             y = F.layer_norm(x, (d,), layer.norm3.weight, layer.norm3.bias, layer.norm3.eps)
             x = x + layer.linear2(F.gelu(layer.linear1(y)))

@@ -228,7 +228,7 @@ INPAINT_STARTS = ("sample", "mean")
 def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequence[int],
             generator: torch.Generator | None = None, schedule: Schedule | None = None,
             mode: str = "paper", mask_input: bool | None = None, start: str = "sample",
-            points: Tensor | None = None, last=None) -> Tensor:
+            points: Tensor | None = None) -> Tensor:
     """Inpaint the unobserved features of a window (the paper's Algorithm 1).
 
     x_input: (B, N, F) normalised features; unobserved entries hold an initial guess (the
@@ -264,10 +264,6 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
     for a traced model, which has no config). ``points`` (B or 1, N, 16): the tracked
     points' position input of a model that takes one (``ModelConfig.points``).
 
-    ``last``: the network of the final call, answering the window's newest frames alone
-    (an ``OnnxNet`` with ``rows``); the result is then (B, rows, F). Only the live runtime's
-    path takes it (a network with ``run_np``, "replace-ddim" from the mean, no points).
-
     One model call per step; per step cost beyond the model is a few elementwise ops.
     """
     schedule = schedule or Schedule.cosine()
@@ -280,11 +276,7 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
         use_mask = wants_mask(model) if mask_input is None else mask_input
         return torch.from_numpy(_replace_ddim_mean_np(
             run_np, x_input.detach().float().numpy(), m_np.astype(bool, copy=False),
-            height.detach().float().numpy(), steps, schedule, use_mask,
-            last=None if last is None else (last.run_np, last.rows)))
-    if last is not None:
-        raise ValueError("a final call on the newest frames alone is the live runtime's path: a network with "
-                         "run_np, replace-ddim from the mean, no points")
+            height.detach().float().numpy(), steps, schedule, use_mask))
 
     def draw(first: bool) -> Tensor:
         if first and start == "mean":
@@ -334,24 +326,17 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
 
 
 def _replace_ddim_mean_np(run, x_input: np.ndarray, mask: np.ndarray, height: np.ndarray, steps: Sequence[int],
-                          schedule: Schedule, use_mask: bool, last=None) -> np.ndarray:
+                          schedule: Schedule, use_mask: bool) -> np.ndarray:
     """``inpaint(mode="replace-ddim", start="mean")`` on numpy arrays, for a network that
     takes and gives numpy (``OnnxNet.run_np``: the live runtime). The same arithmetic as the
     torch loop; what it saves is per call: the tensors made and converted around a network
-    that reads numpy anyway (~0.1-0.3 ms a call, three calls a live pose).
-
-    last: (run, rows), the final call through a network answering the newest ``rows``
-    frames alone; the result is then those frames (B, rows, F)."""
+    that reads numpy anyway (~0.1-0.3 ms a call, three calls a live pose)."""
     x_input = np.ascontiguousarray(x_input, dtype=np.float32)
     mask = np.ascontiguousarray(mask)
     height = np.ascontiguousarray(height, dtype=np.float32)
     b = x_input.shape[0]
     z = np.where(mask, x_input, np.float32(schedule.sqrt_ab(steps[0])) * x_input)
     for i, t in enumerate(steps):
-        if i + 1 == len(steps) and last is not None:
-            run_last, rows = last
-            y = run_last(z, np.full(b, t, dtype=np.int64), height, mask if use_mask else None)
-            return np.where(mask[:, -rows:], x_input[:, -rows:], y)
         x = np.where(mask, x_input, run(z, np.full(b, t, dtype=np.int64), height, mask if use_mask else None))
         if i + 1 == len(steps):
             return x

@@ -71,15 +71,10 @@ class OnnxNet:
     docs/latency.md says why it is not the default."""
 
     def __init__(self, module: nn.Module, batch: int, window: int, features: int, mask_input: bool,
-                 threads: int | None = None, quantize: bool = False, rows: int | None = None) -> None:
+                 threads: int | None = None, quantize: bool = False) -> None:
         import onnxruntime as ort
 
         self.config = getattr(module, "config", None)
-        # a graph that answers the newest ``rows`` frames alone (``Denoiser.forward(rows=)``):
-        # the live chain's last level, read at its newest frames only
-        self.rows = rows
-        if rows is not None:
-            module = _NewestRows(module, rows)
         self.shape = (batch, window, features)
         self.mask_input = mask_input
         example: tuple[Tensor, ...] = (torch.zeros(self.shape), torch.zeros(batch, dtype=torch.long),
@@ -130,19 +125,6 @@ class OnnxNet:
         return torch.from_numpy(self.session.run(None, feeds)[0])
 
 
-class _NewestRows(nn.Module):
-    """A denoiser called like one, answering its window's newest ``rows`` frames: what an
-    ONNX export of ``forward(..., rows=)`` needs (the exporter passes positional inputs)."""
-
-    def __init__(self, module: nn.Module, rows: int) -> None:
-        super().__init__()
-        self.module, self.rows = module, rows
-        self.config = getattr(module, "config", None)
-
-    def forward(self, z: Tensor, t: Tensor, height: Tensor, mask: Tensor | None = None) -> Tensor:
-        return self.module(z, t, height, mask, rows=self.rows)
-
-
 def quantize_dynamic_int8(graph: bytes) -> bytes:
     """An ONNX graph with its MatMul / Gemm weights in int8 (ONNX Runtime's dynamic
     quantizer: per-tensor weight scales, activations quantized on the fly)."""
@@ -164,12 +146,11 @@ def quantize_dynamic_int8(graph: bytes) -> bytes:
         return onnx.load(str(dst)).SerializeToString()
 
 
-def onnx_net(module: nn.Module, batch: int, window: int, features: int, mask_input: bool,
-             rows: int | None = None) -> OnnxNet | None:
+def onnx_net(module: nn.Module, batch: int, window: int, features: int, mask_input: bool) -> OnnxNet | None:
     """``OnnxNet`` of ``module``, or None (with a warning) when the export or the session
     fails: the caller then runs torch, so a model ONNX cannot take still runs."""
     try:
-        return OnnxNet(module, batch, window, features, mask_input, rows=rows)
+        return OnnxNet(module, batch, window, features, mask_input)
     except Exception as exc:  # noqa: BLE001 - any failure falls back to torch, said once
         warnings.warn(f"ONNX Runtime unavailable for this model ({type(exc).__name__}: {exc}); running torch",
                       stacklevel=2)

@@ -306,13 +306,6 @@ class Poser:
             from inference.features.mirror import MirrorAveraged
 
             self.mirror_op = MirrorAveraged(model.model, model.norm_mean, model.norm_std)
-        # the chain's last call answers only the frames a step reads (the newest, and the late
-        # answer's before it), where the live runtime's graph can: exact, ~a tenth of a live
-        # model's compute (docs/latency.md, "The last call")
-        self._last_net = None
-        if (self.kind == "diffusion" and not self.chain_mirror and self.inpaint_mode == "replace-ddim"
-                and self.noise_mode == "mean" and not self.takes_points):
-            self._last_net = self.net_for(1, rows=self.answer_lag + 1)
         self._height = torch.tensor([self.body.height], dtype=torch.float32)
         self._offsets = torch.as_tensor(self.body.offsets, dtype=torch.float32)
         self._contact_offsets = torch.as_tensor(self.body.contact_offsets, dtype=torch.float32)
@@ -332,13 +325,11 @@ class Poser:
         cfg = getattr(self.model, "config", None) if self.model is not None else None
         return bool(getattr(cfg, "points", False)) and self.kind == "diffusion"
 
-    def net_for(self, windows: int, mirror: bool | None = None, model: LoadedModel | None = None,
-                rows: int | None = None):
+    def net_for(self, windows: int, mirror: bool | None = None, model: LoadedModel | None = None):
         """The model (``model``: another one, the draws') as called on ``windows`` windows at
         once: a frozen trace of that batch shape (mirror averaging doubles it) when the poser
         freezes. Traces are kept per model and shape (``_model_nets``), so the many posers of
-        an offline run share them. rows: the ONNX graph answering the newest ``rows`` frames
-        alone (the chain's last call), or None where that graph cannot be had."""
+        an offline run share them."""
         mirror = self.mirror if mirror is None else mirror
         model = model or self.model
         # a model with a position input takes it as a keyword the traces do not carry: eager
@@ -347,14 +338,6 @@ class Poser:
         # one window (mirror-averaged inside the graph) or the two chains of whole-chain mirror averaging
         onnx = frozen and (windows == 1 or (windows == 2 and not mirror)) and self.runtime == "onnx"
         key = (windows, mirror, frozen, self.window) + (("onnx",) if onnx else ())
-        if rows is not None:
-            if not onnx or mirror:
-                return None
-            key = (*key, rows)
-            if key not in nets:
-                nets[key] = onnx_net(model.model, windows, self.window, N_FEATURES, model.config.mask_input,
-                                     rows=rows)
-            return nets[key]
         if key not in nets:
             batch = windows * (2 if mirror else 1)
             fast = None
@@ -463,10 +446,7 @@ class Poser:
         self._gen.set_state(state)
 
     # ------------------------------------------------------------------ one step
-    def _predict(self, win: Tensor, mask: Tensor, newest: bool = False) -> Tensor:
-        """(1, N, F) the window's answer; newest: only the frames a step reads are needed
-        (the newest and the late answer's), which the answer may then be alone
-        (1, answer_lag + 1, F)."""
+    def _predict(self, win: Tensor, mask: Tensor) -> Tensor:
         if self.chain_mirror:
             return self._predict_chains(win, mask)
         if self.kind == "diffusion":
@@ -475,8 +455,7 @@ class Poser:
             return inpaint(self._net, win, mask, self._height, self.steps, generator=self._gen,
                            schedule=self.schedule, mode=self.inpaint_mode,
                            mask_input=self.model.config.mask_input,
-                           start="mean" if self.noise_mode == "mean" else "sample", points=self.points_window(),
-                           last=self._last_net if newest else None)
+                           start="mean" if self.noise_mode == "mean" else "sample", points=self.points_window())
         if self.kind == "regressor":
             return regress(self._net, win, mask, self._height)
         return torch.where(mask, win, self._stand_win)
@@ -511,10 +490,9 @@ class Poser:
             obs = self.observe(features, observed_mask)
             win, mask = self.enter(obs)
             self.enter_points(points)
-            due = self.confidence_due()
-            out = self._predict(win, mask, newest=not due)  # the draws re-noise the whole answer
+            out = self._predict(win, mask)
             draws = None
-            if due:
+            if self.confidence_due():
                 draws = self.draw(out, win, mask, self.draw_noise())[:, -1]
             return self.finish(out[0, -1], win, obs, draws, self.earlier_rows(out[0]))
 

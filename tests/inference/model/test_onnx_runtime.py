@@ -85,66 +85,6 @@ def test_the_live_inpainting_on_numpy_is_the_torch_loops(batch):
                        inpaint(TorchOnly(), x, mask, h, [1000, 0], mode="replace", start="mean", mask_input=True))
 
 
-def test_a_denoiser_asked_for_its_newest_rows_answers_them_as_the_whole_window_does():
-    m = _tiny(bypass=True)
-    g = torch.Generator().manual_seed(4)
-    n = m.config.window
-    z = torch.randn(2, n, N_FEATURES, generator=g)
-    mask = torch.rand(2, n, N_FEATURES, generator=g) > 0.5
-    t, h = torch.tensor([1000, 0]), torch.tensor([1.6, 1.9])
-    with torch.no_grad():
-        whole = m.model(z, t, h, mask)
-        for rows in (1, 5, n):
-            got = m.model(z, t, h, mask, rows=rows)
-            assert got.shape == (2, rows, N_FEATURES)
-            np.testing.assert_allclose(got.numpy(), whole[:, -rows:].numpy(), atol=1e-5, rtol=1e-5)
-    with pytest.raises(ValueError, match="eval mode"):  # training keeps the whole window's loss
-        m.model(z, t, h, mask, rows=1)
-
-
-@needs_ort
-def test_the_live_chain_with_a_last_call_on_the_newest_rows_answers_as_the_whole_chain():
-    """The last level through the graph of the newest rows (``OnnxNet(rows=)``) gives the
-    whole chain's newest rows; the poser uses it on the frames without confidence draws
-    and steps as a poser without it does."""
-    from inference.model.diffusion import inpaint, parse_steps
-
-    m = _tiny()
-    n = m.config.window
-    net = onnx_runtime.OnnxNet(m.model, 1, n, N_FEATURES, mask_input=True)
-    last = onnx_runtime.OnnxNet(m.model, 1, n, N_FEATURES, mask_input=True, rows=3)
-    g = torch.Generator().manual_seed(5)
-    x = torch.randn(1, n, N_FEATURES, generator=g)
-    mask = torch.rand(1, n, N_FEATURES, generator=g) > 0.6
-    kw = {"mode": "replace-ddim", "start": "mean", "mask_input": True}
-    whole = inpaint(net, x, mask, torch.tensor([1.7]), parse_steps("10D:3"), **kw)
-    newest = inpaint(net, x, mask, torch.tensor([1.7]), parse_steps("10D:3"), last=last, **kw)
-    assert newest.shape == (1, 3, N_FEATURES)
-    np.testing.assert_allclose(newest.numpy(), whole[:, -3:].numpy(), atol=1e-5, rtol=1e-5)
-    with pytest.raises(ValueError, match="live runtime"):
-        inpaint(net, x, mask, torch.tensor([1.7]), [1000, 0], mode="replace", start="mean", last=last)
-
-    kw = {"body": 1.75, "steps": "3", "runtime": "onnx", "inpaint_mode": "replace-ddim", "noise": "mean",
-          "contact_detector": None, "pelvis_odometry": None}
-    for lag in (0, 2):
-        p_last = Poser(m, answer_lag=lag, **kw)
-        p_whole = Poser(m, answer_lag=lag, **kw)
-        assert p_last._last_net is not None and p_last._last_net.rows == lag + 1
-        p_whole._last_net = None
-        rng = np.random.default_rng(6)
-        obs = np.zeros(N_FEATURES, bool)
-        obs[:60] = True
-        for _ in range(5):
-            f = rng.normal(size=N_FEATURES) * 0.1
-            a, b = p_last.step(f, obs), p_whole.step(f, obs)
-            np.testing.assert_allclose(a.rot, b.rot, atol=1e-4)
-            if lag:
-                np.testing.assert_allclose(a.earlier_rot, b.earlier_rot, atol=1e-4)
-    # mirror averaging per call, or the torch runtime: no such graph
-    assert Poser(m, mirror=True, **kw)._last_net is None
-    assert Poser(m, **{**kw, "runtime": "torch"})._last_net is None
-
-
 @needs_ort
 def test_poser_steps_alike_on_both_runtimes():
     m = _tiny()
