@@ -173,6 +173,27 @@ class Motion:
         return replace(self, rot=np.concatenate(rot), root=np.concatenate(root),
                        meta={**self.meta, "held": (float(before_s), float(after_s), float(settle_s))})
 
+    def turning(self, rate_deg_s: float) -> Motion:
+        """The same movement with the whole body turning about the vertical at ``rate_deg_s``
+        (positive: to the left), its path bent to match: each frame's orientations and its
+        step of the root's horizontal path turned by the heading reached so far. A walk becomes
+        a walk round a circle of radius speed / rate; a slow walk turned at 90-180 deg/s is a
+        turn on the spot in small steps, which real sessions hold (13 of the OpenSense walk's
+        22 s) and the motion capture's walks, straight or gently curved, hold little of.
+        Training augmentation; the stance foot pivots as a turning foot does, and slides
+        sideways by the rate times its distance from the pelvis (~0.2 m/s)."""
+        from inference.body.conventions import rot_z
+
+        yaw = np.radians(float(rate_deg_s)) * self.times
+        Rz = rot_z(yaw)  # (T, 3, 3)
+        step = np.diff(self.root, axis=0)
+        step[:, 2] = 0.0
+        turned = np.einsum("tij,tj->ti", Rz[:-1], step)
+        root = self.root.copy()
+        root[1:, :2] = self.root[0, :2] + np.cumsum(turned[:, :2], axis=0)
+        return replace(self, rot=np.einsum("tij,tsjk->tsik", Rz, self.rot), root=root,
+                       meta={**self.meta, "turning_deg_s": float(rate_deg_s)})
+
     def scaled(self, factor: float) -> Motion:
         """The same joint angles and timing on a body ``factor`` times as large: bones, skin
         sites and root path scale, orientations do not. Training augmentation: the data

@@ -15,6 +15,18 @@ shank is upright and whose knee is straight is a standing leg); the straightened
 goes into the history, so the model goes on from the stand the sensors imply. A shank that
 leans (a bent-kneed stance, a squat held still), a knee the model bends far (sitting with
 the shank upright) or any motion leaves the model's flexion as it is, at once.
+
+A worn thigh with its shank left open is the same knee the other way round: the hinge
+rebuilds the shank from the thigh with the model's flexion, and the shipped model bends
+it in a stand as it does with the shanks worn (the OpenSense walk's stand with pelvis +
+thighs: shanks 12 deg off; the x-IMU3 log's 18-21). A still thigh hanging upright
+straightens its shank the same way (shanks 2.3-2.5 and 5-11 deg).
+
+A standing leg's foot is flat: in a settled stand an unworn foot below the straightened knee
+loses its tilt and keeps its heading (``level``; the stands' feet 0.6-1.5 deg on the
+OpenSense walk where the 21-frame model's mirror-free answer left 4.2-4.7; docs/real_signals.md,
+"A standing body"). A foot the model tilts further than ``max_foot_tilt_deg`` (on its toes)
+is left as it is.
 """
 
 from __future__ import annotations
@@ -24,10 +36,28 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from inference.body.conventions import yaw_of
+from inference.body.conventions import rot_z, yaw_of
 from inference.body.rotations import matrix_about_axis_np, matrix_angle_between
+from inference.body.skeleton import SEGMENT_INDEX
 from inference.poser.joint_constraints import BONE_AXIS, KNEE_AXIS, KNEES, hinge_angle
 from inference.signals.resample import FPS_MODEL
+
+FEET = tuple(SEGMENT_INDEX[f"{side}_foot"] for side in "lr")  # in the order of KNEES
+
+
+def tilt_of(R: np.ndarray) -> float:
+    """How far (rad) a foot's orientation ``R`` is from level: the angle of its swing off the vertical."""
+    return float(np.arccos(np.clip(R[2, 2], -1.0, 1.0)))
+
+
+def level(R: np.ndarray, w: float) -> np.ndarray:
+    """A foot's orientation ``R`` with ``w`` of its tilt taken away, its heading kept: in the
+    body's rest pose a foot is level, so a foot flat on the floor is its heading alone."""
+    from scipy.spatial.transform import Rotation
+
+    heading = rot_z(yaw_of(R))
+    tilt = Rotation.from_matrix(heading.T @ R).as_rotvec()
+    return heading @ Rotation.from_rotvec((1.0 - w) * tilt).as_matrix()
 
 
 @dataclass
@@ -36,10 +66,13 @@ class StandPrior:
 
     still_deg_s: the fastest a measured segment may turn and still count as still, judged
     over ``span_s`` (frame to frame, a sensor's own orientation noise reads as turning).
-    upright_deg: the most a shank's long axis may lean from vertical.
+    upright_deg: the most the worn segment's long axis (a shank's, or a thigh's with its shank
+    unworn) may lean from vertical.
     onset_s / settle_s: still over ``span_s`` and then for ``onset_s`` before the flexion
     starts to go, gone ``settle_s`` later (by default a second after the body stopped).
-    max_flexion_deg: a knee bent further than this is not straightened (sitting).
+    max_flexion_deg: a knee bent further than this is not straightened (sitting, kneeling).
+    level_feet / max_foot_tilt_deg: level the unworn feet of the settled legs, unless the model
+    tilts them further than this.
     """
 
     still_deg_s: float = 15.0
@@ -48,6 +81,8 @@ class StandPrior:
     onset_s: float = 0.0
     settle_s: float = 0.75
     max_flexion_deg: float = 30.0
+    level_feet: bool = True
+    max_foot_tilt_deg: float = 20.0
     fps: float = FPS_MODEL
 
     def __post_init__(self) -> None:
@@ -57,6 +92,7 @@ class StandPrior:
         self._still_rad = np.radians(self.still_deg_s * self._span / self.fps)
         self._cos_upright = np.cos(np.radians(self.upright_deg))
         self._max_flexion = np.radians(self.max_flexion_deg)
+        self._max_foot_tilt = np.radians(self.max_foot_tilt_deg)
         self.reset()
 
     def reset(self) -> None:
@@ -83,20 +119,30 @@ class StandPrior:
         if w <= 0.0:
             return R
         out = R
-        for t, s in KNEES:
-            if not measured[s] or measured[t] or R[s, 2, 2] < self._cos_upright:
+        for (t, s), f in zip(KNEES, FEET):
+            if measured[t] == measured[s]:
+                continue  # both worn: nothing to settle; neither: no upright segment to go by
+            worn, free = (s, t) if measured[s] else (t, s)
+            if R[worn, 2, 2] < self._cos_upright:
                 continue
             theta = hinge_angle(R[t].T @ R[s], self._axis)
             if abs(theta) > self._max_flexion:
                 continue
             if out is R:
                 out = R.copy()
-            # the thigh's twist the hinge kept (``knee_twist``) goes with the flexion: a straight
-            # knee locks the shin's turn, and fading both together leaves no jump at the onset
-            hinged = R[s] @ matrix_about_axis_np(self._axis, theta).T
-            psi = yaw_of(hinged.T @ R[t])  # the twist about the bone the hinge kept
-            out[t] = (R[s] @ matrix_about_axis_np(self._axis, (1.0 - w) * theta).T
-                      @ matrix_about_axis_np(self._bone, (1.0 - w) * psi))
+            if free == t:
+                # the thigh's twist the hinge kept (``knee_twist``) goes with the flexion: a straight
+                # knee locks the shin's turn, and fading both together leaves no jump at the onset
+                hinged = R[s] @ matrix_about_axis_np(self._axis, theta).T
+                psi = yaw_of(hinged.T @ R[t])  # the twist about the bone the hinge kept
+                out[t] = (R[s] @ matrix_about_axis_np(self._axis, (1.0 - w) * theta).T
+                          @ matrix_about_axis_np(self._bone, (1.0 - w) * psi))
+            else:
+                # a worn thigh: the shank the hinge rebuilt from it (the thigh turned by the
+                # model's flexion) straightened
+                out[s] = R[t] @ matrix_about_axis_np(self._axis, (1.0 - w) * theta)
+            if self.level_feet and not measured[f] and tilt_of(R[f]) <= self._max_foot_tilt:
+                out[f] = level(R[f], w)
         return out
 
     def _update(self, R: np.ndarray, measured: np.ndarray) -> None:

@@ -106,15 +106,18 @@ def held_out_files(name: str, root: Path | None = None) -> list[Path]:
 
 
 def _build(files: list[Path], progress: bool = True, speed: float = 1.0, repair: bool = False,
-           causal: bool = False, tag: str = "", hold: float = 0.0, settle: float = 0.0) -> FeatureDataset:
+           causal: bool = False, tag: str = "", hold: float = 0.0, settle: float = 0.0,
+           turn: float = 0.0) -> FeatureDataset:
     """The cached feature dataset of ``files``, performed at ``speed`` (copies at another
     speed get their own cache and names ``<file>@x<speed>``, so a clip and its copies stay apart),
     with broken feet repaired (``plausibility.repair_feet``) when ``repair``, accelerations
     through the low-latency mode's trailing filter when ``causal``, and the subject standing
     still ``hold`` seconds before and after the movement, stepping into and out of an N-pose
-    over ``settle`` seconds when ``settle`` (``Motion.held``; names ``<file>@hold<s>``) when ``hold``."""
+    over ``settle`` seconds when ``settle`` (``Motion.held``; names ``<file>@hold<s>``) when ``hold``, and
+    the whole body turning about the vertical at ``turn`` deg/s (``Motion.turning``; names
+    ``<file>@turn<rate>``) when ``turn``."""
     loader = None
-    if speed != 1.0 or repair or hold:
+    if speed != 1.0 or repair or hold or turn:
         from inference.loaders import load_motion
 
         def loader(f: Path):
@@ -122,14 +125,18 @@ def _build(files: list[Path], progress: bool = True, speed: float = 1.0, repair:
             if repair:
                 m = repair_feet(m)[0]
             m = m.at_speed(speed) if speed != 1.0 else m
+            m = m.turning(turn) if turn else m
             return m.held(hold, hold, settle) if hold else m
 
     variant = ",".join(v for v in ("" if speed == 1.0 else f"speed={speed:g}", "repair_feet" if repair else "", tag,
-                                   f"hold={hold:g}" if hold else "", f"settle={settle:g}" if settle else "") if v)
+                                   f"hold={hold:g}" if hold else "", f"settle={settle:g}" if settle else "",
+                                   f"turn={turn:g}" if turn else "") if v)
     ds = build_dataset(files, cache_root(), loader=loader, finder=lambda paths: [Path(p) for p in paths],
                        progress=progress, variant=variant, causal=causal)
     if speed != 1.0:
         ds.names = [f"{n}@x{speed:g}" for n in ds.names]
+    if turn:
+        ds.names = [f"{n}@turn{turn:g}" for n in ds.names]
     if hold:
         ds.names = [f"{n}@hold{hold:g}" for n in ds.names]
     return ds
@@ -147,8 +154,10 @@ def is_walk(name: str | Path) -> bool:
 
 
 def is_variant(name: str | Path) -> bool:
-    """Whether a clip name is one of ``train_set``'s real-motion copies (slowed walk, held stand)."""
-    return "@hold" in str(name) or ("@x" in str(name) and is_walk(str(name).split("@")[0]))
+    """Whether a clip name is one of ``train_set``'s real-motion copies (slowed walk, held stand,
+    turning walk)."""
+    return ("@hold" in str(name) or "@turn" in str(name)
+            or ("@x" in str(name) and is_walk(str(name).split("@")[0])))
 
 
 def _give_share(ds: FeatureDataset, part: np.ndarray, share: float) -> FeatureDataset:
@@ -227,6 +236,7 @@ def train_set(
     energy_per: str = "trial", drop_implausible: bool = False, repair_implausible: bool = False,
     cmu: bool = False, causal: bool = False, cmu_shares: dict[str, float] | None = None,
     slow_walks: Sequence[float] = (), stand_hold: float = 0.0, variant_share: float = 0.25,
+    turn_walks: Sequence[float] = (), turn_speed: float = 0.6,
 ) -> FeatureDataset:
     """The training split. ``hdm05_speeds``: extra copies of the HDM05 clips performed at
     these speed factors (``Motion.at_speed``), sharing the HDM05 half of the draws. Two
@@ -260,7 +270,10 @@ def train_set(
     sideways, turning) performed at these speed factors (< 1: slower); ``stand_hold``: copies
     of those walks and of the HDM05 clips with the subject standing still this many seconds
     before and after (the walks stepping into and out of an N-pose over 0.6 s, as they are cut
-    mid-stride). Together these copies take ``variant_share`` of the draws."""
+    mid-stride). ``turn_walks``: copies of every Bandai walk performed at ``turn_speed`` and
+    turned about the vertical at each of these rates (deg/s, ``Motion.turning``): a slow walk
+    turned at 90-180 deg/s steps round a circle of 0.3-0.6 m, the nearest the data comes to a
+    turn on the spot. Together these copies take ``variant_share`` of the draws."""
     if energy_per not in ("trial", "window"):
         raise ValueError(f"energy_per must be 'trial' or 'window', not {energy_per!r}")
     files = train_files()
@@ -274,6 +287,8 @@ def train_set(
                                                    causal=causal, tag=CMU_CACHE_TAG)])
     walks = [f for f in files if is_walk(f)]
     extras = [_build(walks, progress, float(s), repair_implausible, causal) for s in slow_walks]
+    extras += [_build(walks, progress, float(turn_speed), repair_implausible, causal, turn=float(r))
+               for r in turn_walks]
     if stand_hold:
         # walks are cut mid-stride: they step into and out of a stand; HDM05 clips start and end standing
         extras.append(_build(walks, progress, repair=repair_implausible, causal=causal, hold=float(stand_hold),

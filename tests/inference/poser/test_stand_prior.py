@@ -61,3 +61,53 @@ def test_motion_gives_the_flexion_back_at_once():
     turned, _ = frame(10.0, turn_deg=5.0)  # a shank turning 100 deg/s
     out = prior(turned, m)
     assert bend(out, LT, LS) == pytest.approx(10.0, abs=1e-6) and prior.weight() == 0.0
+
+
+LF, RF = SEGMENT_INDEX["l_foot"], SEGMENT_INDEX["r_foot"]
+
+
+def thighs_frame(flexion_deg: float = 10.0, thigh_lean_deg: float = 0.0,
+                 foot_pitch_deg: float = 8.0, foot_heading_deg: float = 15.0) -> tuple[np.ndarray, ...]:
+    """Pelvis and thighs measured; each shank the thigh turned about the knee (as the hinge
+    rebuilds it), each foot pitched and turned."""
+    R = np.tile(np.eye(3), (N_SEGMENTS, 1, 1))
+    thigh = matrix_about_axis_np(AXIS, np.radians(thigh_lean_deg))
+    foot = matrix_about_axis_np(np.array([0.0, 0.0, 1.0]), np.radians(foot_heading_deg)) @ matrix_about_axis_np(
+        AXIS, np.radians(foot_pitch_deg))
+    for t, s, f in ((LT, LS, LF), (RT, RS, RF)):
+        R[t] = thigh
+        R[s] = thigh @ matrix_about_axis_np(AXIS, np.radians(flexion_deg))
+        R[f] = foot
+    measured = np.zeros(N_SEGMENTS, dtype=bool)
+    measured[[PELVIS, LT, RT]] = True
+    return R, measured
+
+
+def test_a_worn_upright_thigh_straightens_its_shank_and_levels_the_foot():
+    prior = StandPrior()
+    R, m = thighs_frame(12.0)
+    out = [prior(R, m) for _ in range(30)]
+    assert bend(out[4], LT, LS) == pytest.approx(12.0, abs=1e-6)  # not yet still long enough
+    assert bend(out[20], LT, LS) < 1e-6 and bend(out[20], RT, RS) < 1e-6
+    assert np.array_equal(out[20][[PELVIS, LT, RT]], R[[PELVIS, LT, RT]])  # measured ones untouched
+    for f in (LF, RF):
+        assert out[20][f][2, 2] == pytest.approx(1.0, abs=1e-9)  # flat
+        fwd = out[20][f] @ np.array([1.0, 0.0, 0.0])
+        assert np.degrees(np.arctan2(fwd[1], fwd[0])) == pytest.approx(15.0, abs=1e-6)  # heading kept
+    half = out[10][LF]  # on the way: part of the tilt gone
+    assert 0.0 < np.degrees(np.arccos(half[2, 2])) < 8.0
+
+
+@pytest.mark.parametrize("case", ["sitting thigh", "kneeling", "on the toes"])
+def test_a_worn_thigh_leaves_what_is_no_stand(case):
+    prior = StandPrior()
+    R, m = thighs_frame(90.0 if case == "kneeling" else 12.0,
+                        thigh_lean_deg=-80.0 if case == "sitting thigh" else 0.0,
+                        foot_pitch_deg=35.0 if case == "on the toes" else 8.0)
+    for _ in range(40):
+        out = prior(R, m)
+    if case == "on the toes":  # the knee straightens, the foot the model tilts far is left
+        assert bend(out, LT, LS) < 1e-6
+        assert np.array_equal(out[[LF, RF]], R[[LF, RF]])
+    else:
+        assert np.array_equal(out, R)
