@@ -228,7 +228,7 @@ INPAINT_STARTS = ("sample", "mean")
 def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequence[int],
             generator: torch.Generator | None = None, schedule: Schedule | None = None,
             mode: str = "paper", mask_input: bool | None = None, start: str = "sample",
-            points: Tensor | None = None) -> Tensor:
+            points: Tensor | None = None, start_at: Tensor | None = None) -> Tensor:
     """Inpaint the unobserved features of a window (the paper's Algorithm 1).
 
     x_input: (B, N, F) normalised features; unobserved entries hold an initial guess (the
@@ -259,6 +259,9 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
     leave the pose open (arms with only the shanks worn: HDM05 dg, 2 sites, GA 35.5 -> 31.0
     deg; 6 sites 16.6 -> 15.7; docs/model.md, "Inference: steps, start, noise, mirror,
     history"). With the DDIM modes the whole run is then deterministic and draws nothing.
+    ``start_at`` (F,) or broadcastable to (B, N, F), with ``start="mean"``: where the first
+    level's draw sits instead of 0 (the prior's mean); ``symmetric_start`` gives the one start
+    that is its own mirror image.
 
     ``mask_input``: hand the model the mask too (default: ``wants_mask(model)``; pass it
     for a traced model, which has no config). ``points`` (B or 1, N, 16): the tracked
@@ -276,11 +279,13 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
         use_mask = wants_mask(model) if mask_input is None else mask_input
         return torch.from_numpy(_replace_ddim_mean_np(
             run_np, x_input.detach().float().numpy(), m_np.astype(bool, copy=False),
-            height.detach().float().numpy(), steps, schedule, use_mask))
+            height.detach().float().numpy(), steps, schedule, use_mask,
+            None if start_at is None else np.asarray(start_at, dtype=np.float32)))
 
     def draw(first: bool) -> Tensor:
         if first and start == "mean":
-            return torch.zeros(x.shape, dtype=x.dtype)
+            zero = torch.zeros(x.shape, dtype=x.dtype)
+            return zero if start_at is None else zero + torch.as_tensor(start_at, dtype=x.dtype)
         return torch.randn(x.shape, generator=generator, dtype=x.dtype)
 
     with torch.inference_mode():
@@ -326,7 +331,7 @@ def inpaint(model, x_input: Tensor, mask: Tensor, height: Tensor, steps: Sequenc
 
 
 def _replace_ddim_mean_np(run, x_input: np.ndarray, mask: np.ndarray, height: np.ndarray, steps: Sequence[int],
-                          schedule: Schedule, use_mask: bool) -> np.ndarray:
+                          schedule: Schedule, use_mask: bool, start_at: np.ndarray | None = None) -> np.ndarray:
     """``inpaint(mode="replace-ddim", start="mean")`` on numpy arrays, for a network that
     takes and gives numpy (``OnnxNet.run_np``: the live runtime). The same arithmetic as the
     torch loop; what it saves is per call: the tensors made and converted around a network
@@ -336,12 +341,28 @@ def _replace_ddim_mean_np(run, x_input: np.ndarray, mask: np.ndarray, height: np
     height = np.ascontiguousarray(height, dtype=np.float32)
     b = x_input.shape[0]
     z = np.where(mask, x_input, np.float32(schedule.sqrt_ab(steps[0])) * x_input)
+    if start_at is not None:  # the draw's place at the first level (``inpaint``'s start_at)
+        z = np.where(mask, z, z + np.float32(schedule.sqrt_1mab(steps[0])) * start_at)
     for i, t in enumerate(steps):
         x = np.where(mask, x_input, run(z, np.full(b, t, dtype=np.int64), height, mask if use_mask else None))
         if i + 1 == len(steps):
             return x
         z = np.where(mask, x_input, ddim_step(schedule, z, x, t, steps[i + 1]))  # float32 kept (Python scalars)
     raise AssertionError("unreachable: validate_steps refuses an empty step list")
+
+
+def symmetric_start(norm_mean, norm_std) -> np.ndarray:
+    """(F,) the mean start's symmetric midpoint in the normaliser's units: 1/2 (M(mu) - mu) / sigma,
+    M the mirror image of a frame's features. The data mean (0 in these units) is not its own
+    mirror image (some features move by a whole standard deviation), so a chain that starts
+    there answers a symmetric body with a left/right bias; the default's mirror chains cancel
+    it, one window does not (docs/model.md, "The fast model"). This start is its own mirror
+    image: M(mu + sigma c) = mu + sigma c."""
+    from inference.features.mirror import mirror_features
+
+    mu = torch.as_tensor(np.asarray(norm_mean), dtype=torch.float32).reshape(1, 1, -1)
+    sd = torch.as_tensor(np.asarray(norm_std), dtype=torch.float32).reshape(1, 1, -1)
+    return (0.5 * (mirror_features(mu) - mu) / sd).reshape(-1).numpy()
 
 
 def redraw(model, x_hat: Tensor, x_input: Tensor, mask: Tensor, height: Tensor, level: int, noise: Tensor,
@@ -368,5 +389,5 @@ __all__ = [
     "T_DEFAULT", "PAPER_STEPS_10D", "Schedule", "cosine_alpha_bar", "paper_steps", "paper_like_steps",
     "even_steps", "redraw",
     "parse_steps", "validate_steps", "sample", "ddim_step", "inpaint", "wants_mask", "INPAINT_MODES",
-    "INPAINT_STARTS",
+    "INPAINT_STARTS", "symmetric_start",
 ]

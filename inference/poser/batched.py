@@ -181,11 +181,11 @@ def _inpaint(poser: Poser, wins: Tensor, masks: Tensor, heights: Tensor, chunk: 
         w, m, h = _pad(wins, chunk), _pad(masks, chunk), _pad(heights, chunk)
         out = inpaint(poser.net_for(2 * chunk, mirror=False), torch.cat([w, P(w)]), torch.cat([m, m[..., idx]]),
                       torch.cat([h, h]), poser.steps, schedule=poser.schedule, mode=poser.inpaint_mode,
-                      mask_input=poser.model.config.mask_input, start="mean")
+                      mask_input=poser.model.config.mask_input, start="mean", start_at=poser.start_at)
         return torch.where(m, w, 0.5 * (out[:chunk] + P(out[chunk:])))[:c]
     out = inpaint(poser.net_for(chunk), _pad(wins, chunk), _pad(masks, chunk), _pad(heights, chunk),
                   poser.steps, schedule=poser.schedule, mode=poser.inpaint_mode,
-                  mask_input=poser.model.config.mask_input, start="mean")
+                  mask_input=poser.model.config.mask_input, start="mean", start_at=poser.start_at)
     return out[:c]
 
 

@@ -71,6 +71,7 @@ from inference.features.layout import N_FEATURES, SL_ACC, SL_CONTACT, SL_DP, SL_
 from inference.features.mirror import MirrorAveraged
 from inference.model.denoiser import Denoiser, freeze_for_cpu
 from inference.model.diffusion import Schedule, inpaint, parse_steps, redraw
+from inference.model.diffusion import symmetric_start as symmetric_start_at
 from inference.model.files import LoadedModel
 from inference.model.onnx_runtime import onnx_net, resolve_runtime
 from inference.model.regressor import regress
@@ -188,6 +189,9 @@ class Poser:
     models only); the pose itself is the same with it on or off. mirror_chains: with mirror
     averaging, average whole inpainting chains of the window and its mirror image instead of
     each model call (``_predict_chains``; None: the model file's ``mirror_chains``, off).
+    symmetric_start: the mean start at the data mean's symmetric midpoint
+    (``diffusion.symmetric_start``) instead of the data mean, for a model that answers without
+    mirror chains (None: the model file's ``symmetric_start``, off).
     """
 
     def __init__(
@@ -216,6 +220,7 @@ class Poser:
         mirror_chains: bool | None = None,
         answer_lag: int | None = None,
         knee_twist: float | None = None,
+        symmetric_start: bool | None = None,
     ) -> None:
         self.model = model
         # the frame-by-frame call through ONNX Runtime where that is faster (live sessions ask
@@ -306,6 +311,12 @@ class Poser:
             from inference.features.mirror import MirrorAveraged
 
             self.mirror_op = MirrorAveraged(model.model, model.norm_mean, model.norm_std)
+        sym = symmetric_start if symmetric_start is not None else bool(meta.get("symmetric_start", False))
+        # where the mean start's draw sits (None: the data mean, 0); its own mirror image, so the
+        # mirror chains' second half starts there too
+        self.start_at = (torch.as_tensor(symmetric_start_at(model.norm_mean, model.norm_std))
+                         if sym and self.kind == "diffusion" and self.noise_mode == "mean"
+                         and model.norm_mean is not None else None)
         self._height = torch.tensor([self.body.height], dtype=torch.float32)
         self._offsets = torch.as_tensor(self.body.offsets, dtype=torch.float32)
         self._contact_offsets = torch.as_tensor(self.body.contact_offsets, dtype=torch.float32)
@@ -455,7 +466,8 @@ class Poser:
             return inpaint(self._net, win, mask, self._height, self.steps, generator=self._gen,
                            schedule=self.schedule, mode=self.inpaint_mode,
                            mask_input=self.model.config.mask_input,
-                           start="mean" if self.noise_mode == "mean" else "sample", points=self.points_window())
+                           start="mean" if self.noise_mode == "mean" else "sample", points=self.points_window(),
+                           start_at=self.start_at)
         if self.kind == "regressor":
             return regress(self._net, win, mask, self._height)
         return torch.where(mask, win, self._stand_win)
@@ -471,7 +483,7 @@ class Poser:
         m2 = torch.cat([mask, mask[..., self.mirror_op.idx]])
         out = inpaint(self.net_for(2, mirror=False), w2, m2, self._height.expand(2), self.steps, generator=self._gen,
                       schedule=self.schedule, mode=self.inpaint_mode, mask_input=self.model.config.mask_input,
-                      start="mean")
+                      start="mean", start_at=self.start_at)
         # the known entries as measured: the mirror image's round trip moves them by float rounding
         return torch.where(mask, win, 0.5 * (out[:1] + P(out[1:])))
 

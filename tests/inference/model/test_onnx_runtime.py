@@ -55,7 +55,7 @@ def test_the_live_inpainting_on_numpy_is_the_torch_loops(batch):
     """``inpaint`` with a network that answers numpy (``OnnxNet.run_np``) runs its
     replace-DDIM chain from the mean on numpy: the same answers as the torch loop over the
     same network, the known entries exactly as given."""
-    from inference.model.diffusion import inpaint, parse_steps
+    from inference.model.diffusion import inpaint, parse_steps, symmetric_start
 
     m = _tiny()
     net = onnx_runtime.OnnxNet(m.model, batch, m.config.window, N_FEATURES, mask_input=True)
@@ -80,6 +80,12 @@ def test_the_live_inpainting_on_numpy_is_the_torch_loops(batch):
     assert got.dtype == torch.float32 and got.shape == want.shape
     np.testing.assert_allclose(got.numpy(), want.numpy(), atol=1e-5, rtol=1e-5)
     assert torch.equal(got[mask], x[mask])
+    # a start elsewhere than the data mean (``start_at``): both paths alike, and it changes the answer
+    at = torch.as_tensor(symmetric_start(m.norm_mean, m.norm_std))
+    got_at = inpaint(net, x, mask, h, parse_steps("10D:3"), start_at=at, **kw)
+    want_at = inpaint(TorchOnly(), x, mask, h, parse_steps("10D:3"), start_at=at, **kw)
+    np.testing.assert_allclose(got_at.numpy(), want_at.numpy(), atol=1e-5, rtol=1e-5)
+    assert torch.equal(got_at[mask], x[mask]) and not torch.allclose(got_at, got, atol=1e-4)
     # the other modes keep the torch loop
     assert torch.equal(inpaint(net, x, mask, h, [1000, 0], mode="replace", start="mean", mask_input=True),
                        inpaint(TorchOnly(), x, mask, h, [1000, 0], mode="replace", start="mean", mask_input=True))
@@ -116,3 +122,23 @@ def test_runtime_choice(monkeypatch):
     assert onnx_runtime.resolve_runtime("auto") == "torch"
     # offline runs never ask: a poser keeps torch unless told
     assert Poser(_tiny(), body=1.75, steps="2", contact_detector=None, pelvis_odometry=None).runtime == "torch"
+
+
+def test_the_symmetric_start_is_its_own_mirror_image_and_the_poser_reads_it_from_the_file():
+    """``symmetric_start``: the data mean's midpoint with its mirror image, in the normaliser's
+    units, is its own mirror image (the data mean is not); a file's meta turns it on."""
+    from inference.features.mirror import mirror_features
+    from inference.model.diffusion import symmetric_start
+
+    m = _tiny()
+    mu = torch.as_tensor(m.norm_mean).reshape(1, 1, -1)
+    sd = torch.as_tensor(m.norm_std).reshape(1, 1, -1)
+    c = torch.as_tensor(symmetric_start(m.norm_mean, m.norm_std)).reshape(1, 1, -1)
+    start = mu + sd * c
+    torch.testing.assert_close(mirror_features(start), start, atol=1e-5, rtol=1e-5)
+    assert not torch.allclose(mirror_features(mu), mu, atol=1e-3)
+    assert Poser(m, body=1.75, contact_detector=None, pelvis_odometry=None).start_at is None
+    m.meta = {"symmetric_start": True, "noise": "mean"}  # the mean start it moves
+    p = Poser(m, body=1.75, contact_detector=None, pelvis_odometry=None)
+    torch.testing.assert_close(p.start_at, c.reshape(-1))
+    assert Poser(m, body=1.75, contact_detector=None, pelvis_odometry=None, symmetric_start=False).start_at is None
