@@ -340,9 +340,10 @@ def _replace_ddim_mean_np(run, x_input: np.ndarray, mask: np.ndarray, height: np
     mask = np.ascontiguousarray(mask)
     height = np.ascontiguousarray(height, dtype=np.float32)
     b = x_input.shape[0]
-    z = np.where(mask, x_input, np.float32(schedule.sqrt_ab(steps[0])) * x_input)
+    z0 = np.float32(schedule.sqrt_ab(steps[0])) * x_input
     if start_at is not None:  # the draw's place at the first level (``inpaint``'s start_at)
-        z = np.where(mask, z, z + np.float32(schedule.sqrt_1mab(steps[0])) * start_at)
+        z0 = z0 + np.float32(schedule.sqrt_1mab(steps[0])) * start_at
+    z = np.where(mask, x_input, z0)
     for i, t in enumerate(steps):
         x = np.where(mask, x_input, run(z, np.full(b, t, dtype=np.int64), height, mask if use_mask else None))
         if i + 1 == len(steps):

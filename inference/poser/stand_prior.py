@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from inference.body.conventions import rot_z, yaw_of
+from inference.body.conventions import swing_twist_z, yaw_of
 from inference.body.rotations import matrix_about_axis_np, matrix_angle_between
 from inference.body.skeleton import SEGMENT_INDEX
 from inference.poser.joint_constraints import BONE_AXIS, KNEE_AXIS, KNEES, hinge_angle
@@ -55,9 +55,8 @@ def level(R: np.ndarray, w: float) -> np.ndarray:
     body's rest pose a foot is level, so a foot flat on the floor is its heading alone."""
     from scipy.spatial.transform import Rotation
 
-    heading = rot_z(yaw_of(R))
-    tilt = Rotation.from_matrix(heading.T @ R).as_rotvec()
-    return heading @ Rotation.from_rotvec((1.0 - w) * tilt).as_matrix()
+    heading, tilt = swing_twist_z(R)
+    return heading @ Rotation.from_rotvec((1.0 - w) * Rotation.from_matrix(tilt).as_rotvec()).as_matrix()
 
 
 @dataclass
