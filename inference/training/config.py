@@ -131,6 +131,12 @@ class TrainConfig:
     # model at its first call (``inpaint(start="mean")``). 1 = the top level is trained only
     # that way, so its answer becomes the mean estimate of the unknown features
     mean_start: float = 0.0
+    # diffusion only, with mean_start: the mean start sits at the data mean's symmetric midpoint
+    # (``diffusion.symmetric_start``) instead of the data mean, as the poser starts a file whose
+    # meta says ``symmetric_start`` (exported with it). The data mean is not its own mirror
+    # image; a one-window student trained from it answers a symmetric body with a left/right
+    # bias (docs/model.md, "The fast model")
+    symmetric_start: bool = False
     # sites whose orientations must be known for a window's swing loss term to count (by the
     # share of its frames, ``sites_known_share``); empty = every window alike. The swing term
     # asks for the true leg amplitude, which only the measurements can place: with the

@@ -52,7 +52,7 @@ from inference.features.layout import (
 from inference.features.mirror import MirrorAveraged, mirror_features, mirror_points
 from inference.model.config import ModelConfig, atomic_torch_save
 from inference.model.denoiser import deepened_state_dict
-from inference.model.diffusion import Schedule, ddim_step, inpaint, paper_steps, parse_steps
+from inference.model.diffusion import Schedule, ddim_step, inpaint, paper_steps, parse_steps, symmetric_start
 from inference.model.files import MODEL_FORMAT, build_model, newest_positions, save_model, with_reading
 from inference.model.regressor import random_observation_mask
 from inference.training.augment import rotate_yaw, scale_features, sensor_effects
@@ -127,6 +127,14 @@ class StepContext:
     std: Tensor
     schedule: Schedule
     teacher: nn.Module | None = None  # the distillation's teacher network (``TrainConfig.teacher``)
+
+    @functools.cached_property
+    def start_at(self) -> Tensor:
+        """(F,) where the mean start's draw sits, normalised: 0 (the data mean), or its symmetric
+        midpoint with ``TrainConfig.symmetric_start``."""
+        if not self.cfg.symmetric_start:
+            return torch.zeros(self.mean.shape[-1])
+        return torch.as_tensor(symmetric_start(self.mean.numpy(), self.std.numpy()), dtype=torch.float32)
 
     @functools.cached_property
     def teacher_mirror(self) -> MirrorAveraged:
@@ -262,7 +270,7 @@ def batch_loss(model: nn.Module, batch: dict, ctx: StepContext, rng: np.random.G
         noise = torch.randn(xn.shape, generator=gen)
         if cfg.mean_start > 0:
             top = (t == ctx.schedule.T) & (torch.rand(B, generator=gen) < cfg.mean_start)
-            noise = torch.where(top[:, None, None], torch.zeros(()), noise)
+            noise = torch.where(top[:, None, None], ctx.start_at, noise)
         z = ctx.schedule.q_sample(xn, t, noise=noise)
         if cfg.cond_prob > 0:
             # conditioning by replacement: known entries clean in z (and exact in the
@@ -352,7 +360,8 @@ def _chain_distilled(model: nn.Module, ctx: StepContext, x: Tensor, xn: Tensor, 
     m = torch.as_tensor(random_observation_mask(rng, B, N, cfg.mask))
     mw, xw = m[:, keep], xm[:, keep]
     teacher = ctx.teacher_mirror if cfg.teacher_mirror_chains else ctx.teacher
-    z = torch.where(m, xm, torch.zeros(()))  # the mean start: ~0 at the top level
+    # the mean start: ~0 at the top level (or the symmetric midpoint), as ``inpaint`` starts live
+    z = torch.where(m, xm, sch.sqrt_1mab(levels[0]) * ctx.start_at)
     states, answers = [], []
     with torch.no_grad():
         for i, t in enumerate(levels):
@@ -445,7 +454,8 @@ def validate(model: nn.Module, val_set: Dataset, ctx: StepContext) -> dict[str, 
         if cfg.kind == "diffusion":
             steps = parse_steps(cfg.infer_steps or "paper") if ctx.teacher is not None else paper_steps()
             out = inpaint(model, x_in, mask, h, steps, generator=gen, schedule=ctx.schedule,
-                          mode=inpaint_mode_for(cfg), start="mean" if cfg.mean_start > 0 else "sample")
+                          mode=inpaint_mode_for(cfg), start="mean" if cfg.mean_start > 0 else "sample",
+                          start_at=ctx.start_at if cfg.symmetric_start else None)
         else:
             out = torch.where(mask, x_in, model(x_in, mask, h))
         pred = out[:, -1] * ctx.std + ctx.mean
@@ -777,6 +787,8 @@ def export_model(checkpoint: str | os.PathLike, dest: str | os.PathLike, fp16: b
             "acc_filter": "causal" if cfg.get("causal") else "centred"}
     if cfg.get("answer_lag"):  # trained to be best k frames back: the poser answers that late (inference/poser/lag.py)
         meta["answer_lag"] = int(cfg["answer_lag"])
+    if cfg.get("symmetric_start"):  # trained from the symmetric midpoint: the poser starts there
+        meta["symmetric_start"] = True
     meta.update(poser or {})
     save_model(dest, model, ck["kind"], ck["norm_mean"], ck["norm_std"], step=int(ck["step"]), meta=meta, fp16=fp16)
 

@@ -885,6 +885,51 @@ def test_a_chain_student_of_fewer_frames_is_answered_by_the_teacher_over_its_who
     assert res.step == 2 and student.config.window == 21 and student.config.d_model == teacher.config.d_model
 
 
+def test_a_chain_student_trained_from_the_symmetric_start_starts_there_and_its_file_says_so(tmp_path):
+    """``symmetric_start``: the student's first call sees its unknown entries at the data mean's
+    symmetric midpoint (where the poser starts a file that says so), not at the data mean; the
+    exported file carries the flag, so the poser starts where the student learnt to."""
+    from inference.model.diffusion import Schedule, symmetric_start
+    from inference.poser.poser import Poser
+    from inference.training.loop import export_model, load_teacher
+
+    masked, teacher_file, teacher, batch, mean, std = _tiny_teacher(tmp_path)
+    sch = Schedule.cosine()
+    firsts = []
+
+    class Recording(torch.nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.net = teacher.model
+
+        def forward(self, z, t, h, m):
+            if not firsts:
+                firsts.append((z.clone(), m.clone()))
+            return self.net(z, t, h, m)
+
+    for sym in (False, True):
+        firsts.clear()
+        cfg = _cfg(**{"cond_prob": 1.0, "model": masked, "teacher": str(teacher_file), "student_steps": "10D:3",
+                      "augment_yaw": False, "augment_mirror": 0.0, "symmetric_start": sym})
+        ctx = StepContext(cfg=cfg, mean=mean, std=std, schedule=sch,
+                          teacher=load_teacher(cfg, teacher.norm_mean, teacher.norm_std))
+        batch_loss(Recording(), batch, ctx, np.random.default_rng(1), torch.Generator().manual_seed(1))
+        z, m = firsts[0]
+        c = torch.as_tensor(symmetric_start(mean.numpy(), std.numpy())) if sym else torch.zeros(mean.shape[-1])
+        want = (sch.sqrt_1mab(1000) * c).expand_as(z)
+        assert (~m).any() and torch.allclose(z[~m], want[~m], atol=1e-6)
+        if sym:
+            assert float(c.abs().max()) > 0.05  # the midpoint is somewhere else than the data mean
+    res = train(_cfg(steps=1, cond_prob=1.0, model=masked, teacher=str(teacher_file), student_steps="10D:3",
+                     infer_steps="10D:3", mean_start=1.0, symmetric_start=True), tmp_path / "sym", progress=False,
+                init_from=teacher_file)
+    assert res.step == 1
+    export_model(tmp_path / "sym" / "last.pt", tmp_path / "sym.pt", poser={"noise": "mean"})  # as imucap train --export
+    exported = load_model(tmp_path / "sym.pt")
+    assert exported.meta["symmetric_start"] is True
+    assert Poser(exported, body=1.75, contact_detector=None, pelvis_odometry=None).start_at is not None
+
+
 def test_distillation_from_mirror_chains_targets_both_chains_averaged(tmp_path):
     """With ``teacher_mirror_chains`` the target is the teacher's chain averaged with the chain
     of the window's mirror image, each started from the data mean (as ``Poser(mirror_chains=True)``
