@@ -249,14 +249,20 @@ class DemoRun:
     def calibration_error_deg(self) -> float | None:
         """Mean angle between the recovered sensor-to-bone rotations and the ones the
         simulator drew."""
+        by_site = self.calibration_error_by_site()
+        return None if not by_site else round(float(np.mean(list(by_site.values()))), 3)
+
+    def calibration_error_by_site(self) -> dict[str, float]:
+        """Each calibrated sensor's angle between its recovered sensor-to-bone rotation and the
+        one the simulator drew (deg): which sensor a poor calibration is about."""
         from inference.body.rotations import matrix_angle_between
 
         cal, tr = self.session.calibration, self.truth_sink.truth
         if cal is None or tr is None or tr.R_SB is None or not cal.valid.any():
-            return None
+            return {}
         idx = [list(tr.sites).index(s) for s in cal.sites]
         err = np.rad2deg(matrix_angle_between(cal.R_SB, tr.R_SB[idx]))
-        return round(float(np.mean(err[cal.valid])), 3)
+        return {s: round(float(e), 3) for s, e, ok in zip(cal.sites, err, cal.valid) if ok}
 
     def result(self) -> dict[str, Any]:
         """The headless JSON object: the capture's result, then what the truth says."""
@@ -278,6 +284,7 @@ class DemoRun:
             "sites": sites, "calibrated": res["calibrated"], "calibration_status": res["calibration_status"],
             "calibration_residual_deg": None if cal is None or cal.residual_deg is None else round(cal.residual_deg, 3),
             "calibration_error_deg": self.calibration_error_deg(),
+            "calibration_error_by_site": self.calibration_error_by_site(),
             "calibrated_at_s": None if self.calibrated_at is None else round(self.calibrated_at, 3),
             "ga_deg": truth.get("ga_deg"), "ga_frames": truth.get("truth_frames", 0),
             "model": s.model_label, "steps": len(p.steps) if p.kind == "diffusion" else int(p.kind == "regressor"),

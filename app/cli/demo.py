@@ -21,10 +21,11 @@ walk takes 10-15 s before it).
 
 ``--headless --json`` prints one JSON object: frames, fps, latency_p50_ms/p99_ms, per-site
 packets/errors/gaps (``sites``), calibration_residual_deg, calibration_error_deg (the
-recovered straps against the drawn ones), ga_deg against the simulated motion, model, steps,
-the session's ``spec`` (and more, see ``DemoRun.result``; with ``--stream``, what each stream
-sent). Without weights for the default model the floor baseline runs instead and the output
-says so loudly. The exit code is 1 when the calibration failed or ``--frames`` was not reached.
+recovered straps against the drawn ones; ``calibration_error_by_site`` the same per sensor),
+ga_deg against the simulated motion, model, steps, the session's ``spec`` (and more, see
+``DemoRun.result``; with ``--stream``, what each stream sent). Without weights for the default
+model the floor baseline runs instead and the output says so loudly. The exit code is 1 when
+the calibration failed or ``--frames`` was not reached.
 
 ``--stream lsl,vmc,vrchat`` also sends the live body to other programs (a lab recorder,
 an avatar app, VRChat), to this machine unless ``--stream-host`` names another: see

@@ -46,7 +46,9 @@ def test_headless_json_contract(tiny_model, tmp_path, capsys):
     assert out["calibration_residual_deg"] < 2.0
     # recovered strap rotations vs the drawn ones, through 3 drivers: the guided walk finds each
     # sensor's heading from its swing (tests/calibration/test_walk.py holds segments to 3 deg)
-    assert out["calibration_error_deg"] < 5.0
+    # a failure names the sensor and what its stream did (a second run under load has shown 5-60 deg)
+    assert out["calibration_error_deg"] < 5.0, (out["calibration_error_by_site"], out["sites"], out["events"])
+    assert set(out["calibration_error_by_site"]) == {"pelvis", "l_wrist", "r_shank"}
     assert out["ga_deg"] is not None and np.isfinite(out["ga_deg"])
     assert out["latency_p99_ms"] >= out["latency_p50_ms"] > 0
     assert set(out["sites"]) == {"pelvis", "l_wrist", "r_shank"}
