@@ -37,6 +37,7 @@ from .heading import axis_forward, heading_change, peak_forward, still_mean, tur
 SWING_SEGMENTS = ("l_thigh", "r_thigh", "l_shank", "r_shank")
 MIN_WALK_M = 1.0  # shorter than this and a bias of 0.05 m/s^2 is a few degrees of heading
 MIN_PRESENT = 0.5  # of the walk's frames, per sensor
+LONG_GAP_S = 0.25  # missing longer than this, a stream's velocity is held across the gap (``fill_gaps``)
 MOVING_M_S = 0.3  # the still ends of a walk say nothing of its direction
 MIN_SWING_FRAMES = 30
 WARN_DEG = 15.0  # a heading this far from the others' is named in the report
@@ -61,16 +62,26 @@ def signed_angle_deg(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.rad2deg(np.arctan2(cross, np.sum(u * v, -1)))
 
 
-def fill_gaps(a: np.ndarray, ok: np.ndarray) -> np.ndarray:
-    """(T,3) with the frames not ``ok`` interpolated linearly in time from their neighbours.
-    A busy hub marks bursts of frames missing: counting them as zero acceleration shortens
-    the velocity along the step phases they fall in and turns the heading (10 % of frames
-    missing in bursts put a wrist 4 deg off, 20 % over 9 deg); interpolated, a burst of a few
-    frames costs only the acceleration's detail within it."""
+def fill_gaps(a: np.ndarray, ok: np.ndarray, fps: float = 60.0) -> np.ndarray:
+    """(T,3) bias-free acceleration with the frames not ``ok`` filled. A busy hub marks bursts
+    of frames missing: counting them as zero acceleration shortens the velocity along the
+    step phases they fall in and turns the heading (10 % of frames missing in bursts put a
+    wrist 4 deg off, 20 % over 9 deg); interpolated, a burst of a few frames costs only the
+    acceleration's detail within it. A stream that stalls for longer than LONG_GAP_S (a
+    pseudo-terminal waiting for a core) is another matter: the line between its edges'
+    accelerations, a step's peaks apart, integrates to a velocity change of metres a
+    second (a 1 s gap put a wrist 23-32 deg off). There the velocity is held instead (zero
+    acceleration): a walk's speed changes little over a second, and what it does change
+    stays along the walk, so its heading keeps (1.1 deg)."""
     if ok.all():
         return a
     t = np.arange(len(a))
-    return np.stack([np.interp(t, t[ok], a[ok, j]) for j in range(a.shape[1])], axis=-1)
+    out = np.stack([np.interp(t, t[ok], a[ok, j]) for j in range(a.shape[1])], axis=-1)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], (~ok).astype(np.int8), [0]])))
+    for i, j in zip(edges[::2], edges[1::2]):  # runs of missing frames [i, j)
+        if j - i > LONG_GAP_S * fps:
+            out[i:j] = 0.0
+    return out
 
 
 def velocity(a: np.ndarray, fps: float) -> np.ndarray:
@@ -98,7 +109,7 @@ def walk_displacements(a_G: np.ndarray, present: np.ndarray, fps: float, walk: t
         ok = present[w0:w1, k] & np.all(np.isfinite(seg), -1)
         if ok_still.sum() < 2 or ok.mean() < MIN_PRESENT:
             continue
-        a = fill_gaps(seg - a_G[n0:n1, k][ok_still].mean(0), ok)
+        a = fill_gaps(seg - a_G[n0:n1, k][ok_still].mean(0), ok, fps)
         v = turn_back(velocity(a, fps)[:, :2], None if turn is None else np.nan_to_num(turn[w0:w1]))
         disp[k] = v.sum(0) / fps
         moving = v[np.linalg.norm(v, axis=-1) > MOVING_M_S]

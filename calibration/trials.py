@@ -161,7 +161,7 @@ def _open_displacement(a_G: np.ndarray, ok: np.ndarray, fps: float, stop: int, t
         good = ok[:, k] & np.all(np.isfinite(a_G[:, k]), -1)
         if good.mean() < 0.5 or not np.isfinite(bias[k]).all():
             continue
-        a = fill_gaps(a_G[:, k] - bias[k], good)
+        a = fill_gaps(a_G[:, k] - bias[k], good, fps)
         v = np.cumsum(a, axis=0) / fps
         v = turn_back((v - v[-1])[:, :2], None if turn is None else np.nan_to_num(turn))
         disp[k] = v.sum(0) / fps
