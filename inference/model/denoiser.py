@@ -128,26 +128,34 @@ class Denoiser(nn.Module):
         63-token window, and the live loop calls the model K times per 50 ms frame.
         """
         B, L, d = x.shape
+        M = mem.shape[1]
         heads = self.config.heads
         hd = d // heads
+        # the tokens as rows (B*L, d) between the attentions: a linear layer on a 2-D input is one
+        # Gemm in the exported graph, on a 3-D one a Gemm between two Reshapes, each a node that
+        # ONNX Runtime dispatches at a fixed cost (docs/latency.md, "Nodes against arithmetic")
+        x = x.reshape(B * L, d)
+        mem = mem.reshape(B * M, d)
         for layer in self.decoder.layers:
             sa, ca = layer.self_attn, layer.multihead_attn
             # self-attention over [step, height, frames]
             y = F.layer_norm(x, (d,), layer.norm1.weight, layer.norm1.bias, layer.norm1.eps)
-            qkv = F.linear(y, sa.in_proj_weight, sa.in_proj_bias).view(B, L, 3, heads, hd).permute(2, 0, 3, 1, 4)
-            a = F.scaled_dot_product_attention(qkv[0], qkv[1], qkv[2])
-            x = x + F.linear(a.transpose(1, 2).reshape(B, L, d), sa.out_proj.weight, sa.out_proj.bias)
+            # heads of q, k and v side by side (B, 3 heads, L, hd), cut in three: one Split, no Squeeze
+            qkv = F.linear(y, sa.in_proj_weight, sa.in_proj_bias)
+            q, k, v = qkv.view(B, L, 3 * heads, hd).transpose(1, 2).split(heads, 1)
+            a = F.scaled_dot_product_attention(q, k, v)
+            x = x + F.linear(a.transpose(1, 2).reshape(B * L, d), sa.out_proj.weight, sa.out_proj.bias)
             # cross-attention to the two memory tokens
             y = F.layer_norm(x, (d,), layer.norm2.weight, layer.norm2.bias, layer.norm2.eps)
             w, b = ca.in_proj_weight, ca.in_proj_bias
             q = F.linear(y, w[:d], b[:d]).view(B, L, heads, hd).transpose(1, 2)
-            kv = F.linear(mem, w[d:], b[d:]).view(B, -1, 2, heads, hd).permute(2, 0, 3, 1, 4)
-            a = F.scaled_dot_product_attention(q, kv[0], kv[1])
-            x = x + F.linear(a.transpose(1, 2).reshape(B, L, d), ca.out_proj.weight, ca.out_proj.bias)
+            k, v = F.linear(mem, w[d:], b[d:]).view(B, M, 2 * heads, hd).transpose(1, 2).split(heads, 1)
+            a = F.scaled_dot_product_attention(q, k, v)
+            x = x + F.linear(a.transpose(1, 2).reshape(B * L, d), ca.out_proj.weight, ca.out_proj.bias)
             # feed-forward
             y = F.layer_norm(x, (d,), layer.norm3.weight, layer.norm3.bias, layer.norm3.eps)
             x = x + layer.linear2(F.gelu(layer.linear1(y)))
-        return x
+        return x.view(B, L, d)
 
 
 def freeze_for_cpu(model: nn.Module, batch: int = 1, window: int | None = None) -> nn.Module:
