@@ -125,6 +125,31 @@ class OnnxNet:
         return torch.from_numpy(self.session.run(None, feeds)[0])
 
 
+class PerWindowNet:
+    """A one-window session called once per window of a batch. An int8 graph quantizes each
+    activation with one scale over its whole input tensor (``DynamicQuantizeLinear``), so a
+    window's answer would depend on the other windows in its batch; called one by one, an
+    offline run's answers are exactly the live loop's (which calls one window a frame)."""
+
+    def __init__(self, one: OnnxNet) -> None:
+        self.one = one
+        self.config = one.config
+        self.mask_input = one.mask_input
+        self.quantized = one.quantized
+        self.threads = one.threads
+
+    def run_np(self, z: np.ndarray, t: np.ndarray, height: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+        return np.concatenate([self.one.run_np(z[i:i + 1], t[i:i + 1], height[i:i + 1],
+                                               None if mask is None else mask[i:i + 1]) for i in range(len(z))])
+
+    def __call__(self, z: Tensor, t: Tensor, height: Tensor, mask: Tensor | None = None) -> Tensor:
+        def arr(x: Tensor, dtype) -> np.ndarray:
+            return np.ascontiguousarray(x.detach().numpy(), dtype=dtype)
+
+        return torch.from_numpy(self.run_np(arr(z, np.float32), arr(t, np.int64), arr(height, np.float32),
+                                            None if mask is None else arr(mask, bool)))
+
+
 def quantize_dynamic_int8(graph: bytes) -> bytes:
     """An ONNX graph with its MatMul / Gemm weights in int8 (ONNX Runtime's dynamic
     quantizer: per-tensor weight scales, activations quantized on the fly)."""
@@ -146,10 +171,15 @@ def quantize_dynamic_int8(graph: bytes) -> bytes:
         return onnx.load(str(dst)).SerializeToString()
 
 
-def onnx_net(module: nn.Module, batch: int, window: int, features: int, mask_input: bool) -> OnnxNet | None:
+def onnx_net(module: nn.Module, batch: int, window: int, features: int, mask_input: bool,
+             quantize: bool = False) -> OnnxNet | PerWindowNet | None:
     """``OnnxNet`` of ``module``, or None (with a warning) when the export or the session
-    fails: the caller then runs torch, so a model ONNX cannot take still runs."""
+    fails: the caller then runs torch, so a model ONNX cannot take still runs. ``quantize``:
+    the int8 graph, one window a call (``PerWindowNet`` for a batch of them)."""
     try:
+        if quantize:
+            one = OnnxNet(module, 1, window, features, mask_input, quantize=True)
+            return one if batch == 1 else PerWindowNet(one)
         return OnnxNet(module, batch, window, features, mask_input)
     except Exception as exc:  # noqa: BLE001 - any failure falls back to torch, said once
         warnings.warn(f"ONNX Runtime unavailable for this model ({type(exc).__name__}: {exc}); running torch",
@@ -157,4 +187,5 @@ def onnx_net(module: nn.Module, batch: int, window: int, features: int, mask_inp
         return None
 
 
-__all__ = ["RUNTIMES", "onnxruntime_available", "resolve_runtime", "OnnxNet", "onnx_net", "quantize_dynamic_int8"]
+__all__ = ["RUNTIMES", "onnxruntime_available", "resolve_runtime", "OnnxNet", "PerWindowNet", "onnx_net",
+           "quantize_dynamic_int8"]

@@ -53,6 +53,7 @@ raises a FileNotFoundError that says how to train one.
 from __future__ import annotations
 
 import os
+import warnings
 import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -73,7 +74,7 @@ from inference.model.denoiser import Denoiser, freeze_for_cpu
 from inference.model.diffusion import Schedule, inpaint, parse_steps, redraw
 from inference.model.diffusion import symmetric_start as symmetric_start_at
 from inference.model.files import LoadedModel
-from inference.model.onnx_runtime import onnx_net, resolve_runtime
+from inference.model.onnx_runtime import onnx_net, onnxruntime_available, resolve_runtime
 from inference.model.regressor import regress
 from inference.poser.confidence import (
     ConfidenceSettings,
@@ -191,7 +192,10 @@ class Poser:
     each model call (``_predict_chains``; None: the model file's ``mirror_chains``, off).
     symmetric_start: the mean start at the data mean's symmetric midpoint
     (``diffusion.symmetric_start``) instead of the data mean, for a model that answers without
-    mirror chains (None: the model file's ``symmetric_start``, off).
+    mirror chains (None: the model file's ``symmetric_start``, off). int8: the network's linear
+    layers in int8 through ONNX Runtime's dynamic quantizer, one window a call, offline too, so
+    an evaluation scores what runs live (None: the model file's ``int8``, off; without
+    onnxruntime the float network runs, with a warning).
     """
 
     def __init__(
@@ -221,11 +225,15 @@ class Poser:
         answer_lag: int | None = None,
         knee_twist: float | None = None,
         symmetric_start: bool | None = None,
+        int8: bool | None = None,
     ) -> None:
         self.model = model
         # the frame-by-frame call through ONNX Runtime where that is faster (live sessions ask
         # for "auto"; offline runs keep torch's exact results): inference/model/onnx_runtime.py
         self.runtime = resolve_runtime(runtime) if model is not None and model.kind == "diffusion" else "torch"
+        self.int8 = int8_for(model, int8)
+        if self.int8:  # an int8 file is its ONNX Runtime graph: offline runs take it too
+            self.runtime = "onnx"
         self.kind = "floor" if model is None else model.kind
         if self.kind not in POSER_KINDS:
             raise ValueError(f"cannot pose with a model of kind {self.kind!r}")
@@ -347,14 +355,15 @@ class Poser:
         frozen = self._freeze and isinstance(model.model, Denoiser) and not self.takes_points
         nets = _model_nets(model)
         # one window (mirror-averaged inside the graph) or the two chains of whole-chain mirror averaging
-        onnx = frozen and (windows == 1 or (windows == 2 and not mirror)) and self.runtime == "onnx"
-        key = (windows, mirror, frozen, self.window) + (("onnx",) if onnx else ())
+        int8 = self.int8 and frozen and model is self.model
+        onnx = frozen and (windows == 1 or (windows == 2 and not mirror) or int8) and self.runtime == "onnx"
+        key = (windows, mirror, frozen, self.window) + (("onnx",) if onnx else ()) + (("int8",) if int8 else ())
         if key not in nets:
             batch = windows * (2 if mirror else 1)
             fast = None
             if onnx:
                 eager = MirrorAveraged(model.model, model.norm_mean, model.norm_std) if mirror else model.model
-                fast = onnx_net(eager, windows, self.window, N_FEATURES, model.config.mask_input)
+                fast = onnx_net(eager, windows, self.window, N_FEATURES, model.config.mask_input, quantize=int8)
             if fast is not None:
                 nets[key] = fast
             else:
@@ -742,6 +751,20 @@ _CONTACT_SEGMENTS = np.array(CONTACT_SEGMENTS)
 
 
 _NETS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def int8_for(model: LoadedModel | None, int8: bool | None = None) -> bool:
+    """Whether a poser runs ``model``'s network in int8 (``Poser(int8=)``; None: its file's
+    ``int8``): a diffusion model's, where ONNX Runtime is installed (else the float network,
+    said once)."""
+    if model is None or model.kind != "diffusion":
+        return False
+    want = bool((model.meta or {}).get("int8", False)) if int8 is None else bool(int8)
+    if want and not onnxruntime_available():
+        warnings.warn("this model runs its linear layers in int8 through ONNX Runtime, which is not installed: "
+                      "running the float network (pip install '.[onnx]')", stacklevel=3)
+        return False
+    return want
 
 
 def _model_nets(model: LoadedModel) -> dict:

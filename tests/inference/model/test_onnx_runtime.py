@@ -142,3 +142,41 @@ def test_the_symmetric_start_is_its_own_mirror_image_and_the_poser_reads_it_from
     p = Poser(m, body=1.75, contact_detector=None, pelvis_odometry=None)
     torch.testing.assert_close(p.start_at, c.reshape(-1))
     assert Poser(m, body=1.75, contact_detector=None, pelvis_odometry=None, symmetric_start=False).start_at is None
+
+
+@needs_ort
+def test_an_int8_file_runs_its_quantized_graph_one_window_a_call_offline_as_live(monkeypatch):
+    """A file whose meta says ``int8`` runs ONNX Runtime's int8 graph whatever runtime the
+    caller asked for (an offline evaluation scores what runs live). Its activations are
+    quantized over the whole input, so a batch of windows would change each window's answer:
+    offline the windows go one a call (``PerWindowNet``), and lanes of clips answer exactly as
+    each clip frame by frame. The answer is near the float network's, not equal to it; without
+    onnxruntime the float network runs, with a warning."""
+    import warnings
+
+    from inference.poser import poser as poser_module
+    from inference.poser.batched import reconstruct_many
+    from inference.poser.poser import reconstruct_offline
+
+    m = _tiny()
+    m.meta = {"int8": True, "noise": "mean", "history": "measured", "inpaint_mode": "replace-ddim"}
+    kw = dict(body=1.75, steps="3", contact_detector=None, pelvis_odometry=None)
+    p = Poser(m, runtime="torch", **kw)
+    assert p.int8 and p.runtime == "onnx" and p._net.quantized
+    assert isinstance(p.net_for(4), onnx_runtime.PerWindowNet)
+    rng = np.random.default_rng(3)
+    mask = np.zeros(N_FEATURES, bool)
+    mask[:60] = True
+    clips = [(rng.normal(size=(30, N_FEATURES)) * 0.2, mask) for _ in range(3)]
+    one = [reconstruct_offline(Poser(m, **kw), f, mk) for f, mk in clips]
+    many = reconstruct_many([Poser(m, **kw) for _ in clips], clips, lanes=3)
+    for a, b in zip(one, many):
+        np.testing.assert_array_equal(a.rot, b.rot)
+    flat = reconstruct_offline(Poser(m, int8=False, **kw), *clips[0])
+    gap = np.abs(flat.rot - one[0].rot).max()
+    assert 1e-5 < gap < 0.2, gap
+    monkeypatch.setattr(poser_module, "onnxruntime_available", lambda: False)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        p = Poser(m, **kw)
+    assert not p.int8 and p.runtime == "torch" and any("int8" in str(w.message) for w in caught)
