@@ -84,7 +84,7 @@ def bench_poser(model, steps=None, frames: int = 200, warmup: int = 10, label: s
         "steps": len(poser.steps) if kind == "diffusion" else (1 if kind == "regressor" else 0),
         "passes_per_pose": passes_per_pose(poser), "window": getattr(poser, "window", None),
         "model": label or kind, "frames": int(frames), "threads": torch.get_num_threads(),
-        "mirror": poser.mirror, "runtime": poser.runtime,
+        "mirror": poser.mirror, "runtime": poser.runtime, "int8": poser.int8,
         **({"draws": c.draws, "every": c.every, "pool": c.pool, "level": c.level}
            if (c := poser.confidence) is not None else {}),
     }
@@ -197,7 +197,7 @@ def bench_reference(model, steps=None, frames: int = 200, warmup: int = 10, seed
     posers = {"default": Poser(model, body=motion.body, steps=steps, seed=seed, mirror=mirror, runtime="auto"),
               "reference": Poser(ref, body=motion.body, steps=parse_steps(REFERENCE_STEPS), seed=seed, mirror=True,
                                  mirror_chains=True, noise="mean", inpaint_mode="replace-ddim", history="measured",
-                                 runtime="auto")}
+                                 runtime="auto", int8=False)}  # the shipped float network
     ms = interleaved_times(posers, inp, frames, warmup)
     out: dict = {"frames": int(frames), "interleaved": True}
     for name, poser in posers.items():
@@ -205,6 +205,7 @@ def bench_reference(model, steps=None, frames: int = 200, warmup: int = 10, seed
                      "p99_ms": round(float(np.percentile(ms[name], 99)), 3),
                      "window": poser.window, "steps": list(poser.steps), "passes_per_pose": passes_per_pose(poser),
                      "mirror": poser.mirror, "mirror_chains": bool(poser.chain_mirror), "runtime": poser.runtime,
+                     "int8": poser.int8,
                      "size": "{layers}/{d_model}/{ff}".format(**vars(poser.model.config))}
     out["ratio_p50"] = round(out["default"]["p50_ms"] / out["reference"]["p50_ms"], 3)
     out["ratio_p99"] = round(out["default"]["p99_ms"] / out["reference"]["p99_ms"], 3)
