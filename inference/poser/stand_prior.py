@@ -27,6 +27,12 @@ loses its tilt and keeps its heading (``level``; the stands' feet 0.6-1.5 deg on
 OpenSense walk where the 21-frame model's mirror-free answer left 4.2-4.7; docs/real_signals.md,
 "A standing body"). A foot the model tilts further than ``max_foot_tilt_deg`` (on its toes)
 is left as it is.
+
+A standing body's trunk is upright too. Over a worn pelvis that stands upright, with a settled
+leg under it, the unworn spine and neck lose their tilt the same way (heading kept). The
+21-frame `fast` file leaned the OpenSense walk's standing torso forward from 7 to 21 deg over
+its 1.8 s (the default 6 deg), the sensor upright; a trunk the model bends further than
+``max_trunk_tilt_deg`` (a stoop held still) is left as it is.
 """
 
 from __future__ import annotations
@@ -43,6 +49,8 @@ from inference.poser.joint_constraints import BONE_AXIS, KNEE_AXIS, KNEES, hinge
 from inference.signals.resample import FPS_MODEL
 
 FEET = tuple(SEGMENT_INDEX[f"{side}_foot"] for side in "lr")  # in the order of KNEES
+PELVIS = SEGMENT_INDEX["pelvis"]
+TRUNK = tuple(SEGMENT_INDEX[s] for s in ("spine1", "spine2", "spine3", "neck"))  # upright in the rest pose
 
 
 def tilt_of(R: np.ndarray) -> float:
@@ -72,6 +80,9 @@ class StandPrior:
     max_flexion_deg: a knee bent further than this is not straightened (sitting, kneeling).
     level_feet / max_foot_tilt_deg: level the unworn feet of the settled legs, unless the model
     tilts them further than this.
+    upright_trunk / max_trunk_tilt_deg: with a settled leg under a worn pelvis that stands
+    upright, the unworn spine and neck lose their tilt (heading kept), unless the model tilts
+    a segment further than this (a stoop held still).
     """
 
     still_deg_s: float = 15.0
@@ -82,6 +93,8 @@ class StandPrior:
     max_flexion_deg: float = 30.0
     level_feet: bool = True
     max_foot_tilt_deg: float = 20.0
+    upright_trunk: bool = True
+    max_trunk_tilt_deg: float = 30.0
     fps: float = FPS_MODEL
 
     def __post_init__(self) -> None:
@@ -92,6 +105,7 @@ class StandPrior:
         self._cos_upright = np.cos(np.radians(self.upright_deg))
         self._max_flexion = np.radians(self.max_flexion_deg)
         self._max_foot_tilt = np.radians(self.max_foot_tilt_deg)
+        self._max_trunk_tilt = np.radians(self.max_trunk_tilt_deg)
         self.reset()
 
     def reset(self) -> None:
@@ -118,6 +132,7 @@ class StandPrior:
         if w <= 0.0:
             return R
         out = R
+        standing = False  # a worn leg segment hangs upright with its knee near straight
         for (t, s), f in zip(KNEES, FEET):
             if measured[t] == measured[s]:
                 continue  # both worn: nothing to settle; neither: no upright segment to go by
@@ -127,6 +142,7 @@ class StandPrior:
             theta = hinge_angle(R[t].T @ R[s], self._axis)
             if abs(theta) > self._max_flexion:
                 continue
+            standing = True
             if out is R:
                 out = R.copy()
             if free == t:
@@ -142,6 +158,10 @@ class StandPrior:
                 out[s] = R[t] @ matrix_about_axis_np(self._axis, (1.0 - w) * theta)
             if self.level_feet and not measured[f] and tilt_of(R[f]) <= self._max_foot_tilt:
                 out[f] = level(R[f], w)
+        if self.upright_trunk and standing and measured[PELVIS] and R[PELVIS, 2, 2] >= self._cos_upright:
+            for k in TRUNK:
+                if not measured[k] and tilt_of(R[k]) <= self._max_trunk_tilt:
+                    out[k] = level(R[k], w)
         return out
 
     def _update(self, R: np.ndarray, measured: np.ndarray) -> None:

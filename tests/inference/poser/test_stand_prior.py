@@ -111,3 +111,47 @@ def test_a_worn_thigh_leaves_what_is_no_stand(case):
         assert np.array_equal(out[[LF, RF]], R[[LF, RF]])
     else:
         assert np.array_equal(out, R)
+
+
+TRUNK = [SEGMENT_INDEX[s] for s in ("spine1", "spine2", "spine3", "neck")]
+
+
+def lean(R: np.ndarray, deg: float, heading_deg: float = 30.0) -> np.ndarray:
+    """``R`` with the unworn spine and neck turned ``heading_deg`` and leaning forward ``deg``."""
+    R = R.copy()
+    turn = matrix_about_axis_np(np.array([0.0, 0.0, 1.0]), np.radians(heading_deg))
+    for k in TRUNK:
+        R[k] = turn @ matrix_about_axis_np(np.array([0.0, 1.0, 0.0]), np.radians(deg))
+    return R
+
+
+def tilt_deg(R: np.ndarray) -> float:
+    return float(np.degrees(np.arccos(np.clip(R[2, 2], -1.0, 1.0))))
+
+
+def test_a_standing_body_over_an_upright_pelvis_stands_its_trunk_upright():
+    """The 21-frame model leaned a real stand's torso 7-21 deg forward over a still, upright
+    pelvis and straight legs; settled, the unworn trunk loses its tilt and keeps its heading."""
+    prior = StandPrior()
+    R, m = frame(10.0)
+    R = lean(R, 18.0)
+    out = [prior(R, m) for _ in range(30)]
+    assert all(tilt_deg(out[0][k]) == pytest.approx(18.0, abs=1e-6) for k in TRUNK)  # just stopped: the model's
+    for k in TRUNK:
+        assert tilt_deg(out[20][k]) < 1e-4
+        heading = np.degrees(np.arctan2(out[20][k][1, 0], out[20][k][0, 0]))
+        assert heading == pytest.approx(30.0, abs=1e-4)
+
+
+@pytest.mark.parametrize("case", ["stoop", "pelvis leaning", "trunk worn", "no standing leg"])
+def test_the_trunk_is_left_where_the_sensors_do_not_say_upright_stand(case):
+    prior = StandPrior()
+    R, m = frame(10.0, shank_lean_deg=15.0 if case == "no standing leg" else 0.0)
+    R = lean(R, 40.0 if case == "stoop" else 18.0)
+    if case == "pelvis leaning":
+        R[PELVIS] = matrix_about_axis_np(np.array([0.0, 1.0, 0.0]), np.radians(20.0))
+    if case == "trunk worn":
+        m[TRUNK] = True
+    for _ in range(40):
+        out = prior(R, m)
+    assert np.array_equal(out[TRUNK], R[TRUNK])
