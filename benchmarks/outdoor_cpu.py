@@ -9,7 +9,7 @@ Each round starts the simulated suit in its own process (`imucap devices simulat
 the outdoor view (``--view outdoor --outdoor-skeleton 2d|3d``; under Xvfb here, so GL is
 software GL, llvmpipe, on threads of the capture process), or ``--headless``. "light" is
 the setup's lighter model setting (one diffusion step, for a laptop on battery); "fast" the
-narrow chain student (``[model] name = "fast"``, a third of the model's compute). The
+21-frame int8 chain student (``[model] name = "fast"``, under a third of the model's compute). The
 capture process's CPU time, all its threads (devices, hub, model, drawing, recording),
 is read from /proc twice a second; its share of one core is taken over the last 15 s
 before it stops, when it has posed for a while (the start-up's imports and the
