@@ -133,7 +133,7 @@ class Denoiser(nn.Module):
         hd = d // heads
         # the tokens as rows (B*L, d) between the attentions: a linear layer on a 2-D input is one
         # Gemm in the exported graph, on a 3-D one a Gemm between two Reshapes, each a node that
-        # ONNX Runtime dispatches at a fixed cost (docs/latency.md, "Nodes against arithmetic")
+        # ONNX Runtime dispatches at a fixed cost (docs/latency.md, "int8 weights for the 21-frame file")
         x = x.reshape(B * L, d)
         mem = mem.reshape(B * M, d)
         for layer in self.decoder.layers:

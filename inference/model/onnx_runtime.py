@@ -114,15 +114,16 @@ class OnnxNet:
         return self.session.run(None, feeds)[0]
 
     def __call__(self, z: Tensor, t: Tensor, height: Tensor, mask: Tensor | None = None) -> Tensor:
-        feeds: dict[str, Any] = {
-            "z": np.ascontiguousarray(z.detach().numpy(), dtype=np.float32),
-            "t": np.ascontiguousarray(t.detach().numpy(), dtype=np.int64),
-            "height": np.ascontiguousarray(height.detach().numpy(), dtype=np.float32),
-        }
-        if self.mask_input:
-            m = torch.zeros(self.shape, dtype=torch.bool) if mask is None else mask
-            feeds["mask"] = np.ascontiguousarray(m.detach().numpy(), dtype=bool)
-        return torch.from_numpy(self.session.run(None, feeds)[0])
+        return _call_on_tensors(self.run_np, z, t, height, mask)
+
+
+def _call_on_tensors(run_np, z: Tensor, t: Tensor, height: Tensor, mask: Tensor | None) -> Tensor:
+    """A numpy network's ``run_np`` called like the torch module: tensors in, a tensor out."""
+    def arr(x: Tensor, dtype) -> np.ndarray:
+        return np.ascontiguousarray(x.detach().numpy(), dtype=dtype)
+
+    return torch.from_numpy(run_np(arr(z, np.float32), arr(t, np.int64), arr(height, np.float32),
+                                   None if mask is None else arr(mask, bool)))
 
 
 class PerWindowNet:
@@ -143,11 +144,7 @@ class PerWindowNet:
                                                None if mask is None else mask[i:i + 1]) for i in range(len(z))])
 
     def __call__(self, z: Tensor, t: Tensor, height: Tensor, mask: Tensor | None = None) -> Tensor:
-        def arr(x: Tensor, dtype) -> np.ndarray:
-            return np.ascontiguousarray(x.detach().numpy(), dtype=dtype)
-
-        return torch.from_numpy(self.run_np(arr(z, np.float32), arr(t, np.int64), arr(height, np.float32),
-                                            None if mask is None else arr(mask, bool)))
+        return _call_on_tensors(self.run_np, z, t, height, mask)
 
 
 def quantize_dynamic_int8(graph: bytes) -> bytes:
