@@ -147,6 +147,18 @@ def _model(spec: str, latency: str) -> Any:
     return _MODELS[spec]
 
 
+def _replay_poser(rec: Any, settings: Any, body: Any, latency: str, subset: Any) -> Any:
+    """The replay poser of ``rec`` wearing ``subset`` (None: every recorded sensor), its model
+    loaded once per worker (the live default, "auto", chooses its file by the subset)."""
+    from dataclasses import replace
+
+    from app.replay import build_replay_poser, replay_model, resolve_sensors
+
+    sites = None if subset is None else resolve_sensors(rec, subset)
+    spec = replay_model(rec, settings, sites)
+    return build_replay_poser(rec, replace(settings, model=spec), body, model=_model(spec, latency))
+
+
 def one_line(exc: BaseException) -> str:
     text = " ".join(str(exc).split())
     return text if text else type(exc).__name__
@@ -214,7 +226,7 @@ def _run(task: Task) -> dict[str, Any]:
     from app.capture.simulate import read_truth
     from app.export.formats import body_for_recording, export_motion, motion_from_poses
     from app.recording import read_recording
-    from app.replay import build_replay_poser, compare_to_recorded, held_out_errors, replay_recording, truth_errors
+    from app.replay import compare_to_recorded, held_out_errors, replay_recording, truth_errors
 
     folder = Path(task.folder)
     stamp = input_stamp(task.recording)
@@ -230,7 +242,6 @@ def _run(task: Task) -> dict[str, Any]:
     body, note = body_for_recording(rec.metadata)
     opts = task.options
     latency = opts.settings.latency or rec.metadata.get("latency") or "centred"
-    model = _model(opts.settings.model, latency)
     truth = read_truth(task.truth) if task.truth else None
     warnings = list(rec.damage) + ([note] if note else [])
     full = None  # every recorded sensor's replay, once, for the held-out error of each subset
@@ -242,7 +253,7 @@ def _run(task: Task) -> dict[str, Any]:
             rows.append(journal[label]["row"])
             files += journal[label]["files"]
             continue
-        built = build_replay_poser(rec, opts.settings, body, model=model)
+        built = _replay_poser(rec, opts.settings, body, latency, subset)
         res = replay_recording(rec, built.poser, sensors=subset, causal=built.causal)
         if subset is None:
             full = res
@@ -287,7 +298,7 @@ def _run(task: Task) -> dict[str, Any]:
             files += journal["report"]["files"]
         else:
             if first is None:  # the first subset came from the journal: its replay again
-                built = build_replay_poser(rec, opts.settings, body, model=model)
+                built = _replay_poser(rec, opts.settings, body, latency, opts.subsets[0])
                 first = (replay_recording(rec, built.poser, sensors=opts.subsets[0], causal=built.causal),
                          built.label, built.steps)
             made = write_report(rec, folder, *first)

@@ -98,7 +98,7 @@ def check_setup(setup: Setup, seconds: float = 3.0) -> SetupCheck:
     for th in threads:
         th.join()
     report = SetupCheck(setup, seconds, [results[name] for name in setup.urls()])
-    _check_model(setup.model, report)
+    _check_model(setup.model, report, setup.sites())
     _check_recordings(setup.recordings_dir(), report)
     return report
 
@@ -170,11 +170,12 @@ def judge(d: DeviceCheck) -> list[str]:
     return problems
 
 
-def _check_model(spec: str, report: SetupCheck) -> None:
-    from inference.poser.models import DEFAULT_WEIGHTS, MODEL_NAMES
+def _check_model(spec: str, report: SetupCheck, sites: tuple[str, ...] | None = None) -> None:
+    from inference.poser.models import DEFAULT_WEIGHTS, MODEL_NAMES, model_for_sites
 
     if spec == "floor":
         return
+    spec = str(model_for_sites(spec, sites))  # the live default: the file it chooses for these sensors
     if spec in DEFAULT_WEIGHTS:
         if not DEFAULT_WEIGHTS[spec].exists():
             report.warnings.append(f"model {spec}: the trained weights {DEFAULT_WEIGHTS[spec]} are missing; "

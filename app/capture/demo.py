@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from app.capture.session import CaptureOptions, CaptureSession, session_spec
-from app.capture.setup_file import Setup
+from app.capture.setup_file import DEFAULT_MODEL, Setup
 from app.capture.simulate import Truth, read_truth
 from app.capture.simulator_process import SimulatorProcess
 from app.capture.twins import simulated_setup
@@ -49,7 +49,7 @@ class DemoConfig:
     protocol: str = "xbus"
     seconds: float = 20.0  # the activity after the calibration (the simulated subject's clip, looped)
     frames: int = 0  # headless: run on past ``seconds`` until this many poses (DemoRun.run_for)
-    model: str = "diffusion"
+    model: str = DEFAULT_MODEL
     steps: str | None = None
     seed: int = 0
     record: str | None = None

@@ -107,8 +107,9 @@ class CaptureSession:
         self.options = opt = options or CaptureOptions()
         set_torch_threads(opt.threads)
         self.sites = setup.sites()
-        choice = choose_model(setup.model, opt.latency, fallback=True)
+        choice = choose_model(setup.model, opt.latency, fallback=True, sites=self.sites)
         self.model, self.model_label, self.warning = choice.model, choice.label, choice.warning
+        self.model_spec = choice.spec
         causal = choice.causal
         steps = setup.steps
         self.poser = Poser(self.model, body=Body.from_height(setup.subject.height_m), steps=steps, runtime="auto",
@@ -185,7 +186,7 @@ class CaptureSession:
                       **({"tracked": {n: e.url for n, e in s.tracked.items()}} if s.tracked else {}),
                       "calibration": s.calibration, "file": str(s.path) if s.path else None},
             "sensors": list(self.sites), "insoles": s.insoles is not None, "model": self.model_label,
-            "app_version": APP_VERSION,
+            "model_spec": self.model_spec, "app_version": APP_VERSION,
             # how the poser ran, from the poser built: a replay with no options runs it so again
             **poser_metadata(self.poser, self.options.latency),
             "body_height_m": s.subject.height_m, "reach": self.pipeline.reach, **self.options.metadata,

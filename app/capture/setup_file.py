@@ -29,7 +29,9 @@ CALIBRATION_PROTOCOLS: dict[str, str] = {
     "walk": "no table: N-pose, then a few steps forward",
     "table": "sensors on a table, then T-pose",
 }
-DEFAULT_MODEL = "diffusion"
+# the live default: the 21-frame file, or the full model where a worn thigh has no shank below it
+# (inference.poser.models.model_for_sites)
+DEFAULT_MODEL = "auto"
 DEFAULT_RECORDINGS = Path("recordings")
 # the tables a setup file may hold and the keys each takes ([sensors] takes site names)
 TABLE_KEYS: dict[str, tuple[str, ...]] = {
@@ -426,7 +428,8 @@ class _Parser:
     def _model(self, table: dict[str, Any]) -> tuple[str, str | None]:
         name = self._text("model", "name", table.get("name", DEFAULT_MODEL)).strip()
         if not name:
-            raise self.error("the model name is empty", 'use "diffusion", "fast", "regressor", "floor" or a model file',
+            raise self.error("the model name is empty",
+                             'use "auto", "diffusion", "fast", "regressor", "floor" or a model file',
                              self.line("model", "name"))
         steps = table.get("steps")
         if steps is None:
@@ -561,7 +564,8 @@ def _dump(setup: Setup, base: Path | None) -> str:
     lines += [
         "",
         "[model]",
-        '# name: "diffusion", "fast" (a third of the compute, less accurate), "regressor", "floor" (no model)',
+        '# name: "auto" (the default: "fast", or "diffusion" where a thigh is worn without its shank),',
+        '#   "diffusion" (the full model, three times the compute), "fast", "regressor", "floor" (no model)',
         '#   or a model file;',
         '# steps: diffusion steps, e.g. "10D:3" (fewer = faster); leave out for the model\'s own',
         f"name = {_quote(setup.model)}",

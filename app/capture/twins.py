@@ -18,7 +18,7 @@ import socket
 import tempfile
 from pathlib import Path
 
-from app.capture.setup_file import SensorEntry, Setup, Subject
+from app.capture.setup_file import DEFAULT_MODEL, SensorEntry, Setup, Subject
 from drivers.urls import parse_url
 from sim_devices.devices.can_loopback import (
     REMOTE_INTERFACE,
@@ -113,7 +113,7 @@ def simulated_url(site: str, protocol: str, folder: Path, k: int, can_channel: s
 
 
 def simulated_setup(sites: tuple[str, ...], protocol: str = "xbus", insoles: bool = False,
-                    folder: Path | None = None, subject: Subject | None = None, model: str = "diffusion",
+                    folder: Path | None = None, subject: Subject | None = None, model: str = DEFAULT_MODEL,
                     steps: str | None = None, recordings: Path | None = None) -> Setup:
     """A setup whose devices are simulated: ``protocol`` for all, or ``mixed`` (in turn)."""
     folder = Path(folder or tempfile.mkdtemp(prefix="imucap-sim-"))

@@ -377,7 +377,7 @@ def _config_label(model) -> str:
     return f"{model.kind} {c.layers}/{c.d_model}/{c.ff}"
 
 
-def run_bench(model_spec: str = "diffusion", steps=None, frames: int = 200, paper_frames: int = 10,
+def run_bench(model_spec: str = "auto", steps=None, frames: int = 200, paper_frames: int = 10,
               threads: int = 0, random_weights: bool = False, paper: bool = True, warmup: int = 10,
               mirror: bool | None = None, confidence: bool = True, onnx: bool = True,
               variants: bool = True) -> dict:
@@ -385,11 +385,12 @@ def run_bench(model_spec: str = "diffusion", steps=None, frames: int = 200, pape
     import torch
 
     from app.live.model_choice import load_model, set_torch_threads
+    from inference.evaluation.runner import SIX
     from inference.features.layout import N_FEATURES
     from inference.model.config import ModelConfig
     from inference.model.diffusion import even_steps, parse_steps
     from inference.model.files import LoadedModel, build_model
-    from inference.poser.models import default_weights
+    from inference.poser.models import DEFAULT_WEIGHTS, default_weights, model_for_sites
 
     set_torch_threads(threads)
     weights: str
@@ -401,7 +402,8 @@ def run_bench(model_spec: str = "diffusion", steps=None, frames: int = 200, pape
         weights = "random (default ModelConfig)"
     else:
         model = load_model(model_spec)[0]
-        weights = str(default_weights(model_spec)) if model_spec in ("diffusion", "regressor") else model_spec
+        name = str(model_for_sites(model_spec, SIX))  # the live default at the bench's 6 sites
+        weights = str(default_weights(name)) if name in DEFAULT_WEIGHTS else name
     st = parse_steps(steps) if steps is not None else None
     out = bench_poser(model, st, frames, warmup, label=_config_label(model), mirror=mirror)
     out["weights"] = weights
@@ -444,7 +446,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="timed frames of the paper-size model (default 10; ~1-3 s each on 2 cores)")
     p.add_argument("--threads", type=int, default=1,
                    help="torch threads (default 1, the live loop's setting; 0 = torch's default)")
-    p.add_argument("--model", default="diffusion", help="diffusion | fast | regressor | floor | PATH.pt")
+    p.add_argument("--model", default="auto",
+                   help="auto (the live default) | diffusion | fast | regressor | floor | PATH.pt")
     p.add_argument("--steps", default=None, help="diffusion steps (default: the model's own)")
     p.add_argument("--mirror", action=argparse.BooleanOptionalAction, default=None,
                    help="mirror averaging on/off (default: the model file's own)")

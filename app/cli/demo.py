@@ -61,7 +61,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="headless: after --seconds, run on until this many poses were made (a busy machine makes "
                         "fewer a second), for at most 20x --seconds; exit 1 if they were not reached")
     p.add_argument("--record", default=None, help="record the session to FILE.h5")
-    p.add_argument("--model", default="diffusion", help="diffusion | fast | regressor | floor | PATH.pt")
+    p.add_argument("--model", default="auto",
+                   help="auto (default: the 21-frame file at a third of the compute, the full model where a thigh "
+                        "is worn without its shank) | diffusion (the full model) | fast | regressor | floor | PATH.pt")
     p.add_argument("--steps", default=None, help="diffusion steps (default: the model's own)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-noise", action="store_true", help="ideal sensors (no noise, mounting or heading errors)")

@@ -312,8 +312,10 @@ def run(args: argparse.Namespace) -> int:
 
     def one(spec: str, set_sites, insoles: bool, keep: bool = False, label: str = "", confidence: bool = False):
         from app.live.latency import model_spec_for, resolve_filter
+        from inference.poser.models import model_for_sites
 
-        model = get_model(model_spec_for(args.latency, spec))
+        # the live default ("auto") poses with the file it chooses for these sensors
+        model = get_model(model_for_sites(model_spec_for(args.latency, spec), set_sites))
         causal, latency_warning = resolve_filter(args.latency, model)
         if latency_warning:
             print(f"evaluate: warning: {latency_warning}", file=sys.stderr)

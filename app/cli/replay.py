@@ -1,7 +1,7 @@
 """`imucap replay` and `imucap export`: the researcher's workflow for recorded sessions
 (`imucap demo --record FILE.h5`, the GUI's record button, or any ``Recorder``).
 
-    imucap replay REC.h5 [--model diffusion|regressor|floor|PATH.pt] [--sensors SITE,...]
+    imucap replay REC.h5 [--model diffusion|fast|auto|regressor|floor|PATH.pt] [--sensors SITE,...]
                   [--insoles/--no-insoles] [--steps K] [--seed S] [--every-frame] [--threads N] [--height M]
                   [--out FILE.{bvh,csv,h5,mot}]... [--json] [--no-progress]
                   [--stream lsl,vmc,vrchat [--stream-host HOST] [--stream-speed X]]
@@ -9,10 +9,13 @@
 
 ``replay`` re-runs the poser over the recording's raw sensor stream with the recorded
 calibration(s): another model or step count, or only some of the recorded sensors (the
-others are inpainted, as with a smaller suit live). Frames the live loop had no time to pose
-are left out as live left them (``--every-frame`` poses them too). Progress goes to stderr; ``--json``
-prints one JSON object on stdout (frames, duration_s, sensors, insoles, model, steps,
-vs_recorded_ga_deg = how far the re-run is from the live reconstruction, outputs ...).
+others are inpainted, as with a smaller suit live). With no ``--model`` it poses with the
+model the session ran (so with no options it gives back the live reconstruction); ``--model
+diffusion`` re-poses a live capture with the full model, as an import and a report do.
+Frames the live loop had no time to pose are left out as live left them (``--every-frame``
+poses them too). Progress goes to stderr; ``--json`` prints one JSON object on stdout
+(frames, duration_s, sensors, insoles, model, steps, vs_recorded_ga_deg = how far the
+re-run is from the live reconstruction, outputs ...).
 ``--out`` writes the re-run poses (repeat it for several formats).
 
 ``--stream`` sends the replayed body to other programs as a live session would
@@ -61,8 +64,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("replay", help="re-run the poser over a recorded session (other model, sensor subset)",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("recording", type=Path, metavar="REC.h5", help="a session recording")
-    p.add_argument("--model", default="diffusion",
-                   help="diffusion | fast | regressor | floor | PATH.pt (default diffusion)")
+    p.add_argument("--model", default=None,
+                   help="diffusion | fast | auto | regressor | floor | PATH.pt (default: the model the recording was "
+                        "posed with)")
     p.add_argument("--sensors", default=None,
                    help="comma separated recorded sites to use (default: all the recording has)")
     p.add_argument("--insoles", action=argparse.BooleanOptionalAction, default=None,
@@ -207,7 +211,7 @@ def run_replay(args: argparse.Namespace) -> int:
     built = build_replay_poser(rec, ReplaySettings(
         model=args.model, steps=args.steps, seed=args.seed, mirror=args.mirror, stride_scale=args.stride_scale,
         pelvis_odometry=args.pelvis_odometry, confidence=args.confidence or None, latency=args.latency,
-        answer_lag=args.answer_lag, knee_twist=args.knee_twist), body)
+        answer_lag=args.answer_lag, knee_twist=args.knee_twist), body, sites=sensors)
     if built.warning:
         print(f"replay: warning: {built.warning}", file=sys.stderr)
     poser, causal, latency, label, steps = built.poser, built.causal, built.latency, built.label, built.steps

@@ -176,15 +176,28 @@ def score_recording(rec: Recording, model: str = "diffusion", seed: int = 0,
     ``answer_lag``: frames each pose waits (None: as the recording says; an import's 4);
     ``knee_twist``: the poser's twist share (None: as the recording says, else the model's)."""
     from app.export.formats import body_for_recording
+    from inference.poser.models import model_for_sites
 
     body, _ = body_for_recording(rec.metadata)
-    built = build_replay_poser(rec, ReplaySettings(model=model, seed=seed, answer_lag=answer_lag,
-                                                         knee_twist=knee_twist), body, loaded)
-    full = replay_recording(rec, built.fresh(), sensors=rec.sites, causal=built.causal).poses
+    # the live default ("auto") poses each set with the file it chooses for those sites
+    models = {str(model_for_sites(model)): loaded}
+    built_for: dict[str, Any] = {}
+
+    def built(sites: Sequence[str]):
+        spec = str(model_for_sites(model, sites))
+        if spec not in built_for:
+            built_for[spec] = build_replay_poser(rec, ReplaySettings(model=spec, seed=seed, answer_lag=answer_lag,
+                                                                     knee_twist=knee_twist), body,
+                                                 models.get(spec, "resolve"))
+        return built_for[spec]
+
+    ref = built(rec.sites)
+    full = replay_recording(rec, ref.fresh(), sensors=rec.sites, causal=ref.causal).poses
     t_raw, labels = recording_phases(rec)
     out: dict[str, Any] = {}
     for label, sites in held_out_sets(rec.sites, sets):
-        poses = replay_recording(rec, built.fresh(), sensors=sites, causal=built.causal).poses
+        b = built(sites)
+        poses = replay_recording(rec, b.fresh(), sensors=sites, causal=b.causal).poses
         left = [s for s in rec.sites if s not in sites]
         out[label] = {"sensors": list(sites), **held_out_errors(poses, full, left),
                       **split_errors(poses, full, left, lambda t: phase_at(t_raw, labels, t))}

@@ -81,16 +81,28 @@ def segment_differences(ref: Track, other: Track, index: np.ndarray) -> tuple[np
     return diff, {"ga_deg": ga, "frames": int(ok.sum()), "segments": per_segment}
 
 
-def rerun(job: Job, rec: Recording, sensors: tuple[str, ...], insoles: bool, model_spec: str,
+# the Re-run's model box: the model the session was posed with, as ``imucap replay`` with no --model
+AS_RECORDED = "as recorded"
+
+
+def rerun_model(text: str) -> str | None:
+    """The model spec the Re-run box names (None: as recorded)."""
+    text = text.strip()
+    return None if text in ("", AS_RECORDED) else text
+
+
+def rerun(job: Job, rec: Recording, sensors: tuple[str, ...], insoles: bool, model_spec: str | None,
           steps: str | None, confidence: bool = False) -> Track:
-    """The worker: a poser for ``model_spec`` and the recording's body, then the replay."""
+    """The worker: a poser for ``model_spec`` (None: the recorded model) and the recording's
+    body, then the replay."""
     from app.export.formats import body_for_recording
     from app.live.model_choice import FLOOR_FALLBACK_LABEL, choose_model, set_torch_threads
-    from app.replay import ReplaySettings, build_replay_poser, replay_recording
+    from app.replay import ReplaySettings, build_replay_poser, replay_model, replay_recording
 
     set_torch_threads(1)  # leave the other core to the window and the devices
     job.report((0, 1, "loading the model"))
     latency = rec.metadata.get("latency") or "centred"
+    model_spec = replay_model(rec, ReplaySettings(model=model_spec), sensors)
     # the window falls back to the floor, as live, where the CLI replay would stop
     choice = choose_model(model_spec, latency, fallback=True)
     body, _ = body_for_recording(rec.metadata)
@@ -225,7 +237,7 @@ class ReplayPanel(QtWidgets.QWidget):
         form = QtWidgets.QFormLayout()
         self.model = QtWidgets.QComboBox()
         self.model.setEditable(True)
-        self.model.addItems(["diffusion", "fast", "regressor", "floor"])
+        self.model.addItems([AS_RECORDED, "diffusion", "fast", "auto", "regressor", "floor"])
         self.steps = QtWidgets.QLineEdit()
         self.steps.setPlaceholderText("the model's own")
         form.addRow("Model", self.model)
@@ -356,7 +368,7 @@ class ReplayPanel(QtWidgets.QWidget):
         self.cancel_button.setEnabled(True)
         self.progress.setValue(0)
         self.rerun_job = self.jobs.run("rerun", rerun, self.rec, sites, self.insoles.isChecked(),
-                                       self.model.currentText().strip() or "diffusion",
+                                       rerun_model(self.model.currentText()),
                                        self.steps.text().strip() or None, self.confidence.isChecked(),
                                        on_done=self._rerun_done,
                                        on_error=self._rerun_failed, with_job=True)

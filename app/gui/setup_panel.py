@@ -19,7 +19,7 @@ from app.gui.body_figure import BodyFigure
 from app.gui.presets import PRESETS, preset, sites_of
 from app.gui.setup_model import SetupModel
 
-MODELS = ("diffusion", "fast", "regressor", "floor")
+MODELS = ("auto", "diffusion", "fast", "regressor", "floor")
 Report = Callable[[str, str], None]
 
 
@@ -102,7 +102,7 @@ class SetupPanel(QtWidgets.QWidget):
         self.model_name.addItems(MODELS)
         self.model_name.setToolTip("diffusion (the paper's method), regressor (faster), floor (no model), "
                                    "or the path of a model file")
-        self.model_name.currentTextChanged.connect(lambda t: self._edit(model=t.strip() or "diffusion"))
+        self.model_name.currentTextChanged.connect(lambda t: self._edit(model=t.strip() or "auto"))
         self.steps = QtWidgets.QLineEdit()
         self.steps.setPlaceholderText("the model's own (e.g. 10D:3)")
         self.steps.editingFinished.connect(lambda: self._edit(steps=self.steps.text().strip() or None))

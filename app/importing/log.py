@@ -95,7 +95,7 @@ def _reconstruct(out: str | Path, sites: tuple[str, ...], meta: dict[str, Any], 
     body, _ = body_for_recording(rec.metadata)
     built = build_replay_poser(rec, ReplaySettings(), body)
     res = replay_recording(rec, built.poser, causal=built.causal)
-    meta = {**meta, "model": built.label, **poser_metadata(built.poser, built.latency)}
+    meta = {**meta, "model": built.label, "model_spec": built.spec, **poser_metadata(built.poser, built.latency)}
     tmp = Path(str(out) + ".recon.tmp")
     _record(tmp, sites, meta, quat, acc, gyro, present, cal, res.poses)
     os.replace(tmp, out)

@@ -73,10 +73,11 @@ def causal_weights() -> os.PathLike:
 
 
 def model_spec_for(mode: str, spec: str) -> str:
-    """The model to run: in the low mode the default diffusion model becomes the one trained
-    on the trailing filter when that file is installed; anything named explicitly stays."""
+    """The model to run: in the low mode the default diffusion model (and the live default,
+    "auto") becomes the one trained on the trailing filter when that file is installed;
+    anything else named explicitly stays."""
     latency_settings(mode)
-    if mode == "low" and spec == "diffusion":
+    if mode == "low" and spec in ("diffusion", "auto"):
         path = causal_weights()
         if os.path.exists(path):
             return os.fspath(path)

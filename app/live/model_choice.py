@@ -19,6 +19,7 @@ how many it wants and nothing else calls torch for it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -74,11 +75,14 @@ def load_model(spec: str, fallback: bool = False) -> tuple[LoadedModel | None, s
 
 
 def choose_model(spec: str, latency: str = "centred", *, fallback: bool = False,
-                 loaded: Any = "resolve") -> ModelChoice:
+                 loaded: Any = "resolve", sites: Sequence[str] | None = None) -> ModelChoice:
     """The model a run in latency mode ``latency`` poses with (see the module docstring).
     loaded: a model already loaded for ``spec`` in this mode (a batch worker or the window
-    loads it once), or "resolve" to load it here."""
-    spec = model_spec_for(latency, spec)
+    loads it once), or "resolve" to load it here. sites: the sensors the run wears, which
+    the live default ("auto") chooses its file by (``inference.poser.models.model_for_sites``)."""
+    from inference.poser.models import model_for_sites
+
+    spec = model_for_sites(model_spec_for(latency, spec), sites)
     if isinstance(loaded, str) and loaded == "resolve":
         model, label, warning = load_model(spec, fallback)
     else:

@@ -18,7 +18,9 @@ from app.replay.run import (
     build_replay_poser,
     live_skipped_times,
     poser_metadata,
+    recorded_model,
     recording_has_insoles,
+    replay_model,
     replay_recording,
     resolve_insoles,
     resolve_sensors,
@@ -28,6 +30,7 @@ from inference.body.skeleton import SITES
 __all__ = [
     "MATCH_TOLERANCE_S", "SAME_FRAME_S", "SITES", "ReplayPoser", "ReplayResult", "ReplaySettings",
     "build_replay_poser", "compare_to_recorded", "held_out_errors", "live_skipped_times", "match_times",
-    "poser_metadata", "recording_has_insoles", "replay_recording", "resolve_insoles", "resolve_sensors",
+    "poser_metadata", "recorded_model", "recording_has_insoles", "replay_model", "replay_recording",
+    "resolve_insoles", "resolve_sensors",
     "truth_errors",
 ]

@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from app.live import POSE_SKIPPED_EVENT, RECALIBRATION_EVENT, LivePose, Pipeline, Sink
+from app.live.latency import causal_weights
 from app.live.model_choice import choose_model
 from app.recording import Recording
 from app.replay.compare import SAME_FRAME_S, match_times
@@ -131,7 +132,9 @@ class ReplaySettings:
     """How to re-run a recording: what ``imucap replay`` and ``imucap batch`` take. ``None``
     means "as the recording says it ran" (its metadata), else the model file's own."""
 
-    model: str = "diffusion"
+    # None: the model the recording was posed with (``recorded_model``); an import, a report's
+    # second posing and a batch name theirs
+    model: str | None = "diffusion"
     steps: str | None = None
     seed: int | None = None
     mirror: bool | None = None
@@ -158,6 +161,7 @@ class ReplayPoser:
     label: str
     steps: int
     warning: str | None = None
+    spec: str | None = None  # the model spec it poses with (what a recording's ``model_spec`` names)
 
     def fresh(self) -> Poser:
         """Another poser of the same settings (one per replay: a poser keeps its history)."""
@@ -183,16 +187,50 @@ def poser_metadata(poser: Poser, latency: str) -> dict[str, Any]:
     }
 
 
-def build_replay_poser(rec: Recording, settings: ReplaySettings, body: Any, model: Any = "resolve") -> ReplayPoser:
+def recorded_model(meta: dict[str, Any]) -> str:
+    """The model spec a recording was posed with: its ``model_spec``, else the shipped file its
+    label names (``diffusion 4/128/512 (diffusionposer_fast.pt)``), else "diffusion" (what every
+    session recorded before the live default changed ran)."""
+    from inference.poser.models import DEFAULT_WEIGHTS
+
+    spec = meta.get("model_spec")
+    if spec:
+        return str(spec)
+    label = str(meta.get("model") or "")
+    if label.startswith("floor"):
+        return "floor"
+    for name, path in DEFAULT_WEIGHTS.items():
+        if label.endswith(f"({path.name})"):
+            return name
+    causal = causal_weights()
+    if label.endswith(f"({causal.name})") and causal.exists():
+        return str(causal)
+    return "diffusion"
+
+
+def replay_model(rec: Recording, settings: ReplaySettings, sites: Sequence[str] | None = None) -> str:
+    """The model spec a replay of ``rec`` wearing ``sites`` (None: every recorded one) poses
+    with: ``settings.model``, or the recorded one, with the live default ("auto") turned into
+    the shipped file it stands for with those sites. A caller that loads the model once for
+    many replays (a batch worker) keys it by this."""
+    from inference.poser.models import model_for_sites
+
+    spec = settings.model if settings.model is not None else recorded_model(rec.metadata)
+    return str(model_for_sites(spec, rec.sites if sites is None else sites))
+
+
+def build_replay_poser(rec: Recording, settings: ReplaySettings, body: Any, model: Any = "resolve",
+                       sites: Sequence[str] | None = None) -> ReplayPoser:
     """The poser a replay of ``rec`` runs: ``settings`` where given, else what the recording
     says the session ran with (a session recorded before a default changed replays as it
     ran). ``model``: an already loaded model for ``settings.model`` (a batch worker loads
-    it once), or "resolve" to load it here."""
+    it once), or "resolve" to load it here. ``sites``: the sensors the replay will wear,
+    which the live default ("auto") chooses its file by (None: the recording's)."""
     from inference.poser.poser import Poser
 
     meta = rec.metadata
     latency = settings.latency or meta.get("latency") or "centred"
-    choice = choose_model(settings.model, latency, loaded=model)
+    choice = choose_model(replay_model(rec, settings, sites), latency, loaded=model)
     loaded, causal, warning, label = choice.model, choice.causal, choice.warning, choice.label
     mirror = settings.mirror if settings.mirror is not None else meta.get("mirror")
     stride = settings.stride_scale if settings.stride_scale is not None else bool(meta.get("stride_scale", False))
@@ -214,7 +252,7 @@ def build_replay_poser(rec: Recording, settings: ReplaySettings, body: Any, mode
                    knee_twist=twist)
     poser = Poser(loaded, body=body, **setting)
     steps = len(poser.steps) if poser.kind == "diffusion" else (1 if poser.kind == "regressor" else 0)
-    return ReplayPoser(poser, loaded, causal, latency, label, steps, warning,
+    return ReplayPoser(poser, loaded, causal, latency, label, steps, warning, spec=choice.spec,
                        _setting=setting)
 
 

@@ -8,6 +8,7 @@ import functools
 import os
 import types
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -39,8 +40,33 @@ PELVIS_ODOMETRY_WEIGHTS = WEIGHTS_DIR / "pelvis_odometry.pt"
 POSER_KINDS = ("diffusion", "regressor", "floor")
 
 
-# what ``--model`` takes besides a file: the shipped files by name, and the floor
-MODEL_NAMES = (*DEFAULT_WEIGHTS, "floor")
+# the live default: the shipped file that serves the worn sensors best at about a third of the
+# full model's compute (``model_for_sites``)
+AUTO = "auto"
+
+
+# what ``--model`` takes besides a file: the shipped files by name, the live default, and the floor
+MODEL_NAMES = (*DEFAULT_WEIGHTS, AUTO, "floor")
+
+
+# a leg whose thigh is worn and whose shank is not: there the 21-frame file answers the shank and
+# foot below the worn thigh worse than the full model (the OpenSense walk's feet with pelvis +
+# thighs +0.8-0.9 deg, settled; dg +0.54 unsettled; docs/model.md, "The live default")
+_THIGH_WITHOUT_SHANK = (("l_thigh", "l_shank"), ("r_thigh", "r_shank"))
+
+
+def model_for_sites(spec: str | os.PathLike | LoadedModel | None,
+                    sites: Sequence[str] | None = None) -> str | os.PathLike | LoadedModel | None:
+    """The shipped name ``spec`` stands for with ``sites`` worn: "auto" is "fast" (the 21-frame
+    int8 file, a third of the compute) unless a worn thigh has no worn shank below it, where
+    it is "diffusion" (the full model; the 21-frame window loses the feet there). Sites
+    unknown (None): "fast". Any other spec is itself."""
+    if not isinstance(spec, str) or spec != AUTO:
+        return spec
+    worn = set(sites or ())
+    if any(t in worn and s not in worn for t, s in _THIGH_WITHOUT_SHANK):
+        return "diffusion"
+    return "fast"
 
 
 # what of the history the model is told is known: all of it (the paper: measured and
@@ -121,7 +147,8 @@ def _shipped_stage(path: Path, mtime_ns: int, loader):
 
 def resolve_model(spec: str | os.PathLike | LoadedModel | None = "diffusion",
                   window: int | None = None) -> LoadedModel | None:
-    """A model from a CLI-style spec: "diffusion"/"regressor"/"fast" (shipped weights), "floor"
+    """A model from a CLI-style spec: "diffusion"/"regressor"/"fast" (shipped weights), "auto"
+    (the live default with no sites known: "fast"; ``model_for_sites`` chooses by the sites), "floor"
     (no model: returns None), a path to a model file or checkpoint, or a LoadedModel;
     ``window``: the frames it reads (``inference.model.files.with_window``; None: its file's)."""
     if spec is None or isinstance(spec, LoadedModel):
@@ -129,6 +156,7 @@ def resolve_model(spec: str | os.PathLike | LoadedModel | None = "diffusion",
     s = os.fspath(spec)
     if s == "floor":
         return None
+    s = os.fspath(model_for_sites(s))
     if s in DEFAULT_WEIGHTS:
         return load_model(default_weights(s), window=window)
     if not Path(s).exists():

@@ -1,6 +1,7 @@
 """The one place that decides which model a run poses with and on how many torch threads
 (app/live/model_choice.py): the floor fallback a live session takes and nothing else does, the
-low mode's own model, the label a replay matches recordings by, the thread count."""
+low mode's own model, the live default's file for the sensors worn, the label a replay matches
+recordings by, the thread count."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from app.live.model_choice import (
     model_label,
     set_torch_threads,
 )
-from inference.poser.models import DEFAULT_WEIGHTS
+from inference.poser.models import DEFAULT_WEIGHTS, MODEL_NAMES, model_for_sites
 
 
 def test_missing_weights_fall_back_to_floor_loudly_only_when_asked(monkeypatch, tmp_path):
@@ -86,3 +87,28 @@ def test_the_fast_model_is_a_short_chain_whose_draws_come_from_the_default():
     assert warning is None and label.endswith("(diffusionposer_fast.pt)")
     assert 3 * model.config.window <= default.config.window + 2 and model.meta["draws_from"] == "diffusion"
     assert not model.meta.get("mirror") and model.meta["default_steps"] == "10D:3"
+
+
+def test_the_live_default_is_the_fast_file_except_below_a_thigh_worn_without_its_shank(monkeypatch, tmp_path):
+    """"auto" is the 21-frame file wherever it is as good as the full model on the real logs,
+    and the full model where a worn thigh has no shank below it (its feet lose there); the
+    low mode keeps its own model; any other name is left alone."""
+    six = ("pelvis", "head", "l_wrist", "r_wrist", "l_shank", "r_shank")
+    assert model_for_sites("auto", six) == "fast"
+    assert model_for_sites("auto", ("pelvis", "l_wrist", "r_wrist")) == "fast"
+    assert model_for_sites("auto", ("pelvis", "l_thigh", "r_thigh", "l_shank", "r_shank")) == "fast"
+    assert model_for_sites("auto", ("pelvis", "l_thigh", "r_thigh")) == "diffusion"
+    assert model_for_sites("auto", ("pelvis", "l_thigh", "l_shank", "r_thigh")) == "diffusion"  # one leg is enough
+    assert model_for_sites("auto") == "fast"  # sites unknown
+    assert model_for_sites("diffusion", ("l_thigh",)) == "diffusion" and model_for_sites("x.pt", six) == "x.pt"
+    assert "auto" in MODEL_NAMES
+    monkeypatch.setattr(latency, "causal_weights", lambda: tmp_path / "causal.pt")
+    (tmp_path / "causal.pt").write_bytes(b"")
+    assert latency.model_spec_for("low", "auto") == str(tmp_path / "causal.pt")
+    assert latency.model_spec_for("centred", "auto") == "auto"
+    if not (DEFAULT_WEIGHTS["fast"].exists() and DEFAULT_WEIGHTS["diffusion"].exists()):
+        pytest.skip("shipped weights not installed")
+    fast = choose_model("auto", "centred", sites=six)
+    full = choose_model("auto", "centred", sites=("pelvis", "l_thigh", "r_thigh"))
+    assert fast.spec == "fast" and fast.label.endswith("(diffusionposer_fast.pt)")
+    assert full.spec == "diffusion" and full.label.endswith("(diffusionposer.pt)")

@@ -204,3 +204,23 @@ def test_a_replay_keeps_the_knee_twist_the_recording_was_posed_with(recorded):
     assert twist({**base, "step_list": [1000, 400, 0]}) == 0.0
     assert twist(base) == KNEE_TWIST
     assert twist({**base, "knee_twist": 0.25}, asked=0.0) == 0.0
+
+
+def test_a_replay_with_no_model_named_poses_with_the_recorded_one(recorded):
+    """The recording names the spec it was posed with; one recorded before that is read from
+    its label (a shipped file's name), and one that says neither was the full model's, the
+    default then. The live default ("auto") chooses by the sensors the replay wears."""
+    from app.replay import ReplaySettings, recorded_model, replay_model
+    from inference.poser.models import DEFAULT_WEIGHTS
+
+    assert recorded_model({"model_spec": "fast", "model": "diffusion 4/128/512 (diffusionposer.pt)"}) == "fast"
+    assert recorded_model({"model": f"diffusion 4/128/512 ({DEFAULT_WEIGHTS['fast'].name})"}) == "fast"
+    assert recorded_model({"model": f"diffusion 4/128/512 ({DEFAULT_WEIGHTS['diffusion'].name})"}) == "diffusion"
+    assert recorded_model({"model": "floor (fallback: weights missing)"}) == "floor"
+    assert recorded_model({"model": "diffusion 4/128/512 (mine.pt)"}) == recorded_model({}) == "diffusion"
+    rec = read_recording(recorded.path)
+    assert rec.metadata["model"] == "floor" and replay_model(rec, ReplaySettings(model=None)) == "floor"
+    assert replay_model(rec, ReplaySettings()) == "diffusion"  # what an import and a report pose with
+    assert replay_model(rec, ReplaySettings(model="auto")) == "fast"
+    thighs = replace(rec, metadata={**rec.metadata, "model_spec": "auto"})
+    assert replay_model(thighs, ReplaySettings(model=None), ("pelvis", "l_thigh", "r_thigh")) == "diffusion"
