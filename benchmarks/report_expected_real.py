@@ -1,7 +1,7 @@
 """The gait report's expected errors on real recordings, from the real logs' held-out scoring.
 
     imucap evaluate --data @real --json > late.json
-    imucap evaluate --data @real --answer-lag 0 --json > live.json
+    imucap evaluate --data @real --answer-lag 0 --model auto --json > live.json   # live poses: the live default
     .venv/bin/python benchmarks/report_expected_real.py late.json [--write]
     .venv/bin/python benchmarks/report_expected_real.py live.json --live [--write]
 
@@ -23,7 +23,7 @@ from app.report.confidence import EXPECTED_FILE
 
 ABOUT = ("Orientation error (deg) of each segment left out of the sensor set, on the real logs' walking phases, "
          "posed {how}: imucap evaluate --data @real{arg} --json, "
-         "held_out.<log>.<set>.phases.walking.deg, shipped model (inference/weights/diffusionposer.pt); written by "
+         "held_out.<log>.<set>.phases.walking.deg, model {model}; written by "
          "benchmarks/report_expected_real.py; docs/real_signals.md, 'Per phase, constant and dynamic'. The truth is "
          "the left-out sensor itself, so its own mounting error counts in.")
 
@@ -42,8 +42,13 @@ def real_section(result: dict, live: bool = False) -> dict:
                 entry["segments"][seg][logs.index(log)] = None if v is None else round(float(v), 1)
     for entry in sets.values():
         entry["segments"] = dict(sorted(entry["segments"].items()))
+    model = str(result.get("model") or "diffusion")
+    named = {"diffusion": "diffusion (inference/weights/diffusionposer.pt)",
+             "auto": "auto (the live default: diffusionposer_fast.pt, diffusionposer.pt with pelvis + thighs)"}
     about = ABOUT.format(how="live" if live else "as imports pose them (four frames late)",
-                         arg=" --answer-lag 0" if live else "")
+                         arg=(" --answer-lag 0" if live else "")
+                         + ("" if model == "diffusion" else f" --model {model}"),
+                         model=named.get(model, model))
     return {"about": about, "logs": logs, "sets": sets}
 
 

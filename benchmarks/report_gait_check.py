@@ -66,7 +66,7 @@ from app.report.normal import dataset_of, trial_curves
 from app.report.strides import match_strides
 from inference.evaluation.runner import SIX, evaluate_motions, face_forward, resolve_models
 from inference.loaders import find_motion_files, load_motion
-from inference.poser.models import CONTACT_THRESHOLD
+from inference.poser.models import CONTACT_THRESHOLD, model_for_sites
 from inference.signals.resample import FPS_MODEL, STEP
 from inference.signals.synthesis import FPS_SIGNAL, NoiseModel, kinematics, synthesize
 from inference.training.data import data_root
@@ -286,7 +286,8 @@ def reconstructions(motions, model_spec: str, label: str, keep: Path | None,
                                         if (folder / f"{m.name}.npz").is_file()}
     todo = [m for m in motions if m.name not in stored]
     if todo:
-        model = resolve_models([model_spec])[model_spec]
+        spec = str(model_for_sites(model_spec, SETS[label]))  # the live default chooses by the set
+        model = resolve_models([spec])[spec]
         _, results = evaluate_motions(todo, model, SETS[label], keep=True, desc=label, smoothing=smoothing,
                                       answer_lag=answer_lag)
         assert abs(1.0 / FPS_MODEL - STEP / FPS_SIGNAL) < 1e-9

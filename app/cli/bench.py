@@ -1,5 +1,6 @@
 """`imucap bench`: per-frame latency of the live loop (``Poser.step``: shift, inpaint,
-root correction, FK) with the default model and steps, and of the paper-size model
+root correction, FK) with the live default ("auto": at the bench's 6 sites the 21-frame int8
+file; ``--model diffusion`` for the full model) and its steps, and of the paper-size model
 (8 layers / 512 / FF 2048, 30 steps, random weights: latency does not depend on their
 values) measured in the same run, so the two figures share the machine's load.
 
@@ -18,7 +19,8 @@ side's ``passes_per_pose``, window, steps and runtime: a ratio from one run, com
 the linear layers in int8 (ONNX Runtime's dynamic quantizer, torch's ``quantize_dynamic``),
 all stepped in turn on the same frames, each row's p50 / p99 as a ratio to plain torch and its
 poses' difference from torch's (``mean_deg``, ``max_deg``; ``--no-variants`` skips it).
-``--sizes``: which larger denoiser would fit the live budget: the loop with the model's own
+``--sizes``: which larger denoiser would fit the live budget (the full model unless ``--model`` names
+another): the loop with the model's own
 settings (steps, mirror averaging, runtime) but random weights of each size, all stepped in
 turn with the model itself, each row's p50 also as a ratio to it.
 ``stages``: the step split into the observation, the window's shift, the model call and the work after
@@ -527,7 +529,8 @@ def _run_sizes(args: argparse.Namespace) -> int:
 
     sizes = parse_sizes(args.sizes)
     set_torch_threads(args.threads)
-    model = load_model(args.model)[0]
+    # the sizes are the full model's question (what larger denoiser would fit): its file unless named
+    model = load_model(args.model if args.model != "auto" else "diffusion")[0]
     if model is None or model.kind != "diffusion":
         raise ValueError(f"--sizes times denoisers: --model {args.model} is not a diffusion model")
     steps = parse_steps(args.steps) if args.steps is not None else None

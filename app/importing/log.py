@@ -93,7 +93,7 @@ def _reconstruct(out: str | Path, sites: tuple[str, ...], meta: dict[str, Any], 
 
     rec = read_recording(out)
     body, _ = body_for_recording(rec.metadata)
-    built = build_replay_poser(rec, ReplaySettings(), body)
+    built = build_replay_poser(rec, ReplaySettings(model="diffusion"), body)  # offline: the full model
     res = replay_recording(rec, built.poser, causal=built.causal)
     meta = {**meta, "model": built.label, "model_spec": built.spec, **poser_metadata(built.poser, built.latency)}
     tmp = Path(str(out) + ".recon.tmp")

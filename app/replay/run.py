@@ -132,9 +132,10 @@ class ReplaySettings:
     """How to re-run a recording: what ``imucap replay`` and ``imucap batch`` take. ``None``
     means "as the recording says it ran" (its metadata), else the model file's own."""
 
-    # None: the model the recording was posed with (``recorded_model``); an import, a report's
-    # second posing and a batch name theirs
-    model: str | None = "diffusion"
+    # None: the model the recording was posed with (``recorded_model``); an import and a report's
+    # second posing name the full model ("diffusion"): offline, the compute the live default saves
+    # buys nothing
+    model: str | None = None
     steps: str | None = None
     seed: int | None = None
     mirror: bool | None = None

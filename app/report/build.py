@@ -53,9 +53,10 @@ def with_poses(rec: Recording, poses: Sequence, **meta: Any) -> Recording:
 
 
 def posed_again(path: str | Path | Recording, lag: int, say: Callable[[str], None] | None = None) -> Recording:
-    """The recording with a replay's poses as its reconstruction, each pose shown ``lag`` frames late
-    (``inference/poser/lag.py``): a live capture's poses had to be the newest frame's, a report's need not
-    (the knee range of docs/report.md's walks 13.1 -> 5.9 deg off with pelvis + shanks at 4)."""
+    """The recording with the full model's replay poses as its reconstruction, each pose shown ``lag``
+    frames late (``inference/poser/lag.py``): a live capture's poses had to be the newest frame's and
+    cheap, a report's need not be either (the knee range of docs/report.md's walks 13.1 -> 5.9 deg off
+    with pelvis + shanks at 4)."""
     from app.export.formats import body_for_recording
     from app.replay.run import ReplaySettings, build_replay_poser, replay_recording
 
@@ -63,7 +64,8 @@ def posed_again(path: str | Path | Recording, lag: int, say: Callable[[str], Non
         raise ValueError(f"answer lag {lag}: a number of frames, 0 or more")
     rec = path if isinstance(path, Recording) else read_recording(path)
     body, _ = body_for_recording(rec.metadata, None)
-    built = build_replay_poser(rec, ReplaySettings(answer_lag=lag), body)
+    # offline, the full model: a live capture's poses were the live default's, chosen for its compute
+    built = build_replay_poser(rec, ReplaySettings(model="diffusion", answer_lag=lag), body)
     k = built.poser.answer_lag
     if say is not None:
         say(f"posing {rec.path} again, {k} frames late ({built.label})")

@@ -80,7 +80,7 @@ def test_good_file_parses(tmp_path):
 
 def test_defaults_when_optional_tables_are_left_out():
     s = parse_setup('[subject]\nid = "A"\nheight = 1.8\n[sensors]\nhead = "dualsense://"\n')
-    assert (s.insoles, s.model, s.steps, s.calibration, s.recordings) == (None, "diffusion", None, "walk",
+    assert (s.insoles, s.model, s.steps, s.calibration, s.recordings) == (None, "auto", None, "walk",
                                                                           Path("recordings"))
     assert s.path is None
 

@@ -52,7 +52,8 @@ def test_evaluate_confidence_report_needs_confidence(tmp_path, capsys):
 @needs_weights
 def test_replay_reports_the_mean_spread(recorded, tmp_path, capsys):
     out = tmp_path / "r.csv"
-    code = main(["replay", str(recorded.path), "--confidence", "--sensors", "pelvis,l_wrist,r_wrist", "--json",
+    code = main(["replay", str(recorded.path), "--model", "diffusion", "--confidence", "--sensors",
+                 "pelvis,l_wrist,r_wrist", "--json",
                  "--no-progress", "--out", str(out)])
     res = json.loads(capsys.readouterr().out)
     assert code == 0

@@ -220,7 +220,8 @@ def test_a_replay_with_no_model_named_poses_with_the_recorded_one(recorded):
     assert recorded_model({"model": "diffusion 4/128/512 (mine.pt)"}) == recorded_model({}) == "diffusion"
     rec = read_recording(recorded.path)
     assert rec.metadata["model"] == "floor" and replay_model(rec, ReplaySettings(model=None)) == "floor"
-    assert replay_model(rec, ReplaySettings()) == "diffusion"  # what an import and a report pose with
+    assert replay_model(rec, ReplaySettings()) == "floor"
+    assert replay_model(rec, ReplaySettings(model="diffusion")) == "diffusion"  # what an import and a report pose with
     assert replay_model(rec, ReplaySettings(model="auto")) == "fast"
     thighs = replace(rec, metadata={**rec.metadata, "model_spec": "auto"})
     assert replay_model(thighs, ReplaySettings(model=None), ("pelvis", "l_thigh", "r_thigh")) == "diffusion"
