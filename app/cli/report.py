@@ -17,11 +17,13 @@ REPORT.pdf with headless Chromium (Debian's ``chromium``).
 and more (``parameters``, ``ranges``, ``excluded``, ``confidence``, ``session``, ``compare``). A
 recording without walking gives 0 strides and null figures. docs/report.md.
 
-``--answer-lag K`` poses the recording (and ``--compare``'s) again first, each pose shown as the window K
-frames later answered it (a replay with the session's own settings, about 0.4 of the recording's length
-on two cores): a live capture's poses had to be the newest frame's, a report's need not. 4 is what an
-import does; on the synthesized walks of docs/report.md it takes the knee range's error with pelvis +
-shanks from 13.1 to 5.9 deg, the ankle's and the timing's unchanged.
+A live capture (and ``--compare``'s) is posed again first with the full model, each pose shown as the
+window four frames later answered it, as an import is (a replay with the session's other settings, about
+0.4 of the recording's length on two cores): a live capture's poses had to be the newest frame's and came
+from the live default, chosen for its compute; a report's need neither. On the synthesized walks of
+docs/report.md that takes the knee range's error with pelvis + shanks from 13.1 to 5.9 deg, the ankle's and
+the timing's unchanged. ``--answer-lag K`` poses again K frames late (an error if the recording cannot be
+replayed), ``--answer-lag 0`` reads the recording's own poses; ``posed`` in the JSON says which it read.
 """
 
 from __future__ import annotations
@@ -40,22 +42,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--pdf", action="store_true", help="also REPORT.pdf (headless chromium)")
     p.add_argument("--json", action="store_true", help="print the figures as one JSON object")
     p.add_argument("--answer-lag", type=int, default=None, metavar="K",
-                   help="pose the recording again first, each pose K frames late (a replay; 4 as an import "
-                        "does); default: the recording's own poses")
+                   help="pose the recording again first with the full model, each pose K frames late (0: read "
+                        "the recording's own poses); default: a live capture is posed again 4 frames late, as an "
+                        "import is, and a recording that cannot be replayed is read on its own poses")
     p.set_defaults(func=run_report)
 
 
 def run_report(args: argparse.Namespace) -> int:
     from app.report import make_report
-    from app.report.build import posed_again
+    from app.report.build import poses_to_report
 
-    rec, earlier = args.recording, args.compare
-    if args.answer_lag is not None:
-        said = lambda m: print(f"report: {m}", file=sys.stderr)  # noqa: E731
-        rec = posed_again(rec, args.answer_lag, said)
-        earlier = None if earlier is None else posed_again(earlier, args.answer_lag, said)
+    said = lambda m: print(f"report: {m}", file=sys.stderr)  # noqa: E731
+    rec, posed = poses_to_report(args.recording, args.answer_lag, said)
+    earlier = None if args.compare is None else poses_to_report(args.compare, args.answer_lag, said)[0]
     rep = make_report(rec, args.out, compare_with=earlier, pdf=args.pdf)
     s = rep.summary
+    s["posed"] = posed
     if args.json:
         print(json.dumps(s))
     else:

@@ -102,24 +102,14 @@ def report_path(recording: Path) -> Path:
 def write_report(recording: Path, late: bool = False) -> dict:
     """The gait report of ``recording`` (``imucap report REC --out <report_path>``); its figures, and under
     ``posed`` which poses it read. ``late``: a recording whose poses were the newest frame's (a live capture)
-    is posed again as an import is, ``OFFLINE_ANSWER_LAG`` frames late (``imucap report --answer-lag 4``:
-    the knees of docs/report.md's walks 13.1 -> 5.9 deg off with pelvis + shanks); one that cannot be replayed
-    (no raw stream, no calibration, damage) is reported on its own poses, and says so."""
-    from app.recording import read_recording
+    is posed again as an import is, with the full model ``OFFLINE_ANSWER_LAG`` frames late, as ``imucap
+    report`` does by default (``app.report.build.poses_to_report``: the knees of docs/report.md's walks 13.1
+    -> 5.9 deg off with pelvis + shanks); one that cannot be replayed (no raw stream, no calibration, damage)
+    is reported on its own poses, and says so. Not ``late``: its own poses."""
     from app.report import make_report
-    from app.report.build import posed_again
-    from inference.poser.lag import OFFLINE_ANSWER_LAG
+    from app.report.build import poses_to_report
 
-    rec = read_recording(recording)
-    posed = "its own poses"
-    if late and int(rec.metadata.get("answer_lag") or 0) >= OFFLINE_ANSWER_LAG:
-        posed = "its own poses, late already"
-    elif late:
-        try:
-            rec = posed_again(rec, OFFLINE_ANSWER_LAG)
-            posed = f"posed again {OFFLINE_ANSWER_LAG} frames late"
-        except ValueError as exc:  # nothing to replay: the recording's own poses, said
-            posed = f"its own poses ({exc})"
+    rec, posed = poses_to_report(recording, None if late else 0)
     summary = make_report(rec, report_path(recording)).summary
     summary["posed"] = posed
     return summary

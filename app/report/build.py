@@ -74,6 +74,28 @@ def posed_again(path: str | Path | Recording, lag: int, say: Callable[[str], Non
                       sensors=list(res.sensors), insoles=bool(res.insoles), answer_lag=k)
 
 
+def poses_to_report(path: str | Path | Recording, lag: int | None = None,
+                    say: Callable[[str], None] | None = None) -> tuple[Recording, str]:
+    """The recording a report reads and which poses those are. ``lag`` None: a live capture's poses (the newest
+    frame's, from the live default chosen for its compute) are posed again with the full model
+    ``OFFLINE_ANSWER_LAG`` frames late, as an import poses; poses late already are read as they are; a recording
+    that cannot be replayed (no raw stream, no calibration) is read on its own poses, and says why. ``lag`` 0:
+    its own poses; ``lag`` K: posed again K frames late (an error if it cannot be)."""
+    from inference.poser.lag import OFFLINE_ANSWER_LAG
+
+    rec = path if isinstance(path, Recording) else read_recording(path)
+    if lag is not None:
+        if lag == 0:
+            return rec, "its own poses"
+        return posed_again(rec, lag, say), f"posed again {lag} frames late"
+    if int(rec.metadata.get("answer_lag") or 0) >= OFFLINE_ANSWER_LAG:
+        return rec, "its own poses, late already"
+    try:
+        return posed_again(rec, OFFLINE_ANSWER_LAG, say), f"posed again {OFFLINE_ANSWER_LAG} frames late"
+    except ValueError as exc:  # nothing to replay: the recording's own poses, said
+        return rec, f"its own poses ({exc})"
+
+
 def report_input(path: str | Path | Recording) -> ReportInput:
     """One recording read and analysed, its plots not yet drawn."""
     rec = path if isinstance(path, Recording) else read_recording(path)

@@ -110,13 +110,18 @@ def test_no_walk_in_the_browser(recordings, capsys, tmp_path):
 
 def test_a_recording_posed_again_late(tmp_path, capsys):
     """``--answer-lag``: the report reads a replay's poses, each the window four frames later's, and says so;
-    the recording's own poses (here the truth's) are not read. That the lag moves the inferred segments is
-    tests/inference/poser/test_lag.py's."""
+    the recording's own poses (here the truth's) are read only with ``--answer-lag 0``. That the lag moves the
+    inferred segments is tests/inference/poser/test_lag.py's."""
     rec = walk_recording(tmp_path / "walk.h5", speed=1.2, seconds=8.0, sites=("pelvis", "l_shank", "r_shank"),
                          raw=True, seed=4)
-    truth = run_report(capsys, rec, "--out", tmp_path / "truth.html")
+    truth = run_report(capsys, rec, "--out", tmp_path / "truth.html", "--answer-lag", "0")
     late = run_report(capsys, rec, "--out", tmp_path / "late.html", "--answer-lag", "4")
     assert "posed again 4 frames late" in late["session"]["model"] and truth["session"]["model"] == "truth (test)"
+    assert (truth["posed"], late["posed"]) == ("its own poses", "posed again 4 frames late")
+    # with no --answer-lag a live capture's report is posed again by the full model, as an import poses
+    default = run_report(capsys, rec, "--out", tmp_path / "default.html")
+    assert default["posed"] == "posed again 4 frames late" and "diffusionposer.pt" in default["session"]["model"]
+    assert default["knee_range_deg"] == late["knee_range_deg"]
     assert "posed again 4 frames late" in (tmp_path / "late.html").read_text()
     assert late["strides"]["l"] >= 2 and late["strides"]["r"] >= 2
     knees = [[s["knee_range_deg"][side] for side in "lr"] for s in (truth, late)]
