@@ -233,12 +233,13 @@ def build_replay_poser(rec: Recording, settings: ReplaySettings, body: Any, mode
     latency = settings.latency or meta.get("latency") or "centred"
     choice = choose_model(replay_model(rec, settings, sites), latency, loaded=model)
     loaded, causal, warning, label = choice.model, choice.causal, choice.warning, choice.label
-    mirror = settings.mirror if settings.mirror is not None else meta.get("mirror")
+    # the step list and mirror averaging the session ran (a model file's defaults may have changed since),
+    # unless asked otherwise; another model than the recorded one runs its own file's
+    same_model = label == meta.get("model")
+    mirror = settings.mirror if settings.mirror is not None else (meta.get("mirror") if same_model else None)
     stride = settings.stride_scale if settings.stride_scale is not None else bool(meta.get("stride_scale", False))
     odometry = (settings.pelvis_odometry if settings.pelvis_odometry is not None
                 else bool(meta.get("pelvis_odometry", False)))
-    # the step list the session ran (a model file's default may have changed since), unless asked otherwise
-    same_model = label == meta.get("model")
     steps = settings.steps if settings.steps is not None else (meta.get("step_list") or None if same_model else None)
     seed = settings.seed if settings.seed is not None else int(meta.get("seed") or 0)
     confidence = settings.confidence if settings.confidence is not None else bool(meta.get("confidence", False))

@@ -225,3 +225,21 @@ def test_a_replay_with_no_model_named_poses_with_the_recorded_one(recorded):
     assert replay_model(rec, ReplaySettings(model="auto")) == "fast"
     thighs = replace(rec, metadata={**rec.metadata, "model_spec": "auto"})
     assert replay_model(thighs, ReplaySettings(model=None), ("pelvis", "l_thigh", "r_thigh")) == "diffusion"
+
+
+def test_another_model_than_the_recorded_one_runs_its_own_files_settings(recorded):
+    """A live capture of the 21-frame file (no mirror pair) replayed with the full model runs the full model's
+    mirror chains, as an import or a report's second posing must; the recorded model keeps what it ran."""
+    from app.replay import ReplaySettings, build_replay_poser
+    from inference.poser.models import DEFAULT_WEIGHTS
+
+    if not (DEFAULT_WEIGHTS["fast"].exists() and DEFAULT_WEIGHTS["diffusion"].exists()):
+        pytest.skip("shipped weights not installed")
+    rec = read_recording(recorded.path)
+    live = replace(rec, metadata={**rec.metadata, "model": f"diffusion 4/128/512 ({DEFAULT_WEIGHTS['fast'].name})",
+                                  "model_spec": "fast", "mirror": False, "step_list": [1000, 0]})
+    again = build_replay_poser(live, ReplaySettings(), recorded.body)
+    full = build_replay_poser(live, ReplaySettings(model="diffusion"), recorded.body)
+    assert again.spec == "fast" and not again.poser.mirror and again.poser.steps == [1000, 0]
+    assert full.spec == "diffusion" and full.poser.mirror and full.poser.chain_mirror
+    assert full.poser.steps == [1000, 400, 0]  # the full file's own steps, not the recorded model's
