@@ -100,8 +100,9 @@ class SetupPanel(QtWidgets.QWidget):
         self.model_name = QtWidgets.QComboBox()
         self.model_name.setEditable(True)
         self.model_name.addItems(MODELS)
-        self.model_name.setToolTip("diffusion (the paper's method), regressor (faster), floor (no model), "
-                                   "or the path of a model file")
+        self.model_name.setToolTip("auto (the default: a third of the full model's compute, the full model where a "
+                                   "thigh is worn without its shank), diffusion (the full model), fast (the 21-frame "
+                                   "file always), regressor, floor (no model), or the path of a model file")
         self.model_name.currentTextChanged.connect(lambda t: self._edit(model=t.strip() or "auto"))
         self.steps = QtWidgets.QLineEdit()
         self.steps.setPlaceholderText("the model's own (e.g. 10D:3)")
