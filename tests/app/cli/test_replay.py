@@ -123,13 +123,22 @@ def test_replay_mirrors_as_recorded_else_as_the_model_file_says(recorded, tiny_m
 
     assert mirror_of(recorded.path) is True  # nothing recorded: the model file's default
     assert mirror_of(recorded.path, "--no-mirror") is False
-    # a session recorded without mirror averaging replays without it, unless asked
+    # a session recorded without mirror averaging replays without it with the same model, unless asked
+    from app.live.model_choice import model_label
+    from inference.poser.models import resolve_model
+
     old = tmp_path / "old.h5"
     shutil.copy(recorded.path, old)
     with h5py.File(old, "r+") as f:
-        f.attrs["metadata"] = json.dumps({**json.loads(f.attrs["metadata"]), "mirror": False})
+        meta = json.loads(f.attrs["metadata"])
+        f.attrs["metadata"] = json.dumps({**meta, "mirror": False,
+                                          "model": model_label(str(tagged), resolve_model(tagged))})
     assert mirror_of(old) is False
     assert mirror_of(old, "--mirror") is True
+    # another model than the recorded one runs as its own file says
+    with h5py.File(old, "r+") as f:
+        f.attrs["metadata"] = json.dumps({**meta, "mirror": False, "model": "diffusion 4/128/512 (other.pt)"})
+    assert mirror_of(old) is True
 
 
 @pytest.mark.parametrize("key, flag", [("stride_scale", "stride-scale"), ("pelvis_odometry", "pelvis-odometry")])
