@@ -64,3 +64,21 @@ def test_the_demo_warms_up_before_its_simulated_subject_starts_and_once(monkeypa
     assert order == ["warm up", "simulator"]
     run.session.pipeline.warm_up()  # as CaptureSession.start calls it: already done
     assert order == ["warm up", "simulator"]
+
+
+def test_a_setup_without_a_model_runs_the_live_default_chosen_by_its_sensors():
+    """No [model] table: the live default. Its file follows the worn sensors (the 21-frame file with the shanks
+    worn, the full model with the thighs and no shanks), and the recording names the spec a replay runs again."""
+    from inference.poser.models import DEFAULT_WEIGHTS
+
+    if not (DEFAULT_WEIGHTS["fast"].exists() and DEFAULT_WEIGHTS["diffusion"].exists()):
+        pytest.skip("shipped weights not installed")
+    made = {}
+    for name, legs in (("shanks", ("l_shank", "r_shank")), ("thighs", ("l_thigh", "r_thigh"))):
+        lines = [f'{site} = "xbus:///tmp/imucap-no-such-tty-{site}?baud=115200"' for site in legs]
+        setup = parse_setup(SETUP + "\n".join(lines) + "\n")
+        assert setup.model == "auto" and set(setup.sites()) == {"pelvis", *legs}
+        made[name] = CaptureSession(setup, CaptureOptions(threads=1))
+    assert made["shanks"].model_spec == "fast" and made["shanks"].model_label.endswith("(diffusionposer_fast.pt)")
+    assert made["thighs"].model_spec == "diffusion" and made["thighs"].model_label.endswith("(diffusionposer.pt)")
+    assert made["shanks"].metadata()["model_spec"] == "fast" and made["shanks"].poser.int8
