@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from app.capture.setup_file import DEFAULT_MODEL
 from app.live import LivePose, Sink
 
 WARMUP_POSES = 20  # the first poses after calibration also pay for the model's first calls
@@ -134,7 +135,7 @@ def _read_send_logs(path: str, names: tuple[str, ...]) -> dict[str, list[tuple[i
         return {n: list(zip(z[f"{n}/counter"].tolist(), z[f"{n}/t"].tolist())) for n in names}
 
 
-def measure_mode(mode: str, seconds: float, model: str = "auto", sensors: tuple[str, ...] | None = None,
+def measure_mode(mode: str, seconds: float, model: str = DEFAULT_MODEL, sensors: tuple[str, ...] | None = None,
                  seed: int = 0, threads: int = 1) -> dict[str, Any]:
     """One demo session in ``mode`` (its Xbus devices in their own process): calibrate
     (the guided walk, untimed), then ``seconds`` timed."""
@@ -167,7 +168,7 @@ def measure_mode(mode: str, seconds: float, model: str = "auto", sensors: tuple[
                       s.poser.runtime, s.warning)
 
 
-def run_end_to_end(seconds: float = 10.0, rounds: int = 2, model: str = "auto", seed: int = 0,
+def run_end_to_end(seconds: float = 10.0, rounds: int = 2, model: str = DEFAULT_MODEL, seed: int = 0,
                    threads: int = 1, modes: tuple[str, ...] = ("centred", "low")) -> dict[str, Any]:
     """The `imucap bench --end-to-end` measurement; returns its JSON object: per mode
     ``<mode>_p50_ms``, ``<mode>_p99_ms`` (newest sample leaving its device -> pose to the

@@ -47,6 +47,7 @@ import time
 
 import numpy as np
 
+from app.capture.setup_file import DEFAULT_MODEL
 from app.cli.bench_loop import STAGES, interleaved_times, stage_times, walk_input
 
 
@@ -379,7 +380,7 @@ def _config_label(model) -> str:
     return f"{model.kind} {c.layers}/{c.d_model}/{c.ff}"
 
 
-def run_bench(model_spec: str = "auto", steps=None, frames: int = 200, paper_frames: int = 10,
+def run_bench(model_spec: str = DEFAULT_MODEL, steps=None, frames: int = 200, paper_frames: int = 10,
               threads: int = 0, random_weights: bool = False, paper: bool = True, warmup: int = 10,
               mirror: bool | None = None, confidence: bool = True, onnx: bool = True,
               variants: bool = True) -> dict:
@@ -448,7 +449,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="timed frames of the paper-size model (default 10; ~1-3 s each on 2 cores)")
     p.add_argument("--threads", type=int, default=1,
                    help="torch threads (default 1, the live loop's setting; 0 = torch's default)")
-    p.add_argument("--model", default="auto",
+    p.add_argument("--model", default=DEFAULT_MODEL,
                    help="auto (the live default) | diffusion | fast | regressor | floor | PATH.pt")
     p.add_argument("--steps", default=None, help="diffusion steps (default: the model's own)")
     p.add_argument("--mirror", action=argparse.BooleanOptionalAction, default=None,
@@ -530,7 +531,7 @@ def _run_sizes(args: argparse.Namespace) -> int:
     sizes = parse_sizes(args.sizes)
     set_torch_threads(args.threads)
     # the sizes are the full model's question (what larger denoiser would fit): its file unless named
-    model = load_model(args.model if args.model != "auto" else "diffusion")[0]
+    model = load_model(args.model if args.model != DEFAULT_MODEL else "diffusion")[0]
     if model is None or model.kind != "diffusion":
         raise ValueError(f"--sizes times denoisers: --model {args.model} is not a diffusion model")
     steps = parse_steps(args.steps) if args.steps is not None else None

@@ -40,6 +40,7 @@ import os
 import sys
 
 from app.capture.demo import DEFAULT_SENSORS, FRAMES_PATIENCE, PROTOCOL_CHOICES, DemoConfig, DemoRun
+from app.capture.setup_file import DEFAULT_MODEL
 from app.cli.window_args import add_window_arguments
 from app.streams import add_stream_arguments, parse_stream_spec, sinks_from_args
 
@@ -61,7 +62,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="headless: after --seconds, run on until this many poses were made (a busy machine makes "
                         "fewer a second), for at most 20x --seconds; exit 1 if they were not reached")
     p.add_argument("--record", default=None, help="record the session to FILE.h5")
-    p.add_argument("--model", default="auto",
+    p.add_argument("--model", default=DEFAULT_MODEL,
                    help="auto (default: the 21-frame file at a third of the compute, the full model where a thigh "
                         "is worn without its shank) | diffusion (the full model) | fast | regressor | floor | PATH.pt")
     p.add_argument("--steps", default=None, help="diffusion steps (default: the model's own)")

@@ -14,12 +14,19 @@ from pathlib import Path
 
 from PySide6 import QtCore, QtWidgets
 
-from app.capture.setup_file import CALIBRATION_PROTOCOLS, HEIGHT_RANGE_M, SetupError, load_setup, save_setup
+from app.capture.setup_file import (
+    CALIBRATION_PROTOCOLS,
+    DEFAULT_MODEL,
+    HEIGHT_RANGE_M,
+    SetupError,
+    load_setup,
+    save_setup,
+)
 from app.gui.body_figure import BodyFigure
 from app.gui.presets import PRESETS, preset, sites_of
 from app.gui.setup_model import SetupModel
 
-MODELS = ("auto", "diffusion", "fast", "regressor", "floor")
+MODELS = (DEFAULT_MODEL, "diffusion", "fast", "regressor", "floor")
 Report = Callable[[str, str], None]
 
 
@@ -103,7 +110,7 @@ class SetupPanel(QtWidgets.QWidget):
         self.model_name.setToolTip("auto (the default: a third of the full model's compute, the full model where a "
                                    "thigh is worn without its shank), diffusion (the full model), fast (the 21-frame "
                                    "file always), regressor, floor (no model), or the path of a model file")
-        self.model_name.currentTextChanged.connect(lambda t: self._edit(model=t.strip() or "auto"))
+        self.model_name.currentTextChanged.connect(lambda t: self._edit(model=t.strip() or DEFAULT_MODEL))
         self.steps = QtWidgets.QLineEdit()
         self.steps.setPlaceholderText("the model's own (e.g. 10D:3)")
         self.steps.editingFinished.connect(lambda: self._edit(steps=self.steps.text().strip() or None))
